@@ -1,0 +1,62 @@
+// Separable Gaussian lowpass on the device (kernels/filter.cl).
+//
+// sigma is in millimetres; along each axis it becomes sigma / spacing voxels,
+// so anisotropic volumes are smoothed equally in physical space. The kernel
+// radius is ceil(truncate * sigma_voxels) per axis; weights are normalised to
+// sum to 1; samples beyond the border repeat the edge sample (clamp-to-edge).
+#pragma once
+
+#include <array>
+#include <vector>
+
+#include "cl_runtime.hpp"
+#include "volume.hpp"
+
+namespace softshell {
+
+// Normalised 1-D Gaussian weights w[0..2r], r = ceil(truncate * sigma_voxels);
+// sigma_voxels <= 0 gives the identity {1}.
+std::vector<float> gaussian_weights(double sigma_voxels, double truncate);
+
+class Lowpass {
+ public:
+  struct Params {
+    double sigma_mm = 1.0;  // standard deviation in mm (0: identity)
+    double truncate = 3.0;  // radius in standard deviations
+    // z pass as a sliding window (reads each sample once). Off by default: on
+    // PoCL's CPU device the direct z pass measured faster (docs/architecture.md).
+    bool z_window = false;
+  };
+
+  // Uploads the three weight tables and allocates one scratch volume.
+  Lowpass(Runtime& rt, const GridDesc& grid, const Params& params);
+
+  // out = G_sigma * in. `in` and `out` are distinct buffers of grid voxels
+  // floats. Returns the events of the x, y and z passes (enqueued in order).
+  std::vector<cl::Event> apply(const cl::Buffer& in, const cl::Buffer& out,
+                               const std::vector<cl::Event>* wait = nullptr) const;
+
+  const std::array<int, 3>& radius() const { return radius_; }
+  const std::array<double, 3>& sigma_voxels() const { return sigma_vox_; }
+  std::size_t memory_bytes() const;  // device memory held (scratch + weights)
+
+ private:
+  Runtime& rt_;
+  GridDesc grid_;
+  Params params_;
+  std::array<double, 3> sigma_vox_{};
+  std::array<int, 3> radius_{};
+  std::array<cl::Buffer, 3> weights_;
+  cl::Buffer scratch_;
+  mutable std::array<cl::Kernel, 3> kernels_;
+};
+
+// Host convenience for the CLI: upload, filter, download. Times (seconds)
+// come from profiling events.
+struct LowpassTiming {
+  double upload = 0, filter = 0, download = 0;
+};
+Volume lowpass_volume(Runtime& rt, const Volume& in, const Lowpass::Params& params,
+                      LowpassTiming* timing = nullptr);
+
+}  // namespace softshell

@@ -1,0 +1,200 @@
+// End-to-end checks of the `softshell` binary's contract for bad input: for
+// every kind of broken or unreadable file, exit status 2 and exactly one
+// line on stderr naming the file and the problem; a run never clobbers its
+// input and a failed run leaves no output or temporary files behind.
+#include <string>
+#include <vector>
+
+#include "cli_fixture.hpp"
+#include "io.hpp"
+#include "volume.hpp"
+
+namespace softshell {
+namespace {
+
+using test::CliTest;
+using test::RunResult;
+using test::slurp;
+namespace fs = std::filesystem;
+
+const std::string kNrrd3 = "NRRD0004\ntype: uint16\ndimension: 3\nendian: little\nencoding: raw\n";
+
+// ---- one case per kind of bad input ---------------------------------------------------
+
+TEST_F(CliTest, TruncatedNrrd) {
+  const std::string p = write("trunc.nrrd", kNrrd3 + "sizes: 4 4 4\n\nabc");
+  info_fails(p, {p + ": ", "data truncated or corrupt", "2-sized things, not 64"});
+  const std::string gz = write("trunc_gz.nrrd", "NRRD0004\ntype: uint16\ndimension: 3\nsizes: 4 4 4\n"
+                                                "endian: little\nencoding: gzip\n\nabc");
+  info_fails(gz, {gz + ": ", "expected 128 bytes"});
+}
+
+TEST_F(CliTest, TruncatedMhaUncompressed) {
+  const std::string p = write("t.mha", "ObjectType = Image\nNDims = 3\nDimSize = 4 4 4\n"
+                                       "ElementType = MET_UCHAR\nElementDataFile = LOCAL\nabc");
+  info_fails(p, {p + ": data truncated: expected 64 bytes, found 3"});
+}
+
+TEST_F(CliTest, TruncatedMhaCompressed) {
+  Volume v({16, 16, 16}, {1, 1, 1}, ScalarType::UInt16);
+  for (std::size_t i = 0; i < v.data.size(); ++i) v.data[i] = static_cast<float>((i * 7919) % 65536);
+  WriteOptions z;
+  z.compress = true;
+  write_volume(file("full.mha"), v, z);
+  const std::string full = slurp(file("full.mha"));
+  const std::string cut = full.substr(0, full.size() - full.size() / 3);
+  const std::string p = write("cut.mha", cut);
+  info_fails(p, {p + ": compressed data truncated: CompressedDataSize = "});
+  // Without CompressedDataSize the reader inflates to the end of the file.
+  std::string nosize = cut;
+  const auto a = nosize.find("CompressedDataSize");
+  nosize.erase(a, nosize.find('\n', a) + 1 - a);
+  const std::string q = write("cut2.mha", nosize);
+  info_fails(q, {q + ": data truncated: expected 8192 bytes after decompression"});
+}
+
+TEST_F(CliTest, RawSizeDisagreesWithDims) {
+  const std::string p = write("v.raw", std::string(100, '\0'));
+  info_fails(p, {p + ": file has 100 bytes, but 17x23x9 uint16 needs 7038 bytes"},
+             {"--raw", "17,23,9", "--type", "uint16"});
+  info_fails(p, {"--raw", "expected X,Y,Z with positive integers, got '17,x,9'"},
+             {"--raw", "17,x,9", "--type", "uint16"});
+}
+
+TEST_F(CliTest, DimsWhoseProductOverflows) {
+  const std::string p = write("ovf.nrrd", "NRRD0004\ntype: uint8\ndimension: 3\n"
+                                          "sizes: 4294967296 4294967296 4294967296\nencoding: raw\n\nabc");
+  info_fails(p, {p + ": sizes 4294967296 4294967296 4294967296 overflow the voxel count"});
+  // Fits size_t as a count, overflows as bytes: caught by our own check.
+  const std::string q = write("ovf2.nrrd", "NRRD0004\ntype: float\ndimension: 3\nendian: little\n"
+                                           "sizes: 2000000 2000000 2000000\nencoding: raw\n\nabc");
+  info_fails(q, {q + ": dims 2000000x2000000x2000000 overflow the voxel count"});
+  const std::string m = write("ovf.mha", "NDims = 3\nDimSize = 4294967296 4294967296 4294967296\n"
+                                         "ElementType = MET_UCHAR\nElementDataFile = LOCAL\nabc");
+  info_fails(m, {m + ": dims 4294967296x4294967296x4294967296 overflow the voxel count"});
+  const std::string r = write("ovf.raw", "abc");
+  info_fails(r, {r + ": dims 4294967296x4294967296x4294967296 overflow"},
+             {"--raw", "4294967296,4294967296,4294967296", "--type", "uint8"});
+}
+
+TEST_F(CliTest, DimsExceedingMemory) {
+  const std::string p = write("big.nrrd", "NRRD0004\ntype: uint8\ndimension: 3\n"
+                                          "sizes: 100000 100000 1000\nencoding: raw\n\nabc");
+  info_fails(p, {p + ": a 100000x100000x1000 uint8 volume needs", "memory"});
+  const std::string m = write("big.mha", "NDims = 3\nDimSize = 100000 100000 1000\n"
+                                         "ElementType = MET_UCHAR\nElementDataFile = LOCAL\nabc");
+  info_fails(m, {m + ": a 100000x100000x1000 uint8 volume needs", "memory"});
+}
+
+TEST_F(CliTest, TwoAndFourDimensionalNrrd) {
+  const std::string d2 = write("d2.nrrd", "NRRD0004\ntype: uint8\ndimension: 2\nsizes: 4 5\nencoding: raw\n\n" +
+                                              std::string(20, 'x'));
+  info_fails(d2, {d2 + ": expected a 3-D scalar volume, found 2-D data (sizes 4 5)"});
+  const std::string d4 = write("d4.nrrd", "NRRD0004\ntype: uint8\ndimension: 4\nsizes: 3 4 5 2\nencoding: raw\n\n" +
+                                              std::string(120, 'x'));
+  info_fails(d4, {d4 + ": expected a 3-D scalar volume, found 4-D data (sizes 3 4 5 2)"});
+  const std::string m2 = write("d2.mha", "NDims = 2\nDimSize = 4 5\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n" +
+                                             std::string(20, 'x'));
+  info_fails(m2, {m2 + ": expected a 3-D scalar volume, found 2-D data"});
+}
+
+TEST_F(CliTest, UnknownSampleType) {
+  const std::string b = write("block.nrrd", "NRRD0004\ntype: block\nblock size: 4\ndimension: 3\nsizes: 2 2 2\n"
+                                            "endian: little\nencoding: raw\n\n" + std::string(32, 'x'));
+  info_fails(b, {b + ": unsupported NRRD type 'block'"});
+  // Without "endian", Teem itself rejects the header; still one line.
+  const std::string b2 = write("block2.nrrd", "NRRD0004\ntype: block\nblock size: 4\ndimension: 3\nsizes: 2 2 2\n"
+                                              "encoding: raw\n\n" + std::string(32, 'x'));
+  info_fails(b2, {b2 + ": ", "block"});
+  const std::string m = write("foo.mha", "ObjectType = Image\nNDims = 3\nDimSize = 2 2 2\nElementType = MET_FOO\n"
+                                         "ElementDataFile = LOCAL\n" + std::string(8, 'x'));
+  info_fails(m, {m + ": unknown ElementType MET_FOO"});
+  const std::string r = write("v.raw", "abcdefgh");
+  info_fails(r, {"uint12"}, {"--raw", "2,2,2", "--type", "uint12"});
+}
+
+TEST_F(CliTest, UnreadablePath) {
+  info_fails(file("missing.nrrd"), {file("missing.nrrd") + ": cannot open: No such file or directory"});
+  fs::create_directory(file("adir.nrrd"));
+  info_fails(file("adir.nrrd"), {file("adir.nrrd") + ": cannot open: Is a directory"});
+  info_fails(dir_, {dir_ + ": cannot open: Is a directory"});
+  if (::geteuid() != 0) {  // root reads anything
+    const std::string p = write("secret.nrrd", kNrrd3 + "sizes: 1 1 1\n\nab");
+    fs::permissions(p, fs::perms::none);
+    info_fails(p, {p + ": cannot open: Permission denied"});
+  }
+  // A detached header whose data file is missing names both.
+  const std::string h = write("h.mhd", "NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = gone.raw\n");
+  info_fails(h, {h + ": data file ", "gone.raw: cannot open: No such file or directory"});
+  const std::string n = write("h.nhdr", "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\ndata file: gone.raw\n"
+                                        "encoding: raw\n");
+  info_fails(n, {n + ": ", "gone.raw"});
+}
+
+TEST_F(CliTest, UnknownExtension) {
+  const std::string p = write("volume.xyz", "hello world");
+  info_fails(p, {p + ": unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, or --raw X,Y,Z --type T)"});
+}
+
+TEST_F(CliTest, GarbledHeaders) {
+  const std::string n = write("g.nrrd", "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2\x01 2\nspacings 1 1 1\n\n");
+  info_fails(n, {n + ": "});
+  const std::string m = write("g.mha", "NDims = 3\nthis is not a key value line\n");
+  info_fails(m, {m + ": malformed header line 2"});
+  const std::string b = write("g2.mha", std::string("\x89PNG\r\n\x1a\n\0\0\0\rIHDR", 16));
+  info_fails(b, {b + ": "});
+  const std::string e = write("empty.nrrd", "");
+  info_fails(e, {e + ": "});
+}
+
+// ---- outputs ----------------------------------------------------------------------------
+
+TEST_F(CliTest, LowpassRefusesToOverwriteItsInput) {
+  Volume v({6, 5, 4}, {1, 1, 1}, ScalarType::UInt8);
+  for (std::size_t i = 0; i < v.data.size(); ++i) v.data[i] = static_cast<float>(i % 251);
+  write_volume(file("in.nrrd"), v);
+  const std::string before = slurp(file("in.nrrd"));
+  const auto mtime = fs::last_write_time(file("in.nrrd"));
+
+  const RunResult r = run({"lowpass", file("in.nrrd"), "--sigma", "1", "-o", file("in.nrrd")});
+  expect_one_line_error(r, {file("in.nrrd") + ": output would overwrite the input file"});
+  // Another spelling of the same path.
+  const RunResult r2 = run({"lowpass", file("in.nrrd"), "--sigma", "1", "-o", dir_ + "/./in.nrrd"});
+  expect_one_line_error(r2, {"output would overwrite the input file"});
+
+  EXPECT_EQ(slurp(file("in.nrrd")), before);
+  EXPECT_EQ(fs::last_write_time(file("in.nrrd")), mtime);
+  EXPECT_EQ(listing(), std::vector<std::string>{"in.nrrd"});
+}
+
+TEST_F(CliTest, FailedLowpassLeavesNothingBehind) {
+  const std::string bad = write("bad.nrrd", kNrrd3 + "sizes: 4 4 4\n\nabc");
+  for (const char* out : {"out.nrrd", "out.mha", "out.mhd"}) {
+    const RunResult r = run({"lowpass", bad, "--sigma", "1", "-o", file(out)});
+    SCOPED_TRACE(out);
+    expect_one_line_error(r, {bad + ": ", "truncated"});
+  }
+  EXPECT_EQ(listing(), std::vector<std::string>{"bad.nrrd"});  // no outputs, no .tmp files
+}
+
+TEST_F(CliTest, UnknownOutputExtension) {
+  Volume v({6, 5, 4}, {1, 1, 1}, ScalarType::UInt8);
+  write_volume(file("in.nrrd"), v);
+  const RunResult r = run({"lowpass", file("in.nrrd"), "--sigma", "1", "-o", file("out.xyz")});
+  expect_one_line_error(r, {file("out.xyz") + ": unsupported output extension '.xyz' (use .nrrd, .mha or .mhd)"});
+  EXPECT_EQ(listing(), std::vector<std::string>{"in.nrrd"});
+}
+
+TEST_F(CliTest, InfoOnAGoodFileSucceeds) {
+  Volume v({6, 5, 4}, {0.5, 0.5, 2}, ScalarType::Int16);
+  for (std::size_t i = 0; i < v.data.size(); ++i) v.data[i] = static_cast<float>(i);
+  write_volume(file("ok.mha"), v);
+  const RunResult r = run({"info", file("ok.mha")});
+  EXPECT_EQ(r.status, 0) << r.err;
+  EXPECT_TRUE(r.err.empty()) << r.err;
+  EXPECT_NE(r.out.find("6 x 5 x 4"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("int16"), std::string::npos) << r.out;
+}
+
+}  // namespace
+}  // namespace softshell
