@@ -18,14 +18,14 @@ log "built-in input: a speckled sphere (96^3)"
 "$ss" synthetic --size 96 --seed 1 -o "$out/synthetic.nrrd"
 "$ss" info "$out/synthetic.nrrd" | tee "$out/synthetic-info.txt"
 "$ss" lowpass "$out/synthetic.nrrd" --sigma 1.5 -o "$out/synthetic-lowpass.nrrd"
-"$ss" slices "$out/synthetic.nrrd" "$out/synthetic-lowpass.nrrd" -o "$out/synthetic-slices.png"
+"$ss" slices "$out/synthetic.nrrd" "$out/synthetic-lowpass.nrrd" --height 192 -o "$out/synthetic-slices.png"
 
 spine="$ROOT/../shared/data/plus-spine/SpinePhantomFreehandReconstructed.mha"
 if [ -f "$spine" ]; then
   log "real 3D ultrasound: PLUS spine phantom"
   "$ss" info "$spine" | tee "$out/spine-info.txt"
   "$ss" lowpass "$spine" --sigma 1.0 -o "$out/spine-lowpass.nrrd"
-  "$ss" slices "$spine" "$out/spine-lowpass.nrrd" -o "$out/spine-slices.png"
+  "$ss" slices "$spine" "$out/spine-lowpass.nrrd" --height 256 -o "$out/spine-slices.png"
 else
   log "skipping the real spine volume: $spine not found"
 fi
