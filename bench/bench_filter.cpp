@@ -69,15 +69,13 @@ int main(int argc, char** argv) {
 
     Stream stream(rt);
     const GridDesc g = make_grid({std::size_t(size), std::size_t(size), std::size_t(size)}, {1.0, 1.0, 1.0});
-    Lowpass lowpass(rt, g, {sigma, 3.0, false});        // the default: direct z pass
-    Lowpass lowpass_window(rt, g, {sigma, 3.0, true});  // the alternative: sliding-window z pass
+    Lowpass lowpass(rt, g, {sigma, 3.0});
 
     // Warm-up (first launches pay for kernel preparation).
     stream.copy(a, c, n).wait();
     lowpass.apply(a, c).back().wait();
-    lowpass_window.apply(a, c).back().wait();
 
-    std::vector<double> t_copy, t_triad, t_pass[3], t_total, t_zwindow;
+    std::vector<double> t_copy, t_triad, t_pass[3], t_total;
     for (int r = 0; r < reps; ++r) {
       auto e = stream.copy(a, c, n);
       e.wait();
@@ -85,9 +83,6 @@ int main(int argc, char** argv) {
       e = stream.triad(a, b, c, 0.5f, n);
       e.wait();
       t_triad.push_back(event_seconds(e));
-      const auto evd = lowpass_window.apply(a, c);
-      evd.back().wait();
-      t_zwindow.push_back(event_seconds(evd[2]));
       const auto ev = lowpass.apply(a, c);
       ev.back().wait();
       for (int p = 0; p < 3; ++p) t_pass[p].push_back(event_seconds(ev[p]));
@@ -127,7 +122,6 @@ int main(int argc, char** argv) {
     row("triad", triad, 12);
     const char* pass_names[3] = {"lowpass x", "lowpass y", "lowpass z"};
     for (int p = 0; p < 3; ++p) row(pass_names[p], summarise(t_pass[p]), 8);
-    row("z (window)", summarise(t_zwindow), 8);
     row("lowpass total", total, 24);
     std::printf("check      max |device - cpu| at 64 voxels = %.2e  %s\n", worst, ok ? "ok" : "FAILED");
     return ok ? 0 : 1;

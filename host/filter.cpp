@@ -7,9 +7,7 @@
 
 namespace softshell {
 namespace {
-// z samples per work-item in the sliding-window z pass: long enough to
-// amortise filling the window, short enough to leave plenty of work-items.
-constexpr int k_zchunk = 32;
+constexpr int k_max_radius = 100;
 }  // namespace
 
 std::vector<float> gaussian_weights(double sigma_voxels, double truncate) {
@@ -29,22 +27,21 @@ Lowpass::Lowpass(Runtime& rt, const GridDesc& grid, const Params& params)
     throw std::invalid_argument("lowpass sigma must be a finite number >= 0");
   if (!(params.truncate > 0)) throw std::invalid_argument("lowpass truncate must be > 0");
   const double h[3] = {grid.hx, grid.hy, grid.hz};
-  const int n[3] = {grid.nx, grid.ny, grid.nz};
-  const char* names[3] = {"filter_gauss_x", "filter_gauss_y",
-                          params.z_window ? "filter_gauss_z" : "filter_gauss_z_direct"};
+  const char* names[3] = {"filter_gauss_x", "filter_gauss_y", "filter_gauss_z"};
   for (int a = 0; a < 3; ++a) {
     sigma_vox_[a] = params.sigma_mm / h[a];
     std::vector<float> w = gaussian_weights(sigma_vox_[a], params.truncate);
     radius_[a] = static_cast<int>(w.size() / 2);
-    // Taps beyond the extent all clamp to the edge sample; a radius much larger
-    // than the axis only wastes work, and __constant memory is small.
-    if (w.size() > 4097 || radius_[a] > 8 * n[a] + 64)
+    // The radius is compiled into the kernel and its tap loops unroll: keep it
+    // bounded (sigma up to ~33 voxels), which covers any lowpass that still
+    // leaves a surface to find.
+    if (radius_[a] > k_max_radius)
       throw std::invalid_argument("lowpass sigma too large for this volume (radius " +
-                                  std::to_string(radius_[a]) + " voxels)");
+                                  std::to_string(radius_[a]) + " voxels along axis " + "xyz"[a] +
+                                  ", at most " + std::to_string(k_max_radius) + ")");
     weights_[a] = cl::Buffer(rt.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, w.size() * sizeof(float),
                              w.data());
-    kernels_[a] = rt.kernel("filter.cl", names[a],
-                            "-DRADIUS=" + std::to_string(radius_[a]) + " -DZCHUNK=" + std::to_string(k_zchunk));
+    kernels_[a] = rt.kernel("filter.cl", names[a], "-DRADIUS=" + std::to_string(radius_[a]));
   }
   scratch_ = rt.buffer(grid_voxels(grid) * sizeof(float));
 }
@@ -68,18 +65,13 @@ std::vector<cl::Event> Lowpass::apply(const cl::Buffer& in, const cl::Buffer& ou
     k.setArg(1, *dst[a]);
     k.setArg(2, weights_[a]);
     k.setArg(3, grid_);
-    cl::NDRange global = rt_.global_3d(grid_), local = rt_.local_3d();
-    if (a == 2 && params_.z_window) {  // sliding-window z pass: one work-item per column chunk of k_zchunk samples
-      GridDesc chunks = grid_;
-      chunks.nz = (grid_.nz + k_zchunk - 1) / k_zchunk;
-      global = rt_.global_3d(chunks);
-    }
-    rt_.queue().enqueueNDRangeKernel(k, cl::NullRange, global, local, a == 0 ? wait : nullptr, &events[a]);
+    rt_.queue().enqueueNDRangeKernel(k, cl::NullRange, rt_.global_3d(grid_), rt_.local_3d(),
+                                     a == 0 ? wait : nullptr, &events[a]);
   }
   return events;
 }
 
-Volume lowpass_volume(Runtime& rt, const Volume& in, const Lowpass::Params& params, LowpassTiming* timing) {
+Volume lowpass_volume(Runtime& rt, const Volume& in, const Lowpass::Params& params, LowpassReport* report) {
   const GridDesc g = make_grid(in.dims, in.spacing);
   const std::size_t bytes = in.voxels() * sizeof(float);
   Lowpass filter(rt, g, params);
@@ -90,10 +82,12 @@ Volume lowpass_volume(Runtime& rt, const Volume& in, const Lowpass::Params& para
   const auto passes = filter.apply(d_in, d_out);
   std::vector<float> result(in.voxels());
   rt.queue().enqueueReadBuffer(d_out, CL_TRUE, 0, bytes, result.data(), nullptr, &down);
-  if (timing) {
-    timing->upload = event_seconds(up);
-    timing->filter = event_span_seconds(passes.front(), passes.back());
-    timing->download = event_seconds(down);
+  if (report) {
+    report->sigma_voxels = filter.sigma_voxels();
+    report->radius = filter.radius();
+    report->upload = event_seconds(up);
+    report->filter = event_span_seconds(passes.front(), passes.back());
+    report->download = event_seconds(down);
   }
   return in.with_data(std::move(result), in.source_type);
 }

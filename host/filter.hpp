@@ -23,9 +23,6 @@ class Lowpass {
   struct Params {
     double sigma_mm = 1.0;  // standard deviation in mm (0: identity)
     double truncate = 3.0;  // radius in standard deviations
-    // z pass as a sliding window (reads each sample once). Off by default: on
-    // PoCL's CPU device the direct z pass measured faster (docs/architecture.md).
-    bool z_window = false;
   };
 
   // Uploads the three weight tables and allocates one scratch volume.
@@ -51,12 +48,14 @@ class Lowpass {
   mutable std::array<cl::Kernel, 3> kernels_;
 };
 
-// Host convenience for the CLI: upload, filter, download. Times (seconds)
-// come from profiling events.
-struct LowpassTiming {
+// Host convenience for the CLI: upload, filter, download. The report gives
+// the kernel geometry used and times (seconds) from profiling events.
+struct LowpassReport {
+  std::array<double, 3> sigma_voxels{};
+  std::array<int, 3> radius{};
   double upload = 0, filter = 0, download = 0;
 };
 Volume lowpass_volume(Runtime& rt, const Volume& in, const Lowpass::Params& params,
-                      LowpassTiming* timing = nullptr);
+                      LowpassReport* report = nullptr);
 
 }  // namespace softshell

@@ -154,7 +154,7 @@ int cmd_lowpass(const LowpassOptions& o) {
   const double t_read = seconds_since(t_read0);
 
   const auto t1 = Clock::now();
-  LowpassTiming timing;
+  LowpassReport timing;
   Lowpass::Params p;
   p.sigma_mm = o.sigma;
   p.truncate = o.truncate;
@@ -174,10 +174,8 @@ int cmd_lowpass(const LowpassOptions& o) {
   const double t_write = seconds_since(t2);
 
   if (!o.quiet) {
-    const GridDesc g = make_grid(in.dims, in.spacing);
-    Lowpass probe_radius(rt, g, p);  // cheap: reports the radii actually used
-    const auto& r = probe_radius.radius();
-    const auto& s = probe_radius.sigma_voxels();
+    const auto& r = timing.radius;
+    const auto& s = timing.sigma_voxels;
     std::cout << std::fixed << std::setprecision(3) << "lowpass " << o.in << " -> " << o.out << '\n'
               << "  volume   " << dims_text(in.dims) << ' ' << scalar_type_name(in.source_type) << ", spacing "
               << in.spacing[0] << ',' << in.spacing[1] << ',' << in.spacing[2] << " mm\n"
