@@ -14,21 +14,10 @@
 
 #include "embedded_kernels.hpp"
 #include "error.hpp"
+#include "text.hpp"
 
 namespace softshell {
 namespace {
-
-std::string lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
-  return s;
-}
-
-std::string trim(std::string s) {
-  while (!s.empty() && (std::isspace(static_cast<unsigned char>(s.back())) || s.back() == '\0')) s.pop_back();
-  std::size_t i = 0;
-  while (i < s.size() && std::isspace(static_cast<unsigned char>(s[i]))) ++i;
-  return s.substr(i);
-}
 
 std::string type_name(cl_device_type t) {
   if (t & CL_DEVICE_TYPE_GPU) return "GPU";
@@ -285,6 +274,18 @@ cl::NDRange Runtime::local_1d() const { return cl::NDRange(std::min<std::size_t>
 cl::NDRange Runtime::global_1d(std::size_t n) const {
   const std::size_t l = local_1d()[0];
   return cl::NDRange((n + l - 1) / l * l);
+}
+
+cl::Event Runtime::enqueue_3d(const cl::Kernel& k, const GridDesc& g, const std::vector<cl::Event>* wait) {
+  cl::Event e;
+  queue_.enqueueNDRangeKernel(k, cl::NullRange, global_3d(g), local_3d(), wait, &e);
+  return e;
+}
+
+cl::Event Runtime::enqueue_1d(const cl::Kernel& k, std::size_t n, const std::vector<cl::Event>* wait) {
+  cl::Event e;
+  queue_.enqueueNDRangeKernel(k, cl::NullRange, global_1d(n), local_1d(), wait, &e);
+  return e;
 }
 
 double event_seconds(const cl::Event& e) {

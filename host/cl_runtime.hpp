@@ -76,6 +76,17 @@ class Runtime {
   cl::Buffer buffer(std::size_t bytes, cl_mem_flags flags = CL_MEM_READ_WRITE);
   void check_allocation(std::size_t bytes, const std::string& what) const;
 
+  // Sets a kernel's arguments in order: set_args(k, in, out, grid).
+  template <class... Args>
+  static void set_args(cl::Kernel& k, const Args&... args) {
+    cl_uint i = 0;
+    (k.setArg(i++, args), ...);
+  }
+  // Enqueues a voxel kernel over the grid (3-D, x fastest) or a 1-D kernel
+  // over n items; global sizes are rounded up, kernels bounds-check.
+  cl::Event enqueue_3d(const cl::Kernel& k, const GridDesc& g, const std::vector<cl::Event>* wait = nullptr);
+  cl::Event enqueue_1d(const cl::Kernel& k, std::size_t n, const std::vector<cl::Event>* wait = nullptr);
+
   // Work-group shape for 3-D voxel kernels and a global size rounded up to it.
   cl::NDRange local_3d() const;
   cl::NDRange global_3d(const GridDesc& g) const;

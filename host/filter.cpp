@@ -60,13 +60,8 @@ std::vector<cl::Event> Lowpass::apply(const cl::Buffer& in, const cl::Buffer& ou
   const cl::Buffer* dst[3] = {&out, &scratch_, &out};
   std::vector<cl::Event> events(3);
   for (int a = 0; a < 3; ++a) {
-    cl::Kernel& k = kernels_[a];
-    k.setArg(0, *src[a]);
-    k.setArg(1, *dst[a]);
-    k.setArg(2, weights_[a]);
-    k.setArg(3, grid_);
-    rt_.queue().enqueueNDRangeKernel(k, cl::NullRange, rt_.global_3d(grid_), rt_.local_3d(),
-                                     a == 0 ? wait : nullptr, &events[a]);
+    Runtime::set_args(kernels_[a], *src[a], *dst[a], weights_[a], grid_);
+    events[a] = rt_.enqueue_3d(kernels_[a], grid_, a == 0 ? wait : nullptr);
   }
   return events;
 }

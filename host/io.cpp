@@ -18,6 +18,7 @@
 #include <type_traits>
 
 #include "error.hpp"
+#include "text.hpp"
 
 namespace softshell {
 
@@ -27,25 +28,8 @@ namespace {
 
 std::string errno_text(int err) { return err ? std::strerror(err) : "unknown error"; }
 
-std::string lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return s;
-}
-
 std::string extension_of(const std::string& path) {
   return lower(fs::path(path).extension().string());
-}
-
-std::string dims_text(const Dims3& d) {
-  return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]);
-}
-
-std::string trim(const std::string& s) {
-  const auto b = s.find_first_not_of(" \t");
-  if (b == std::string::npos) return "";
-  const auto e = s.find_last_not_of(" \t");
-  return s.substr(b, e - b + 1);
 }
 
 // Splits "a,b,c" into exactly three trimmed fields; false otherwise.
@@ -131,18 +115,6 @@ bool fits_in_memory(std::size_t voxels, std::size_t bytes_per_voxel) {
 }
 
 namespace io_detail {
-
-std::string human_bytes(double bytes) {
-  static const char* kUnits[] = {"bytes", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"};
-  int u = 0;
-  while (bytes >= 1024.0 && u < 6) {
-    bytes /= 1024.0;
-    ++u;
-  }
-  char buf[64];
-  std::snprintf(buf, sizeof buf, u == 0 ? "%.0f %s" : "%.1f %s", bytes, kUnits[u]);
-  return buf;
-}
 
 std::size_t checked_voxels(const std::string& path, const Dims3& dims, ScalarType t) {
   if (dims[0] == 0 || dims[1] == 0 || dims[2] == 0)

@@ -84,8 +84,6 @@ std::uint64_t file_size(std::FILE* f);
 // Reads up to `n` bytes; returns how many were read (fewer only at EOF).
 // Throws InputError naming `path` on a read error.
 std::size_t read_up_to(std::FILE* f, void* data, std::size_t n, const std::string& path);
-// "1.5 GiB"-style text for messages.
-std::string human_bytes(double bytes);
 
 // A temporary file ".<name>.tmp-XXXXXX" in the directory of `target`,
 // renamed onto `target` by commit(); removed by the destructor if commit()

@@ -15,6 +15,7 @@
 
 #include "error.hpp"
 #include "io.hpp"
+#include "text.hpp"
 
 namespace softshell::io_detail {
 
@@ -67,25 +68,12 @@ std::string excerpt(const std::string& s, std::size_t max = 40) {
   return out;
 }
 
-std::string trim(const std::string& s) {
-  const auto b = s.find_first_not_of(" \t\r\n\f\v");
-  if (b == std::string::npos) return "";
-  const auto e = s.find_last_not_of(" \t\r\n\f\v");
-  return s.substr(b, e - b + 1);
-}
-
 std::vector<std::string> words(const std::string& s) {
   std::istringstream in(s);
   std::vector<std::string> out;
   std::string w;
   while (in >> w) out.push_back(w);
   return out;
-}
-
-std::string lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return s;
 }
 
 // The parsed header. Values stay text until needed so unknown keys cost nothing.

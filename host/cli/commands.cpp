@@ -19,6 +19,7 @@
 #include "filter.hpp"
 #include "image.hpp"
 #include "io.hpp"
+#include "text.hpp"
 #include "volume.hpp"
 
 namespace softshell::cli {
@@ -27,19 +28,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
-std::string human_bytes(double b) {
-  const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB"};
-  int u = 0;
-  while (b >= 1024.0 && u < 4) b /= 1024.0, ++u;
-  std::ostringstream s;
-  s << std::fixed << std::setprecision(u == 0 ? 0 : 1) << b << ' ' << units[u];
-  return s.str();
-}
-
-std::string dims_text(const Dims3& d) {
-  return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]);
 }
 
 // --raw / --type / --spacing / --big-endian for headerless input.
