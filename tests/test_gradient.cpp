@@ -2,7 +2,9 @@
 // one-sided at borders, per mm), guard bands, and determinism.
 #include <cstring>
 
+#include "filter.hpp"
 #include "gradient.hpp"
+#include "reference.hpp"
 #include "test_support.hpp"
 
 namespace softshell {
@@ -73,6 +75,30 @@ INSTANTIATE_TEST_SUITE_P(OddSizesAnisotropic, GradientVsReference,
                                            std::make_pair(Dims3{2, 5, 3}, Vec3d{1.0, 0.25, 3.0}),
                                            std::make_pair(Dims3{1, 7, 66}, Vec3d{1.0, 1.0, 0.6}),
                                            std::make_pair(Dims3{67, 3, 1}, Vec3d{0.4, 1.0, 1.0})));
+
+TEST(Gradient, OfTheLowpassedVolume) {
+  // The classifier needs grad v~: lowpass then gradient on the device, against
+  // the reference gradient of the reference lowpass.
+  Runtime& rt = runtime();
+  const Volume v = test::random_volume({21, 14, 11}, {0.6, 0.9, 1.4}, test::seed() + 10, 0.0f, 255.0f);
+  const auto smooth = test::reference_lowpass(v, 1.1, 3.0);
+  Volume vs(v.dims, v.spacing);
+  for (std::size_t i = 0; i < vs.data.size(); ++i) vs.data[i] = float(smooth[i]);
+  const GridDesc g = make_grid(v.dims, v.spacing);
+  const std::size_t n = v.voxels();
+  cl::Buffer f = test::upload(rt, v.data), fs = rt.buffer(n * 4);
+  cl::Buffer gx = rt.buffer(n * 4), gy = rt.buffer(n * 4), gz = rt.buffer(n * 4);
+  Lowpass(rt, g, {1.1, 3.0}).apply(f, fs);
+  Gradient(rt, g).apply(fs, gx, gy, gz);
+  const std::vector<float> got[3] = {test::download(rt, gx, n), test::download(rt, gy, n), test::download(rt, gz, n)};
+  for (int a = 0; a < 3; ++a) {
+    std::vector<double> want(n);
+    for (std::size_t z = 0; z < v.dims[2]; ++z)
+      for (std::size_t y = 0; y < v.dims[1]; ++y)
+        for (std::size_t x = 0; x < v.dims[0]; ++x) want[v.index(x, y, z)] = reference_derivative(vs, x, y, z, a);
+    EXPECT_TRUE(test::all_near(got[a], want, v.dims, 2e-3, 1e-4)) << "axis " << a;
+  }
+}
 
 TEST(Gradient, ExactOnLinearRamp) {
   // Central and one-sided differences are exact for a linear function.
