@@ -1,0 +1,47 @@
+// Shared pieces of the CLI's commands: how a command registers itself,
+// options that several commands take, and timing helpers.
+//
+// Each command lives in its own cmd_<name>.cpp with one entry point,
+// add_<name>_command(app, action): it adds its subcommand and options to the
+// app and, when the subcommand is given, stores in `action` the work to run
+// after parsing. Validation failures throw InputError (exit 2).
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <chrono>
+#include <functional>
+#include <optional>
+#include <string>
+
+#include "io.hpp"
+
+namespace softshell::cli {
+
+using Action = std::function<int()>;
+
+void add_devices_command(CLI::App& app, Action& action);
+void add_info_command(CLI::App& app, Action& action);
+void add_lowpass_command(CLI::App& app, Action& action);
+void add_slices_command(CLI::App& app, Action& action);
+void add_synthetic_command(CLI::App& app, Action& action);
+
+// --raw / --type / --spacing / --big-endian for headerless input.
+struct RawOptions {
+  std::string dims, type, spacing;
+  bool big_endian = false;
+
+  void add_to(CLI::App* app);
+  // The raw description, or nullopt when --raw was not given; throws
+  // InputError on inconsistent or malformed options.
+  std::optional<RawSpec> spec() const;
+};
+
+// --device I|NAME, documented the same way everywhere.
+void add_device_option(CLI::App* app, std::string& device);
+
+using Clock = std::chrono::steady_clock;
+inline double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+}  // namespace softshell::cli
