@@ -1,5 +1,6 @@
-// 8-bit RGB images: PNG output (libpng, written atomically like every output)
-// and the orthogonal-slice montage behind `softshell slices`.
+// 8-bit RGB images: PNG output (libpng, written atomically like every output),
+// the orthogonal-slice montage behind `softshell slices`, and a small
+// built-in bitmap font for labelling figures.
 #pragma once
 
 #include <cstdint>
@@ -19,6 +20,23 @@ struct Image {
   std::uint8_t* pixel(int x, int y) { return &rgb[(std::size_t(y) * width + x) * 3]; }
   const std::uint8_t* pixel(int x, int y) const { return &rgb[(std::size_t(y) * width + x) * 3]; }
 };
+
+struct Rgb {
+  std::uint8_t r = 0, g = 0, b = 0;
+};
+
+// Fills the rectangle [x, x + w) x [y, y + h), clipped to the image.
+void fill_rect(Image& image, int x, int y, int w, int h, Rgb colour);
+
+// Draws ASCII text with a 5x7 bitmap font, each font pixel a scale x scale
+// block, top-left corner at (x, y); glyphs advance 6 * scale pixels, '\n'
+// starts a new line 9 * scale pixels lower. Characters outside printable
+// ASCII draw as '?'. Only glyph pixels are written (no background), clipped
+// to the image.
+void draw_text(Image& image, int x, int y, const std::string& text, Rgb colour, int scale = 1);
+// Width and height in pixels that draw_text covers (0 for empty text).
+int text_width(const std::string& text, int scale = 1);
+int text_height(const std::string& text, int scale = 1);
 
 void write_png(const std::string& path, const Image& image);
 Image read_png(const std::string& path);  // RGB8 (other layouts converted)

@@ -29,6 +29,8 @@ inline size_t grid_index(const GridDesc g, int x, int y, int z) {
   return (size_t)x + (size_t)g.nx * ((size_t)y + (size_t)g.ny * (size_t)z);
 }
 
+inline size_t grid_voxels(const GridDesc g) { return (size_t)g.nx * (size_t)g.ny * (size_t)g.nz; }
+
 inline bool grid_contains(const GridDesc g, int x, int y, int z) {
   return x < g.nx && y < g.ny && z < g.nz;
 }

@@ -11,7 +11,7 @@ SOFTSHELL_PACKAGES=(
   pkg-config
   ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers pocl-opencl-icd clinfo
   libteem-dev zlib1g-dev libpng-dev
-  libcli11-dev libgtest-dev
+  libcli11-dev libgtest-dev libeigen3-dev
   libglfw3-dev libglm-dev libgl-dev
   xvfb xauth
 )

@@ -42,4 +42,31 @@ std::vector<double> reference_lowpass(const Volume& v, double sigma_mm, double t
   return out;
 }
 
+// d/d(axis) of v at (x, y, z), written independently of the kernel.
+double reference_derivative(const Volume& v, long x, long y, long z, int axis) {
+  long p[3] = {x, y, z};
+  const long n = long(v.dims[axis]);
+  const double h = v.spacing[axis];
+  if (n < 2) return 0.0;
+  auto sample = [&](long c) {
+    long q[3] = {p[0], p[1], p[2]};
+    q[axis] = c;
+    return double(v.at(q[0], q[1], q[2]));
+  };
+  const long c = p[axis];
+  if (c == 0) return (sample(1) - sample(0)) / h;
+  if (c == n - 1) return (sample(n - 1) - sample(n - 2)) / h;
+  return (sample(c + 1) - sample(c - 1)) / (2 * h);
+}
+
+std::array<std::vector<double>, 3> reference_gradient(const Volume& v) {
+  std::array<std::vector<double>, 3> g;
+  for (auto& c : g) c.resize(v.voxels());
+  for (std::size_t z = 0; z < v.dims[2]; ++z)
+    for (std::size_t y = 0; y < v.dims[1]; ++y)
+      for (std::size_t x = 0; x < v.dims[0]; ++x)
+        for (int a = 0; a < 3; ++a) g[a][v.index(x, y, z)] = reference_derivative(v, x, y, z, a);
+  return g;
+}
+
 }  // namespace softshell::test

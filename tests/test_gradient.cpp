@@ -10,24 +10,8 @@
 namespace softshell {
 namespace {
 
+using test::reference_derivative;
 using test::runtime;
-
-// d/d(axis) of v at (x, y, z), written independently of the kernel.
-double reference_derivative(const Volume& v, long x, long y, long z, int axis) {
-  long p[3] = {x, y, z};
-  const long n = long(v.dims[axis]);
-  const double h = v.spacing[axis];
-  if (n < 2) return 0.0;
-  auto sample = [&](long c) {
-    long q[3] = {p[0], p[1], p[2]};
-    q[axis] = c;
-    return double(v.at(q[0], q[1], q[2]));
-  };
-  const long c = p[axis];
-  if (c == 0) return (sample(1) - sample(0)) / h;
-  if (c == n - 1) return (sample(n - 1) - sample(n - 2)) / h;
-  return (sample(c + 1) - sample(c - 1)) / (2 * h);
-}
 
 struct GradResult {
   std::vector<float> gx, gy, gz, mag;

@@ -19,9 +19,12 @@ namespace softshell::cli {
 
 using Action = std::function<int()>;
 
+void add_classify_command(CLI::App& app, Action& action);
 void add_devices_command(CLI::App& app, Action& action);
+void add_evaluate_command(CLI::App& app, Action& action);
 void add_info_command(CLI::App& app, Action& action);
 void add_lowpass_command(CLI::App& app, Action& action);
+void add_phantom_command(CLI::App& app, Action& action);
 void add_slices_command(CLI::App& app, Action& action);
 void add_synthetic_command(CLI::App& app, Action& action);
 

@@ -25,6 +25,9 @@ int run(int argc, char** argv) {
   add_devices_command(app, action);
   add_info_command(app, action);
   add_lowpass_command(app, action);
+  add_phantom_command(app, action);
+  add_classify_command(app, action);
+  add_evaluate_command(app, action);
   add_slices_command(app, action);
   add_synthetic_command(app, action);
 

@@ -1,0 +1,142 @@
+// `--iso auto` (host/auto_iso.hpp): mean gradient magnitude of the lowpassed
+// volume per value bin, and its peak. Host code: one separable Gaussian and
+// one histogram pass, a fraction of a second on the volumes softshell meets.
+#include "auto_iso.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "error.hpp"
+#include "filter.hpp"
+
+namespace softshell {
+namespace {
+
+// In-place separable Gaussian along `axis` (clamp-to-edge like the device
+// lowpass) of one or two fields.
+void blur_axis(std::vector<float>& a, std::vector<float>* b, const Dims3& d, int axis, const std::vector<float>& w) {
+  const std::size_t stride = axis == 0 ? 1 : (axis == 1 ? d[0] : d[0] * d[1]);
+  const std::size_t len = d[axis];
+  const long r = static_cast<long>(w.size() / 2);
+  if (r == 0 || len < 2) return;
+  std::vector<float> la(len), lb(len);
+  const std::size_t lines = a.size() / len;
+  for (std::size_t l = 0; l < lines; ++l) {
+    const std::size_t start =
+        axis == 0 ? l * d[0] : (axis == 1 ? (l % d[0]) + (l / d[0]) * d[0] * d[1] : l);
+    for (std::size_t i = 0; i < len; ++i) {
+      la[i] = a[start + i * stride];
+      if (b) lb[i] = (*b)[start + i * stride];
+    }
+    for (long i = 0; i < long(len); ++i) {
+      double sa = 0, sb = 0;
+      for (long k = -r; k <= r; ++k) {
+        const long j = std::clamp(i + k, 0L, long(len) - 1);
+        sa += w[k + r] * la[j];
+        if (b) sb += w[k + r] * lb[j];
+      }
+      a[start + i * stride] = static_cast<float>(sa);
+      if (b) (*b)[start + i * stride] = static_cast<float>(sb);
+    }
+  }
+}
+
+}  // namespace
+
+double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const AutoIsoParams& params,
+                AutoIsoReport* report) {
+  const Dims3& d = v.dims;
+  const std::size_t n = v.voxels();
+  if (mask && mask->size() != n) throw std::invalid_argument("auto_iso: mask size differs from the volume");
+  if (params.bins < 4 || !(params.sigma_mm >= 0) || !(params.min_bin_share >= 0))
+    throw InputError("auto iso: bins must be >= 4, sigma and min_bin_share >= 0");
+  if (d[0] < 3 || d[1] < 3 || d[2] < 3)
+    throw InputError("--iso auto needs a volume of at least 3 voxels along each axis, got " + std::to_string(d[0]) +
+                     "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]));
+
+  // v~: normalised convolution of the scanned samples.
+  std::vector<float> num(n), den;
+  if (mask) {
+    den.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      den[i] = (*mask)[i] ? 1.0f : 0.0f;
+      num[i] = (*mask)[i] ? v.data[i] : 0.0f;
+    }
+  } else {
+    num = v.data;
+  }
+  for (int axis = 0; axis < 3; ++axis) {
+    const double sigma_vox = std::max(1.0, params.sigma_mm / v.spacing[axis]);
+    blur_axis(num, mask ? &den : nullptr, d, axis, gaussian_weights(sigma_vox, 3.0));
+  }
+  if (mask)
+    for (std::size_t i = 0; i < n; ++i) num[i] = den[i] > 1e-6f ? num[i] / den[i] : 0.0f;
+
+  // Voxels that count: inside, scanned with their six neighbours.
+  const std::size_t sx = 1, sy = d[0], sz = d[0] * d[1];
+  auto usable = [&](std::size_t i) {
+    if (!mask) return true;
+    const auto& m = *mask;
+    return m[i] && m[i - sx] && m[i + sx] && m[i - sy] && m[i + sy] && m[i - sz] && m[i + sz];
+  };
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  std::size_t used = 0;
+  for (std::size_t z = 1; z + 1 < d[2]; ++z)
+    for (std::size_t y = 1; y + 1 < d[1]; ++y)
+      for (std::size_t x = 1; x + 1 < d[0]; ++x) {
+        const std::size_t i = v.index(x, y, z);
+        if (!usable(i)) continue;
+        lo = std::min(lo, double(num[i])), hi = std::max(hi, double(num[i]));
+        ++used;
+      }
+  if (used == 0) throw InputError("--iso auto: no scanned voxels to take the isovalue from");
+  if (!(hi > lo)) throw InputError("--iso auto: the volume is constant, it has no boundary to pick an isovalue at");
+
+  const int bins = params.bins;
+  const double width = (hi - lo) / bins;
+  std::vector<double> sum(bins, 0.0);
+  std::vector<std::size_t> count(bins, 0);
+  const double hx = v.spacing[0], hy = v.spacing[1], hz = v.spacing[2];
+  for (std::size_t z = 1; z + 1 < d[2]; ++z)
+    for (std::size_t y = 1; y + 1 < d[1]; ++y)
+      for (std::size_t x = 1; x + 1 < d[0]; ++x) {
+        const std::size_t i = v.index(x, y, z);
+        if (!usable(i)) continue;
+        const double gx = (num[i + sx] - num[i - sx]) / (2 * hx), gy = (num[i + sy] - num[i - sy]) / (2 * hy),
+                     gz = (num[i + sz] - num[i - sz]) / (2 * hz);
+        const int b = std::clamp(int((num[i] - lo) / width), 0, bins - 1);
+        sum[b] += std::sqrt(gx * gx + gy * gy + gz * gz);
+        ++count[b];
+      }
+
+  // Mean per bin where there are enough voxels, smoothed [1 2 1] over the
+  // valid bins; the peak's centre is the isovalue.
+  const auto min_count = std::max<std::size_t>(1, std::size_t(std::ceil(params.min_bin_share * double(used))));
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::vector<double> mean(bins, nan);
+  for (int b = 0; b < bins; ++b)
+    if (count[b] >= min_count) mean[b] = sum[b] / double(count[b]);
+  int best = -1;
+  double best_value = -1;
+  for (int b = 0; b < bins; ++b) {
+    if (std::isnan(mean[b])) continue;
+    double s = 2 * mean[b], w = 2;
+    if (b > 0 && !std::isnan(mean[b - 1])) s += mean[b - 1], w += 1;
+    if (b + 1 < bins && !std::isnan(mean[b + 1])) s += mean[b + 1], w += 1;
+    if (s / w > best_value) best_value = s / w, best = b;
+  }
+  if (best < 0) throw InputError("--iso auto: too few scanned voxels to take the isovalue from");
+  const double iso = lo + (best + 0.5) * width;
+  if (report) {
+    report->iso = iso;
+    report->lo = lo;
+    report->hi = hi;
+    report->mean_gradient = std::move(mean);
+    report->count = std::move(count);
+    report->voxels = used;
+  }
+  return iso;
+}
+
+}  // namespace softshell

@@ -1,0 +1,259 @@
+// `softshell classify IN --iso V -o OUT`: opacity classification, by the
+// paper's variational method (default) or Levoy's isovalue-contour classifier
+// (the paper's Figure 2b baseline).
+#include <cmath>
+#include <iomanip>
+#include <iostream>
+#include <optional>
+#include <sstream>
+#include <memory>
+
+#include "auto_iso.hpp"
+#include "cl_runtime.hpp"
+#include "cli_common.hpp"
+#include "error.hpp"
+#include "io.hpp"
+#include "levoy.hpp"
+#include "mask.hpp"
+#include "variational.hpp"
+#include "text.hpp"
+
+namespace softshell::cli {
+namespace {
+
+struct ClassifyOptions {
+  std::string in, out, device, method = "variational", iso, init, cycle = "pcg", smoother = "gs", mask = "auto";
+  double thickness = 1.0;
+  double sigma = -1;  // unset: 1 mm for variational, 0 (raw) for levoy
+  VariationalParams vp;
+  SolverParams sp;
+  bool compress = false, quiet = false, stats = false, no_fmg = false;
+  RawOptions raw;
+};
+
+// A number, or nullopt for "auto".
+std::optional<double> parse_iso(const std::string& text) {
+  if (text == "auto") return std::nullopt;
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  if (text.empty() || *end != '\0' || !std::isfinite(v))
+    throw InputError("--iso: expected a number in the input's intensity units or 'auto', got '" + text + "'");
+  return v;
+}
+
+// The data region (host/mask.hpp): derived from the zero fill, read from a
+// file, or everything. Empty vector: no mask.
+struct DataMask {
+  std::vector<std::uint8_t> scanned;  // empty: every voxel scanned
+  std::string text;                   // for the report
+};
+
+DataMask make_mask(const std::string& option, const Volume& in) {
+  DataMask m;
+  const auto percent = [&](std::size_t k) {
+    std::ostringstream s;
+    s << k << " voxels unscanned (" << std::fixed << std::setprecision(1) << 100.0 * double(k) / double(in.voxels())
+      << " %)";
+    return s.str();
+  };
+  if (option == "none") {
+    m.text = "none (every voxel scanned)";
+  } else if (option == "auto") {
+    MaskReport r;
+    m.scanned = scanned_mask(in, {}, &r);
+    m.text = "auto: " + percent(r.unscanned) + ", zero fill " + std::to_string(r.zero_fill) + " + 1-voxel rim";
+    if (r.unscanned == 0) m.scanned.clear(), m.text = "auto: no unscanned region (no solid zero fill at the border)";
+  } else {
+    try {
+      m.scanned = read_mask(option, in.dims);
+    } catch (const InputError& e) {
+      throw InputError(std::string("--mask ") + e.what());
+    }
+    m.text = option + ": " + percent(count_unscanned(m.scanned));
+  }
+  return m;
+}
+
+void write_opacity(const ClassifyOptions& o, const Volume& u) {
+  WriteOptions w;
+  w.type = ScalarType::Float32;
+  w.compress = o.compress;
+  write_volume(o.out, u, w);
+}
+
+int run_levoy(const ClassifyOptions& o, Runtime& rt, const Volume& in, double iso, const std::string& iso_text,
+              const DataMask& mask, Clock::time_point t0) {
+  LevoyParams p;
+  p.iso = iso;
+  p.thickness = o.thickness;
+  p.sigma_mm = o.sigma < 0 ? 0.0 : o.sigma;
+  LevoyReport report;
+  Volume u = classify_levoy(rt, in, p, &report);
+  // Levoy's classifier has no notion of a data region: unscanned voxels get
+  // opacity 0 after the fact (docs/real-data.md).
+  if (!mask.scanned.empty())
+    for (std::size_t i = 0; i < u.data.size(); ++i)
+      if (!mask.scanned[i]) u.data[i] = 0.0f;
+  write_opacity(o, u);
+  if (!o.quiet) {
+    std::size_t drawn = 0;
+    for (float a : u.data) drawn += a > 0.2f;
+    std::cout << std::fixed << std::setprecision(3) << "classify (levoy) " << o.in << " -> " << o.out << '\n'
+              << "  volume   " << dims_text(in.dims) << ' ' << scalar_type_name(in.source_type) << ", iso " << p.iso
+              << iso_text << ", thickness " << p.thickness << " voxels (" << levoy_thickness_mm(p.thickness, in.spacing)
+              << " mm), lowpass sigma " << p.sigma_mm << " mm\n"
+              << "  mask     " << mask.text << '\n'
+              << "  opacity  " << drawn << " voxels above 0.2 (" << std::setprecision(1)
+              << 100.0 * double(drawn) / double(u.voxels()) << " %)\n"
+              << std::setprecision(3) << "  device   " << rt.info().label() << '\n'
+              << "  time     lowpass " << report.lowpass << " s, gradient " << report.gradient << " s, classify "
+              << report.classify << " s, total " << seconds_since(t0) << " s\n";
+  }
+  return 0;
+}
+
+int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, double iso, const std::string& iso_text,
+                    const DataMask& mask, Clock::time_point t0) {
+  VariationalParams p = o.vp;
+  const IntensityMap map = in.intensity_map();
+  p.v_iso = map.to_unit(iso);
+  p.sigma_mm = o.sigma < 0 ? 1.0 : o.sigma;
+  if (!(p.gamma * p.delta > 0)) throw InputError("--gamma and --delta must be > 0 (the system is singular otherwise)");
+  if (p.alpha < 0 || p.beta < 0) throw InputError("--alpha and --beta must be >= 0");
+  if (!(p.epsilon > 0)) throw InputError("--epsilon must be > 0");
+  if (!(p.grad_sigma_mm >= 0)) throw InputError("--grad-sigma must be >= 0");
+  if (p.omega < 0 || p.omega > 1 || p.delta > 1) throw InputError("--omega and --delta must be in [0, 1]");
+  SolverParams sp = o.sp;
+  if (o.cycle != "pcg" && o.cycle != "v") throw InputError("--cycle must be pcg or v");
+  if (o.smoother != "gs" && o.smoother != "jacobi") throw InputError("--smoother must be gs or jacobi");
+  if (!(sp.tol > 0) || sp.tol >= 1) throw InputError("--tol must be in (0, 1)");
+  if (sp.max_cycles < 1 || sp.max_levels < 1) throw InputError("--max-cycles and --levels must be >= 1");
+  sp.krylov = o.cycle == "pcg";
+  sp.jacobi = o.smoother == "jacobi";
+  sp.full_multigrid = !o.no_fmg;
+  std::optional<Volume> init;
+  if (!o.init.empty()) {
+    init = read_volume(o.init);
+    if (init->dims != in.dims)
+      throw InputError(o.init + ": --init has dims " + dims_text(init->dims) + ", the volume " + dims_text(in.dims));
+  }
+  SolveReport report;
+  ClassifyTiming timing;
+  const Volume u = classify_variational(rt, in, p, sp, &report, init ? &*init : nullptr,
+                                       mask.scanned.empty() ? nullptr : &mask.scanned, &timing);
+  auto history = [&] {
+    std::ostringstream s;
+    s << std::scientific << std::setprecision(2);
+    for (double r : report.residuals) s << ' ' << r;
+    return s.str();
+  };
+  if (!report.converged) {
+    std::ostringstream msg;
+    msg << "classification did not converge: relative residual " << std::scientific << std::setprecision(2)
+        << report.residuals.back() << " after " << report.cycles << " iterations (--tol " << sp.tol
+        << "); nothing written; try --max-cycles, or check the parameters (history:" << history() << ")";
+    throw NotConvergedError(msg.str());
+  }
+  write_opacity(o, u);
+  if (!o.quiet) {
+    std::size_t drawn = 0, opaque = 0;
+    for (float a : u.data) drawn += a > 0.2f, opaque += a > 0.01f;
+    std::cout << std::fixed << std::setprecision(3) << "classify (variational) " << o.in << " -> " << o.out << '\n'
+              << "  volume   " << dims_text(in.dims) << ' ' << scalar_type_name(in.source_type) << ", iso " << iso
+              << iso_text << " (" << p.v_iso << " normalised, " << map.describe() << ")\n"
+              << "  mask     " << mask.text << '\n'
+              << "  params   alpha " << p.alpha << " beta " << p.beta << " gamma " << p.gamma << " omega " << p.omega
+              << " delta " << p.delta << " epsilon " << p.epsilon << " u_ind " << p.u_ind << " sigma " << p.sigma_mm
+              << " mm\n"
+              << "  solve    " << report.levels << " levels, " << report.cycles << (sp.krylov ? " PCG iterations" : " V-cycles")
+              << ", relative residual " << std::scientific << std::setprecision(2) << report.residuals.back()
+              << std::fixed << std::setprecision(3) << '\n'
+              << "  opacity  " << drawn << " splats (u > 0.2), " << std::setprecision(1)
+              << 100.0 * double(opaque) / double(u.voxels()) << " % opaque (u > 0.01)\n"
+              << std::setprecision(3) << "  device   " << rt.info().label() << '\n'
+              << "  time     setup " << timing.setup << " s, solve " << timing.solve << " s, total " << seconds_since(t0)
+              << " s\n";
+    if (o.stats) std::cout << "  residuals" << history() << '\n';
+  }
+  return 0;
+}
+
+int run_classify(const ClassifyOptions& o) {
+  const auto t0 = Clock::now();
+  if (o.method != "levoy" && o.method != "variational")
+    throw InputError("--method " + o.method + ": unknown (methods: variational, levoy)");
+  const std::optional<double> given_iso = parse_iso(o.iso);
+  if (o.mask.empty()) throw InputError("--mask: expected FILE, auto or none");
+  ensure_distinct_output(o.in, o.out);
+  if (o.mask != "auto" && o.mask != "none") ensure_distinct_output(o.mask, o.out);
+  const auto raw = o.raw.spec();
+  Runtime rt(o.device);
+  const Volume in = read_volume(o.in, raw);
+  const DataMask mask = make_mask(o.mask, in);
+  double iso = 0;
+  std::string iso_text;
+  if (given_iso) {
+    iso = *given_iso;
+  } else {
+    iso = auto_iso(in, mask.scanned.empty() ? nullptr : &mask.scanned);
+    iso_text = " (auto)";
+  }
+  // Unscanned samples continue the scanned data, so the lowpass and the
+  // gradients see no step at the edge of the sweep (host/mask.hpp).
+  const Volume filled = mask.scanned.empty() ? Volume() : fill_unscanned(in, mask.scanned);
+  const Volume& data = mask.scanned.empty() ? in : filled;
+  return o.method == "levoy" ? run_levoy(o, rt, data, iso, iso_text, mask, t0)
+                             : run_variational(o, rt, data, iso, iso_text, mask, t0);
+}
+
+}  // namespace
+
+void add_classify_command(CLI::App& app, Action& action) {
+  auto o = std::make_shared<ClassifyOptions>();
+  auto* sub = app.add_subcommand("classify", "Opacity classification of a volume (float opacity in [0, 1])");
+  sub->add_option("IN", o->in, "Input volume")->required();
+  sub->add_option("-o,--output", o->out, "Output opacity volume (.nrrd, .mha, .mhd), float")->required();
+  sub->add_option("--iso", o->iso,
+                  "Isovalue, in the input's own intensity units (e.g. 0-255 for 8-bit data), or auto: where the mean "
+                  "gradient of the lowpassed data peaks (docs/real-data.md)")
+      ->required()
+      ->type_name("V|auto");
+  sub->add_option("--mask", o->mask,
+                  "Scanned region: auto (the solid zero fill at the border is unscanned), none, or a volume FILE whose "
+                  "nonzero voxels are scanned; unscanned voxels get opacity 0 (docs/real-data.md)")
+      ->capture_default_str()
+      ->type_name("FILE|auto|none");
+  sub->add_option("--method", o->method,
+                  "variational: the paper's variational classifier; levoy: Levoy's isovalue-contour opacity")
+      ->capture_default_str();
+  sub->add_option("--sigma", o->sigma,
+                  "Lowpass sigma in mm: v~ of the variational terms (default 1), or Levoy's input (default 0: raw)");
+  auto* g = sub->add_option_group("variational", "The paper's functional (normalised intensities, per mm)");
+  g->add_option("--alpha", o->vp.alpha, "Weight of the isovalue term F_iso")->capture_default_str();
+  g->add_option("--beta", o->vp.beta, "Weight of the tangential term F_tan")->capture_default_str();
+  g->add_option("--gamma", o->vp.gamma, "Weight of the indication term F_ind")->capture_default_str();
+  g->add_option("--omega", o->vp.omega, "Blend of v and v~ in F_iso (1: v only)")->capture_default_str();
+  g->add_option("--delta", o->vp.delta, "Share of F_ind independent of |grad v| (> 0)")->capture_default_str();
+  g->add_option("--epsilon", o->vp.epsilon, "Regulariser of 1/(|grad v|^2 + epsilon) in F_iso")->capture_default_str();
+  g->add_option("--u-ind", o->vp.u_ind, "Opacity that F_ind pulls toward")->capture_default_str();
+  g->add_option("--grad-sigma", o->vp.grad_sigma_mm,
+                "Take |grad v| (F_iso, F_ind) from v lowpassed by this sigma in mm; 0: the paper's literal terms")
+      ->capture_default_str();
+  g->add_option("--tol", o->sp.tol, "Stop at this relative residual")->capture_default_str();
+  g->add_option("--max-cycles", o->sp.max_cycles, "Iterations before giving up (exit 3)")->capture_default_str();
+  g->add_option("--levels", o->sp.max_levels, "Multigrid levels (2: the paper's two-level scheme)")->capture_default_str();
+  g->add_option("--cycle", o->cycle, "pcg: V-cycle-preconditioned CG; v: plain V-cycles")->capture_default_str();
+  g->add_option("--smoother", o->smoother, "gs: 8-colour Gauss-Seidel; jacobi: weighted Jacobi")->capture_default_str();
+  g->add_flag("--no-fmg", o->no_fmg, "Start from u = 0 instead of a full-multigrid guess");
+  g->add_option("--init", o->init, "Warm start from this opacity volume (e.g. after a parameter change)");
+  g->add_flag("--stats", o->stats, "Print the residual history");
+  auto* lg = sub->add_option_group("levoy", "Levoy's classifier");
+  lg->add_option("--thickness", o->thickness, "Transition thickness r in voxels")->capture_default_str();
+  sub->add_flag("--compress", o->compress, "Compress the output");
+  sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
+  add_device_option(sub, o->device);
+  o->raw.add_to(sub);
+  sub->callback([&action, o] { action = [o] { return run_classify(*o); }; });
+}
+
+}  // namespace softshell::cli

@@ -1,0 +1,146 @@
+// `softshell evaluate OPACITY TRUTH_SDF`: surface-quality metrics of an
+// opacity volume against a phantom's ground-truth signed distance field
+// (precision, recall, spurious blobs, normal error, the paper's Table 1
+// counts). Runs on the host; no OpenCL device is needed. Definitions:
+// docs/metrics.md.
+#include <array>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <iomanip>
+#include <iostream>
+#include <memory>
+#include <sstream>
+
+#include "cli_common.hpp"
+#include "error.hpp"
+#include "io.hpp"
+#include "metrics.hpp"
+#include "text.hpp"
+
+namespace softshell::cli {
+namespace {
+
+struct EvaluateOptions {
+  std::string opacity, truth, beam = "0,0,1";
+  bool json = false;
+  MetricsParams params;
+};
+
+// "X,Y,Z" with any finite reals, not all zero (parse_vec3 wants positive ones).
+std::array<double, 3> parse_direction(const std::string& text, const std::string& what) {
+  const auto fail = [&] { return InputError(what + ": expected X,Y,Z with finite numbers, not all 0, got '" + text + "'"); };
+  std::array<double, 3> v{};
+  std::size_t pos = 0;
+  for (int i = 0; i < 3; ++i) {
+    const std::size_t comma = text.find(',', pos);
+    if ((i < 2) == (comma == std::string::npos)) throw fail();
+    const std::string field = trim(text.substr(pos, i < 2 ? comma - pos : std::string::npos));
+    if (field.empty()) throw fail();
+    errno = 0;
+    char* end = nullptr;
+    v[i] = std::strtod(field.c_str(), &end);
+    if (errno == ERANGE || *end != '\0' || !std::isfinite(v[i])) throw fail();
+    pos = comma + 1;
+  }
+  if (v[0] == 0 && v[1] == 0 && v[2] == 0) throw fail();
+  return v;
+}
+
+void check_options(const EvaluateOptions& o) {
+  const MetricsParams& p = o.params;
+  if (!std::isfinite(p.threshold) || p.threshold < 0) throw InputError("--threshold must be a finite number >= 0");
+  if (!std::isfinite(p.tolerance) || p.tolerance < 0 || p.tolerance > 1e6)
+    throw InputError("--tolerance must be in [0, 1e6] voxels");
+  if (!(p.facing_cos >= -1 && p.facing_cos <= 1)) throw InputError("--facing-cos must be in [-1, 1]");
+  if (!std::isfinite(p.opaque) || p.opaque < 0) throw InputError("--opaque must be a finite number >= 0");
+}
+
+std::string fixed(double v, int digits) {
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(digits) << v;
+  return s.str();
+}
+
+int run_evaluate(EvaluateOptions o) {
+  const auto t0 = Clock::now();
+  o.params.beam = parse_direction(o.beam, "--beam");
+  check_options(o);
+  const Volume u = read_volume(o.opacity);
+  const Volume sdf = read_volume(o.truth);
+  if (u.dims != sdf.dims)
+    throw InputError("dims differ: " + dims_text(u.dims) + " (" + o.opacity + ") vs " + dims_text(sdf.dims) + " (" +
+                     o.truth + ")");
+  const double t_read = seconds_since(t0);
+  const auto t1 = Clock::now();
+  const Metrics m = evaluate_opacity(u, sdf, o.params);
+  const double t_eval = seconds_since(t1);
+
+  if (o.json) {
+    std::cout << metrics_json(m, o.params) << '\n';
+    return 0;
+  }
+  const MetricsParams& p = o.params;
+  const double bl = std::sqrt(p.beam[0] * p.beam[0] + p.beam[1] * p.beam[1] + p.beam[2] * p.beam[2]);
+  const std::string tol = fixed(p.tolerance, 2) + " voxels", thr = fixed(p.threshold, 3);
+  const std::string beam = fixed(p.beam[0] / bl + 0.0, 2) + "," + fixed(p.beam[1] / bl + 0.0, 2) + "," +
+                           fixed(p.beam[2] / bl + 0.0, 2);
+  struct Row {
+    const char* name;
+    std::string value, meaning;
+  };
+  const Row rows[] = {
+      {"precision", fixed(m.precision, 4), "share of drawn opacity (u > " + thr + ") within " + tol + " of a true surface"},
+      {"recall", fixed(m.recall, 4),
+       "share of true surface voxels facing the transducer with a drawn voxel within " + tol},
+      {"spurious_blobs", std::to_string(m.spurious_blobs),
+       "drawn 26-connected blobs nowhere within " + tol + " of a true surface (" + std::to_string(m.spurious_voxels) +
+           " voxels)"},
+      {"components", std::to_string(m.components), "drawn 26-connected components in all"},
+      {"normal_error_deg", fixed(m.normal_error_deg, 2),
+       "opacity-weighted mean angle (0-90) between the line of grad u and the true normal, over " +
+           std::to_string(m.normal_voxels) + " drawn voxels near a surface"},
+      {"percent_opaque", fixed(m.percent_opaque, 2), "% of voxels with u > " + fixed(p.opaque, 3) + " (paper Table 1)"},
+      {"splats", std::to_string(m.splats), "voxels with u > " + thr + ", one splat each (paper Table 1)"},
+      {"facing_surface_voxels", std::to_string(m.facing_surface_voxels),
+       "true surface voxels whose normal n has n.(-beam) >= " + fixed(p.facing_cos, 2) + ", beam " + beam},
+  };
+  std::cout << "evaluate " << o.opacity << " against " << o.truth << '\n'
+            << "  volume  " << dims_text(u.dims) << ", spacing " << u.spacing[0] << ',' << u.spacing[1] << ','
+            << u.spacing[2] << " mm\n";
+  for (int a = 0; a < 3; ++a)
+    if (std::abs(u.spacing[a] - sdf.spacing[a]) > 1e-6 * u.spacing[a]) {
+      std::cout << "  note    the truth's spacing differs; gradients use the opacity volume's\n";
+      break;
+    }
+  std::cout << "\n  " << std::left << std::setw(23) << "metric" << std::setw(10) << "value" << "meaning\n";
+  for (const Row& r : rows) std::cout << "  " << std::setw(23) << r.name << std::setw(10) << r.value << r.meaning << '\n';
+  std::cout << std::right << "\n  time    read " << fixed(t_read, 3) << " s, evaluate " << fixed(t_eval, 3)
+            << " s\n";
+  return 0;
+}
+
+}  // namespace
+
+void add_evaluate_command(CLI::App& app, Action& action) {
+  auto o = std::make_shared<EvaluateOptions>();
+  auto* sub = app.add_subcommand(
+      "evaluate", "Surface-quality metrics of an opacity volume against a ground-truth SDF (docs/metrics.md)");
+  sub->add_option("OPACITY", o->opacity, "Opacity volume u in [0, 1] (e.g. from classify)")->required();
+  sub->add_option("TRUTH_SDF", o->truth, "Ground-truth signed distance in voxels, < 0 inside (from phantom)")
+      ->required();
+  sub->add_flag("--json", o->json, "Print one JSON object instead of the table");
+  sub->add_option("--threshold", o->params.threshold, "Splat threshold: u > threshold is drawn (paper's epsilon)")
+      ->capture_default_str();
+  sub->add_option("--tolerance", o->params.tolerance, "Voxels: how near a true surface counts as on it")
+      ->capture_default_str();
+  sub->add_option("--beam", o->beam, "Beam direction X,Y,Z (transducer on the z = 0 face: 0,0,1)")
+      ->capture_default_str();
+  sub->add_option("--facing-cos", o->params.facing_cos,
+                  "A surface faces the transducer if its outward normal n has n.(-beam) >= this")
+      ->capture_default_str();
+  sub->add_option("--opaque", o->params.opaque, "u > this counts toward percent_opaque")->capture_default_str();
+  sub->callback([&action, o] { action = [o] { return run_evaluate(*o); }; });
+}
+
+}  // namespace softshell::cli

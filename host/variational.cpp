@@ -1,0 +1,215 @@
+// One level of the variational classifier's linear system on the device:
+// densities (from a volume, from the host, or restricted from a finer level),
+// assembly, operator, smoothers, norm. The solver is in multigrid.cpp.
+#include "variational.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "filter.hpp"
+#include "gradient.hpp"
+
+namespace softshell {
+namespace {
+
+constexpr const char* kSystem = "system.cl";
+constexpr const char* kMultigrid = "multigrid.cl";
+constexpr std::size_t kReduceGroups = 64, kReduceLocal = 256;
+
+template <class T>
+cl::Buffer upload(Runtime& rt, const std::vector<T>& host) {
+  cl::Buffer b = rt.buffer(std::max<std::size_t>(host.size(), 1) * sizeof(T));
+  if (!host.empty()) rt.queue().enqueueWriteBuffer(b, CL_FALSE, 0, host.size() * sizeof(T), host.data());
+  return b;
+}
+
+template <class T>
+std::vector<T> download(Runtime& rt, const cl::Buffer& b, std::size_t n) {
+  std::vector<T> out(n);
+  rt.queue().enqueueReadBuffer(b, CL_TRUE, 0, n * sizeof(T), out.data());
+  return out;
+}
+
+}  // namespace
+
+ClassifyCoeffs VariationalParams::coeffs() const {
+  ClassifyCoeffs k;
+  k.alpha = float(alpha), k.beta = float(beta), k.gamma = float(gamma), k.omega = float(omega);
+  k.delta = float(delta), k.epsilon = float(epsilon), k.u_ind = float(u_ind), k.v_iso = float(v_iso);
+  return k;
+}
+
+DeviceSystem::DeviceSystem(Runtime& rt, const GridDesc& g) : rt_(rt), grid_(g) {
+  const std::size_t n = voxels();
+  rt.check_allocation(n * STENCIL_COEFS * sizeof(float), "the classifier's 27-point system");
+  mu_ = rt.buffer(n * sizeof(float));
+  rho_ = rt.buffer(n * sizeof(float));
+  for (auto& t : T_) t = rt.buffer(n * sizeof(float));
+  fixed_ = rt.buffer(n);
+  coef_ = rt.buffer(n * STENCIL_COEFS * sizeof(float));
+  b_ = rt.buffer(n * sizeof(float));
+  partial_ = rt.buffer(kReduceGroups * sizeof(float));
+  apply_ = rt.kernel(kSystem, "system_apply");
+  residual_ = rt.kernel(kSystem, "system_residual");
+  gs_ = rt.kernel(kSystem, "relax_gs_colour");
+  jacobi_ = rt.kernel(kSystem, "relax_jacobi");
+  zero_fixed_ = rt.kernel(kSystem, "system_zero_fixed");
+  reduce_ = rt.kernel(kSystem, "reduce_sumsq");
+  dot_ = rt.kernel(kSystem, "reduce_dot");
+  axpby_ = rt.kernel(kSystem, "vec_axpby");
+}
+
+DeviceSystem::DeviceSystem(Runtime& rt, const Densities& d) : DeviceSystem(rt, make_grid(d.dims, d.spacing)) {
+  const std::size_t n = voxels();
+  auto check = [n](std::size_t size, const char* what) {
+    if (size != n) throw std::invalid_argument(std::string("Densities: ") + what + " has the wrong size");
+  };
+  check(d.mu.size(), "mu");
+  check(d.rho.size(), "rho");
+  check(d.fixed.size(), "fixed");
+  for (const auto& t : d.T) check(t.size(), "T");
+  // The kernels skip the stencil on the volume boundary: it must be fixed.
+  for (std::size_t z = 0; z < d.dims[2]; ++z)
+    for (std::size_t y = 0; y < d.dims[1]; ++y)
+      for (std::size_t x = 0; x < d.dims[0]; ++x) {
+        const bool boundary = x == 0 || y == 0 || z == 0 || x + 1 == d.dims[0] || y + 1 == d.dims[1] || z + 1 == d.dims[2];
+        if (boundary && !d.fixed[x + d.dims[0] * (y + d.dims[1] * z)])
+          throw std::invalid_argument("Densities: boundary voxels must be fixed (u = 0 on the boundary)");
+      }
+  rt.queue().enqueueWriteBuffer(mu_, CL_FALSE, 0, n * 4, d.mu.data());
+  rt.queue().enqueueWriteBuffer(rho_, CL_FALSE, 0, n * 4, d.rho.data());
+  for (int i = 0; i < 6; ++i) rt.queue().enqueueWriteBuffer(T_[i], CL_FALSE, 0, n * 4, d.T[i].data());
+  rt.queue().enqueueWriteBuffer(fixed_, CL_TRUE, 0, n, d.fixed.data());
+  assemble();
+}
+
+DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams& p,
+                           const std::vector<std::uint8_t>* mask)
+    : DeviceSystem(rt, make_grid(v.dims, v.spacing)) {
+  const std::size_t n = voxels(), bytes = n * sizeof(float);
+  if (mask && mask->size() != n) throw std::invalid_argument("mask size differs from the volume");
+  cl::Buffer dv = upload(rt, v.data);
+  cl::Buffer dvs = rt.buffer(bytes);
+  Lowpass(rt, grid_, {p.sigma_mm, 3.0}).apply(dv, dvs);
+  std::array<cl::Buffer, 3> gv, gs;
+  for (auto& b : gv) b = rt.buffer(bytes);
+  for (auto& b : gs) b = rt.buffer(bytes);
+  const Gradient grad(rt, grid_);
+  if (p.grad_sigma_mm > 0) {
+    cl::Buffer dvg = rt.buffer(bytes);
+    Lowpass(rt, grid_, {p.grad_sigma_mm, 3.0}).apply(dv, dvg);
+    grad.apply(dvg, gv[0], gv[1], gv[2]);
+  } else {
+    grad.apply(dv, gv[0], gv[1], gv[2]);
+  }
+  grad.apply(dvs, gs[0], gs[1], gs[2]);
+  cl::Buffer dmask = mask ? upload(rt, *mask) : upload(rt, std::vector<std::uint8_t>(n, 1));
+  cl::Kernel k = rt.kernel(kSystem, "system_densities");
+  Runtime::set_args(k, dv, dvs, gv[0], gv[1], gv[2], gs[0], gs[1], gs[2], dmask, mu_, rho_, T_[0], T_[1], T_[2],
+                    T_[3], T_[4], T_[5], fixed_, p.coeffs(), grid_);
+  rt.enqueue_3d(k, grid_);
+  assemble();
+}
+
+std::unique_ptr<DeviceSystem> DeviceSystem::coarsen(const DeviceSystem& fine) {
+  const GridDesc& gf = fine.grid_;
+  GridDesc gc = gf;
+  gc.nx = gf.nx / 2 + 1, gc.ny = gf.ny / 2 + 1, gc.nz = gf.nz / 2 + 1;
+  gc.hx = 2 * gf.hx, gc.hy = 2 * gf.hy, gc.hz = 2 * gf.hz;
+  std::unique_ptr<DeviceSystem> c(new DeviceSystem(fine.rt_, gc));
+  cl::Kernel k = fine.rt_.kernel(kMultigrid, "mg_restrict_densities");
+  Runtime::set_args(k, fine.mu_, fine.rho_, fine.T_[0], fine.T_[1], fine.T_[2], fine.T_[3], fine.T_[4], fine.T_[5],
+                    fine.fixed_, c->mu_, c->rho_, c->T_[0], c->T_[1], c->T_[2], c->T_[3], c->T_[4], c->T_[5],
+                    c->fixed_, gf, gc);
+  fine.rt_.enqueue_3d(k, gc);
+  c->assemble();
+  return c;
+}
+
+void DeviceSystem::assemble() {
+  cl::Kernel k = rt_.kernel(kSystem, "system_assemble");
+  Runtime::set_args(k, mu_, rho_, T_[0], T_[1], T_[2], T_[3], T_[4], T_[5], fixed_, coef_, b_, grid_);
+  rt_.enqueue_3d(k, grid_);
+}
+
+cl::Event DeviceSystem::apply(const cl::Buffer& x, const cl::Buffer& y) const {
+  Runtime::set_args(apply_, coef_, x, y, grid_);
+  return rt_.enqueue_3d(apply_, grid_);
+}
+
+cl::Event DeviceSystem::residual(const cl::Buffer& rhs, const cl::Buffer& x, const cl::Buffer& r) const {
+  Runtime::set_args(residual_, coef_, rhs, x, r, grid_);
+  return rt_.enqueue_3d(residual_, grid_);
+}
+
+void DeviceSystem::relax_gs(const cl::Buffer& rhs, const cl::Buffer& x, int sweeps, bool reverse) const {
+  GridDesc half = grid_;  // one work-item per voxel of a colour
+  half.nx = (grid_.nx + 1) / 2, half.ny = (grid_.ny + 1) / 2, half.nz = (grid_.nz + 1) / 2;
+  for (int s = 0; s < sweeps; ++s)
+    for (int c = 0; c < 8; ++c) {
+      Runtime::set_args(gs_, coef_, rhs, x, static_cast<cl_int>(reverse ? 7 - c : c), grid_);
+      rt_.enqueue_3d(gs_, half);
+    }
+}
+
+void DeviceSystem::relax_jacobi(const cl::Buffer& rhs, const cl::Buffer& x, const cl::Buffer& tmp, double w,
+                                int sweeps) const {
+  for (int s = 0; s < sweeps; ++s) {
+    Runtime::set_args(jacobi_, coef_, rhs, x, tmp, static_cast<cl_float>(w), grid_);
+    rt_.enqueue_3d(jacobi_, grid_);
+    rt_.queue().enqueueCopyBuffer(tmp, x, 0, 0, voxels() * sizeof(float));
+  }
+}
+
+void DeviceSystem::zero_fixed(const cl::Buffer& x) const {
+  Runtime::set_args(zero_fixed_, fixed_, x, static_cast<cl_ulong>(voxels()));
+  rt_.enqueue_1d(zero_fixed_, voxels());
+}
+
+double DeviceSystem::reduce(cl::Kernel& k) const {
+  const std::size_t local = std::min<std::size_t>(kReduceLocal, rt_.info().max_work_group);
+  rt_.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(kReduceGroups * local), cl::NDRange(local));
+  std::vector<float> partial(kReduceGroups);
+  rt_.queue().enqueueReadBuffer(partial_, CL_TRUE, 0, kReduceGroups * sizeof(float), partial.data());
+  double sum = 0;
+  for (float f : partial) sum += f;  // fixed order: deterministic
+  return sum;
+}
+
+double DeviceSystem::norm(const cl::Buffer& x) const {
+  Runtime::set_args(reduce_, x, static_cast<cl_ulong>(voxels()), partial_, cl::Local(kReduceLocal * sizeof(float)));
+  return std::sqrt(reduce(reduce_));
+}
+
+double DeviceSystem::dot(const cl::Buffer& x, const cl::Buffer& y) const {
+  Runtime::set_args(dot_, x, y, static_cast<cl_ulong>(voxels()), partial_, cl::Local(kReduceLocal * sizeof(float)));
+  return reduce(dot_);
+}
+
+void DeviceSystem::axpby(float a, const cl::Buffer& x, float b, const cl::Buffer& y) const {
+  Runtime::set_args(axpby_, a, x, b, y, static_cast<cl_ulong>(voxels()));
+  rt_.enqueue_1d(axpby_, voxels());
+}
+
+Densities DeviceSystem::download_densities() const {
+  Densities d;
+  d.dims = {std::size_t(grid_.nx), std::size_t(grid_.ny), std::size_t(grid_.nz)};
+  d.spacing = {grid_.hx, grid_.hy, grid_.hz};
+  const std::size_t n = voxels();
+  d.mu = download<float>(rt_, mu_, n);
+  d.rho = download<float>(rt_, rho_, n);
+  for (int i = 0; i < 6; ++i) d.T[i] = download<float>(rt_, T_[i], n);
+  d.fixed = download<std::uint8_t>(rt_, fixed_, n);
+  return d;
+}
+
+std::vector<float> DeviceSystem::download_coefficients() const {
+  return download<float>(rt_, coef_, voxels() * STENCIL_COEFS);
+}
+
+std::vector<float> DeviceSystem::download_b() const { return download<float>(rt_, b_, voxels()); }
+
+std::size_t DeviceSystem::memory_bytes() const { return voxels() * ((3 + 6 + STENCIL_COEFS) * sizeof(float) + 1); }
+
+}  // namespace softshell

@@ -1,0 +1,136 @@
+// The variational opacity classifier (paper Section 3; docs/numerics.md): the
+// per-voxel densities, the assembled 27-point system on the device, and the
+// multigrid solver.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cl_runtime.hpp"
+#include "stencil.h"
+#include "volume.hpp"
+
+namespace softshell {
+
+// The paper's parameters, named as in the paper, on normalised data
+// (intensities in [0, 1], gradients per mm). v_iso is normalised too.
+struct VariationalParams {
+  double alpha = 1.0, beta = 0.03, gamma = 0.1, omega = 0.6, delta = 0.1, epsilon = 0.01, u_ind = 1.0;
+  double v_iso = 0.5;
+  double sigma_mm = 1.0;  // lowpass giving v~
+  // The |grad v| in F_iso's denominator and in F_ind taken from v lowpassed
+  // with this sigma (mm) instead of from the raw v: speckle then no longer
+  // reads as edges everywhere in tissue. 0: the paper's literal functional.
+  double grad_sigma_mm = 0.0;
+  ClassifyCoeffs coeffs() const;
+};
+
+// Per-voxel densities (docs/numerics.md): mu, rho, the tangential tensor T
+// (xx, yy, zz, xy, xz, yz) and the fixed flag, on a grid with spacing h and
+// voxel volume V = hx hy hz. Host copies, for tests and the float64 oracle.
+struct Densities {
+  Dims3 dims{0, 0, 0};
+  Vec3d spacing{1, 1, 1};
+  std::vector<float> mu, rho;
+  std::array<std::vector<float>, 6> T;
+  std::vector<std::uint8_t> fixed;  // 1: u held at 0
+  std::size_t voxels() const { return dims[0] * dims[1] * dims[2]; }
+};
+
+// One level of the system on the device: densities, the assembled stencil
+// (14 coefficients per voxel, kernels/stencil.h), b, and the operations the
+// solver needs on it.
+class DeviceSystem {
+ public:
+  // Uploads densities and assembles A and b.
+  DeviceSystem(Runtime& rt, const Densities& d);
+  // Computes the densities from a normalised volume on the device (lowpass,
+  // gradients, densities kernel), then assembles. `mask` (optional, one byte
+  // per voxel, 0 = unscanned) fixes voxels.
+  DeviceSystem(Runtime& rt, const Volume& v_normalised, const VariationalParams& p,
+               const std::vector<std::uint8_t>* mask = nullptr);
+  // The next coarser level: restricted densities on the grid of floor(n/2)+1
+  // voxels per axis, spacing 2h, re-assembled (docs/numerics.md).
+  static std::unique_ptr<DeviceSystem> coarsen(const DeviceSystem& fine);
+
+  const GridDesc& grid() const { return grid_; }
+  std::size_t voxels() const { return grid_voxels(grid_); }
+  Runtime& runtime() const { return rt_; }
+
+  cl::Event apply(const cl::Buffer& x, const cl::Buffer& y) const;                      // y = A x
+  cl::Event residual(const cl::Buffer& rhs, const cl::Buffer& x, const cl::Buffer& r) const;  // r = rhs - A x
+  cl::Event residual(const cl::Buffer& x, const cl::Buffer& r) const { return residual(b_, x, r); }
+  // Gauss-Seidel sweeps over the 8 colours (reverse order when `reverse`).
+  void relax_gs(const cl::Buffer& rhs, const cl::Buffer& x, int sweeps, bool reverse) const;
+  // Weighted Jacobi sweeps; `tmp` is scratch of the same size.
+  void relax_jacobi(const cl::Buffer& rhs, const cl::Buffer& x, const cl::Buffer& tmp, double w, int sweeps) const;
+  void zero_fixed(const cl::Buffer& x) const;
+  double norm(const cl::Buffer& x) const;  // Euclidean, deterministic
+  double dot(const cl::Buffer& x, const cl::Buffer& y) const;  // deterministic
+  void axpby(float a, const cl::Buffer& x, float b, const cl::Buffer& y) const;  // y = a x + b y
+
+  Densities download_densities() const;
+  std::vector<float> download_coefficients() const;  // 14 * N, SoA
+  std::vector<float> download_b() const;
+  const cl::Buffer& b() const { return b_; }
+  const cl::Buffer& fixed() const { return fixed_; }
+  std::size_t memory_bytes() const;
+
+ private:
+  DeviceSystem(Runtime& rt, const GridDesc& g);  // allocates
+  void assemble();
+
+  Runtime& rt_;
+  GridDesc grid_;
+  cl::Buffer mu_, rho_, fixed_, coef_, b_, partial_;
+  std::array<cl::Buffer, 6> T_;
+  double reduce(cl::Kernel& k) const;
+  mutable cl::Kernel apply_, residual_, gs_, jacobi_, zero_fixed_, reduce_, dot_, axpby_;
+};
+
+// Multigrid solver settings and report (docs/numerics.md, "Multigrid").
+struct SolverParams {
+  double tol = 1e-4;        // stop at ||b - A u|| / ||b|| <= tol
+  int max_cycles = 30;      // V-cycles; more means "not converged"
+  int pre_sweeps = 2, post_sweeps = 2;
+  bool jacobi = false;      // smoother: weighted Jacobi instead of 8-colour Gauss-Seidel
+  double jacobi_weight = 0.8;
+  bool full_multigrid = true;  // FMG initial guess (ignored with an initial u)
+  int max_levels = 8;          // 2 reproduces the paper's two-level scheme
+  // Outer iteration: conjugate gradients preconditioned by one symmetric
+  // V-cycle per iteration (robust for the strongly anisotropic tangential
+  // term), or plain V-cycles.
+  bool krylov = true;
+};
+
+struct SolveReport {
+  std::vector<double> residuals;  // relative residual: initial, after FMG, after each cycle / iteration
+  int cycles = 0, levels = 0;
+  bool converged = false;
+  double seconds = 0;
+};
+
+// Solves A u = b for the densities' system on the device. `init` (optional)
+// warm-starts from a previous u. Never throws for non-convergence: the report
+// says so and the caller decides.
+std::vector<float> solve(Runtime& rt, const Densities& d, const SolverParams& sp, SolveReport* report = nullptr,
+                         const std::vector<float>* init = nullptr);
+std::vector<float> solve(DeviceSystem& fine, const SolverParams& sp, SolveReport* report = nullptr,
+                         const std::vector<float>* init = nullptr);
+
+// The whole classifier on a volume in its own intensity units: normalise
+// (IntensityMap), densities and system on the device, solve, and return the
+// opacity u clamped to [0, 1] with the volume's geometry. `params.v_iso` is
+// normalised (IntensityMap::to_unit of the file value). `init` warm-starts.
+// Non-convergence is reported in `report`, not thrown.
+struct ClassifyTiming {
+  double setup = 0, solve = 0;  // seconds: densities + assembly; multigrid
+};
+Volume classify_variational(Runtime& rt, const Volume& v, const VariationalParams& params, const SolverParams& sp,
+                            SolveReport* report = nullptr, const Volume* init = nullptr,
+                            const std::vector<std::uint8_t>* mask = nullptr, ClassifyTiming* timing = nullptr);
+
+}  // namespace softshell

@@ -1,0 +1,307 @@
+/* The linear system of the variational classifier (docs/numerics.md):
+ * per-voxel densities, assembly of the 27-point stencil, operator apply and
+ * residual, the two smoothers (8-colour Gauss-Seidel, weighted Jacobi), and a
+ * deterministic sum-of-squares reduction.
+ *
+ * Stencil storage (kernels/stencil.h): coef[k * N + p], k = 0 diagonal,
+ * k = 1..13 the offsets with a positive linear index; A[p][p - off_k] is
+ * coef[k * N + (p - off_k)]. Fixed voxels have identity rows and no couplings,
+ * and every voxel on the volume boundary is fixed, so interior voxels never
+ * look outside the volume.
+ */
+#include "grid.h"
+#include "stencil.h"
+
+inline bool on_boundary(const GridDesc g, int x, int y, int z) {
+  return x == 0 || y == 0 || z == 0 || x == g.nx - 1 || y == g.ny - 1 || z == g.nz - 1;
+}
+
+/* ------------------------------------------------------------ densities */
+
+/* mu = alpha W + gamma c, rho = gamma c u_ind, T = beta (|g|^2 I - g g^T) with
+ * g = grad v~; fixed = boundary or unscanned (mask == 0). */
+__kernel void system_densities(__global const float* restrict v, __global const float* restrict vs,
+                               __global const float* restrict gvx, __global const float* restrict gvy,
+                               __global const float* restrict gvz, __global const float* restrict gsx,
+                               __global const float* restrict gsy, __global const float* restrict gsz,
+                               __global const uchar* restrict mask, __global float* restrict mu,
+                               __global float* restrict rho, __global float* restrict txx,
+                               __global float* restrict tyy, __global float* restrict tzz,
+                               __global float* restrict txy, __global float* restrict txz,
+                               __global float* restrict tyz, __global uchar* restrict fixed,
+                               const ClassifyCoeffs k, const GridDesc g) {
+  const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
+  if (!grid_contains(g, x, y, z)) return;
+  const size_t p = grid_index(g, x, y, z);
+  const float grad2 = gvx[p] * gvx[p] + gvy[p] * gvy[p] + gvz[p] * gvz[p];
+  const float dv = v[p] - k.v_iso, dvs = vs[p] - k.v_iso;
+  const float W = (k.omega * dv * dv + (1.0f - k.omega) * dvs * dvs) / (grad2 + k.epsilon);
+  const float c = k.delta + (1.0f - k.delta) * sqrt(grad2);
+  mu[p] = k.alpha * W + k.gamma * c;
+  rho[p] = k.gamma * c * k.u_ind;
+  const float ax = gsx[p], ay = gsy[p], az = gsz[p];
+  const float s2 = ax * ax + ay * ay + az * az;
+  txx[p] = k.beta * (s2 - ax * ax);
+  tyy[p] = k.beta * (s2 - ay * ay);
+  tzz[p] = k.beta * (s2 - az * az);
+  txy[p] = -k.beta * ax * ay;
+  txz[p] = -k.beta * ax * az;
+  tyz[p] = -k.beta * ay * az;
+  fixed[p] = (on_boundary(g, x, y, z) || mask[p] == 0) ? 1 : 0;
+}
+
+/* ------------------------------------------------------------- assembly */
+
+/* T component (a, b) of voxel q. */
+inline float tensor_ab(__global const float* txx, __global const float* tyy, __global const float* tzz,
+                       __global const float* txy, __global const float* txz, __global const float* tyz,
+                       size_t q, int a, int b) {
+  if (a == b) return a == 0 ? txx[q] : (a == 1 ? tyy[q] : tzz[q]);
+  const int s = a + b; /* 1: xy, 2: xz, 3: yz */
+  return s == 1 ? txy[q] : (s == 2 ? txz[q] : tyz[q]);
+}
+
+/* Does the cell from voxel q = (qx, qy, qz) in direction s lie in the volume? */
+inline bool cell_exists(const GridDesc g, int qx, int qy, int qz, int sx, int sy, int sz) {
+  return qx >= 0 && qy >= 0 && qz >= 0 && qx < g.nx && qy < g.ny && qz < g.nz && qx + sx >= 0 && qy + sy >= 0 &&
+         qz + sz >= 0 && qx + sx < g.nx && qy + sy < g.ny && qz + sz < g.nz;
+}
+
+/* Row p of A (docs/numerics.md, "Stencil"): the diagonal from p's own octants
+ * and from the octants of its face neighbours that point back at p; face
+ * couplings from the 8 cells sharing the grid edge; edge couplings from the
+ * two corners of each of the 2 cells sharing the face diagonal. All times
+ * V/8, plus V mu on the diagonal. Couplings to or from fixed voxels are 0. */
+__kernel void system_assemble(__global const float* restrict mu, __global const float* restrict rho,
+                              __global const float* restrict txx, __global const float* restrict tyy,
+                              __global const float* restrict tzz, __global const float* restrict txy,
+                              __global const float* restrict txz, __global const float* restrict tyz,
+                              __global const uchar* restrict fixed, __global float* restrict coef,
+                              __global float* restrict b, const GridDesc g) {
+  const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
+  if (!grid_contains(g, x, y, z)) return;
+  const size_t N = grid_voxels(g);
+  const size_t p = grid_index(g, x, y, z);
+  const float V = g.hx * g.hy * g.hz;
+  const float h[3] = {g.hx, g.hy, g.hz};
+  const int n[3] = {g.nx, g.ny, g.nz};
+  const int P[3] = {x, y, z};
+  if (fixed[p]) {
+    coef[p] = 1.0f;
+    for (int k = 1; k < STENCIL_COEFS; ++k) coef[k * N + p] = 0.0f;
+    b[p] = 0.0f;
+    return;
+  }
+  float diag = 0.0f;
+  /* p's own octants: sum_{a,b} T_ab s_a s_b / (h_a h_b). */
+  for (int o = 0; o < 8; ++o) {
+    const int s[3] = {(o & 1) ? 1 : -1, (o & 2) ? 1 : -1, (o & 4) ? 1 : -1};
+    if (!cell_exists(g, x, y, z, s[0], s[1], s[2])) continue;
+    for (int a = 0; a < 3; ++a)
+      for (int c = 0; c < 3; ++c)
+        diag += tensor_ab(txx, tyy, tzz, txy, txz, tyz, p, a, c) * (float)(s[a] * s[c]) / (h[a] * h[c]);
+  }
+  /* Octants of q = p - sigma e_a pointing back at p (s_a = sigma): T_aa / h_a^2. */
+  for (int a = 0; a < 3; ++a)
+    for (int sigma = -1; sigma <= 1; sigma += 2) {
+      int q[3] = {P[0], P[1], P[2]};
+      q[a] -= sigma;
+      if (q[a] < 0 || q[a] >= n[a]) continue;
+      const size_t qi = grid_index(g, q[0], q[1], q[2]);
+      const float taa = tensor_ab(txx, tyy, tzz, txy, txz, tyz, qi, a, a) / (h[a] * h[a]);
+      for (int o = 0; o < 4; ++o) {
+        int s[3];
+        const int b1 = (a + 1) % 3, b2 = (a + 2) % 3;
+        s[a] = sigma;
+        s[b1] = (o & 1) ? 1 : -1;
+        s[b2] = (o & 2) ? 1 : -1;
+        if (cell_exists(g, q[0], q[1], q[2], s[0], s[1], s[2])) diag += taa;
+      }
+    }
+  coef[p] = V * mu[p] + 0.125f * V * diag;
+  b[p] = V * rho[p];
+
+  /* Upper offsets. */
+  {
+    const int offs[STENCIL_COEFS][3] = {
+#define OFF(K, DX, DY, DZ) {DX, DY, DZ},
+        STENCIL_OFFSETS(OFF)
+#undef OFF
+    };
+    for (int k = 1; k < STENCIL_COEFS; ++k) {
+      const int kx = offs[k][0], ky = offs[k][1], kz = offs[k][2];
+      const int nb[3] = {x + kx, y + ky, z + kz};
+      float value = 0.0f;
+      const int nz_axes = (kx != 0) + (ky != 0) + (kz != 0);
+      if (nb[0] >= 0 && nb[1] >= 0 && nb[2] >= 0 && nb[0] < g.nx && nb[1] < g.ny && nb[2] < g.nz &&
+          !fixed[grid_index(g, nb[0], nb[1], nb[2])] && nz_axes < 3) {
+        const int K[3] = {kx, ky, kz};
+        if (nz_axes == 1) {
+          /* Face +e_b: -sum_a T_ab s_a s_b/(h_a h_b) over the octants of p with
+           * s_b = +1 and of p + e_b with s_b = -1. */
+          const int bax = kx ? 0 : (ky ? 1 : 2);
+          const int ends[2][3] = {{x, y, z}, {nb[0], nb[1], nb[2]}};
+          for (int e = 0; e < 2; ++e) {
+            const size_t qi = grid_index(g, ends[e][0], ends[e][1], ends[e][2]);
+            const int sb = e == 0 ? 1 : -1;
+            for (int o = 0; o < 4; ++o) {
+              int s[3];
+              const int b1 = (bax + 1) % 3, b2 = (bax + 2) % 3;
+              s[bax] = sb;
+              s[b1] = (o & 1) ? 1 : -1;
+              s[b2] = (o & 2) ? 1 : -1;
+              if (!cell_exists(g, ends[e][0], ends[e][1], ends[e][2], s[0], s[1], s[2])) continue;
+              float sum = 0.0f;
+              for (int a = 0; a < 3; ++a)
+                sum += tensor_ab(txx, tyy, tzz, txy, txz, tyz, qi, a, bax) * (float)(s[a] * s[bax]) / (h[a] * h[bax]);
+              value -= sum;
+            }
+          }
+        } else {
+          /* Edge k = k_a e_a + k_b e_b: -(k_a k_b / (h_a h_b)) T_ab at the two
+           * corners q1 = p + k_a e_a, q2 = p + k_b e_b, each over the (up to)
+           * two cells sharing the face. */
+          const int a = K[0] ? 0 : 1;
+          const int bb = K[2] ? 2 : 1;
+          const int third = 3 - a - bb;
+          const float scale = -(float)(K[a] * K[bb]) / (h[a] * h[bb]);
+          for (int e = 0; e < 2; ++e) {
+            int q[3] = {x, y, z};
+            int s[3];
+            if (e == 0) {
+              q[a] += K[a];
+              s[a] = -K[a];
+              s[bb] = K[bb];
+            } else {
+              q[bb] += K[bb];
+              s[a] = K[a];
+              s[bb] = -K[bb];
+            }
+            const size_t qi = grid_index(g, q[0], q[1], q[2]);
+            const float tab = tensor_ab(txx, tyy, tzz, txy, txz, tyz, qi, a, bb);
+            for (int t = -1; t <= 1; t += 2) {
+              s[third] = t;
+              if (cell_exists(g, q[0], q[1], q[2], s[0], s[1], s[2])) value += scale * tab;
+            }
+          }
+        }
+      }
+      coef[k * N + p] = 0.125f * V * value;
+    }
+  }
+}
+
+/* ------------------------------------------------------ apply, residual */
+
+/* (A x)_p for an interior voxel p. */
+inline float stencil_row(__global const float* restrict coef, __global const float* restrict xv, const size_t N,
+                         const size_t p, const long sy, const long sz) {
+  float acc = coef[p] * xv[p];
+#define TERM(K, DX, DY, DZ)                                          \
+  if (K > 0) {                                                       \
+    const long off = (long)(DX) + (long)(DY) * sy + (long)(DZ) * sz; \
+    acc = fma(coef[K * N + p], xv[p + off], acc);                    \
+    acc = fma(coef[K * N + p - off], xv[p - off], acc);              \
+  }
+  STENCIL_OFFSETS(TERM)
+#undef TERM
+  return acc;
+}
+
+__kernel void system_apply(__global const float* restrict coef, __global const float* restrict xv,
+                           __global float* restrict yv, const GridDesc g) {
+  const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
+  if (!grid_contains(g, x, y, z)) return;
+  const size_t p = grid_index(g, x, y, z);
+  const size_t N = grid_voxels(g);
+  yv[p] = on_boundary(g, x, y, z) ? coef[p] * xv[p] : stencil_row(coef, xv, N, p, g.nx, (long)g.nx * g.ny);
+}
+
+__kernel void system_residual(__global const float* restrict coef, __global const float* restrict bv,
+                              __global const float* restrict xv, __global float* restrict rv, const GridDesc g) {
+  const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
+  if (!grid_contains(g, x, y, z)) return;
+  const size_t p = grid_index(g, x, y, z);
+  const size_t N = grid_voxels(g);
+  const float ax = on_boundary(g, x, y, z) ? coef[p] * xv[p] : stencil_row(coef, xv, N, p, g.nx, (long)g.nx * g.ny);
+  rv[p] = bv[p] - ax;
+}
+
+/* ------------------------------------------------------------ smoothers */
+
+/* One Gauss-Seidel update of the voxels of one colour (parity of x, y, z):
+ * same-colour voxels differ by even offsets, so no 27-point stencil couples
+ * them and the sweep is race-free. Global size: ceil(n / 2) per axis. */
+__kernel void relax_gs_colour(__global const float* restrict coef, __global const float* restrict bv,
+                              __global float* xv, const int colour, const GridDesc g) {
+  const int x = 2 * (int)get_global_id(0) + (colour & 1);
+  const int y = 2 * (int)get_global_id(1) + ((colour >> 1) & 1);
+  const int z = 2 * (int)get_global_id(2) + ((colour >> 2) & 1);
+  if (!grid_contains(g, x, y, z)) return;
+  const size_t p = grid_index(g, x, y, z);
+  if (on_boundary(g, x, y, z)) {
+    xv[p] = bv[p] / coef[p];
+    return;
+  }
+  const size_t N = grid_voxels(g);
+  const float ax = stencil_row(coef, xv, N, p, g.nx, (long)g.nx * g.ny);
+  xv[p] += (bv[p] - ax) / coef[p];
+}
+
+/* Weighted Jacobi: x_new = x + w (b - A x) / diag. */
+__kernel void relax_jacobi(__global const float* restrict coef, __global const float* restrict bv,
+                           __global const float* restrict xv, __global float* restrict xnew, const float w,
+                           const GridDesc g) {
+  const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
+  if (!grid_contains(g, x, y, z)) return;
+  const size_t p = grid_index(g, x, y, z);
+  const size_t N = grid_voxels(g);
+  const float ax = on_boundary(g, x, y, z) ? coef[p] * xv[p] : stencil_row(coef, xv, N, p, g.nx, (long)g.nx * g.ny);
+  xnew[p] = xv[p] + w * (bv[p] - ax) / coef[p];
+}
+
+/* u = 0 at fixed voxels (after a warm start from an arbitrary u). */
+__kernel void system_zero_fixed(__global const uchar* restrict fixed, __global float* restrict u, const ulong n) {
+  const size_t i = get_global_id(0);
+  if (i < n && fixed[i]) u[i] = 0.0f;
+}
+
+/* y = a x + b y (the vector updates of conjugate gradients). */
+__kernel void vec_axpby(const float a, __global const float* restrict xv, const float b, __global float* restrict yv,
+                        const ulong n) {
+  const size_t i = get_global_id(0);
+  if (i < n) yv[i] = a * xv[i] + b * yv[i];
+}
+
+/* ------------------------------------------------------------ reduction */
+
+/* Partial sums of x^2 per work-group (tree in local memory, fixed order):
+ * the host adds the partials in order, so the result is deterministic. */
+__kernel void reduce_sumsq(__global const float* restrict xv, const ulong n, __global float* restrict partial,
+                           __local float* scratch) {
+  const size_t i = get_global_id(0), l = get_local_id(0), ls = get_local_size(0);
+  float acc = 0.0f;
+  for (size_t j = i; j < n; j += get_global_size(0)) acc = fma(xv[j], xv[j], acc);
+  scratch[l] = acc;
+  barrier(CLK_LOCAL_MEM_FENCE);
+  for (size_t s = ls / 2; s > 0; s >>= 1) {
+    if (l < s) scratch[l] += scratch[l + s];
+    barrier(CLK_LOCAL_MEM_FENCE);
+  }
+  if (l == 0) partial[get_group_id(0)] = scratch[0];
+}
+
+/* Partial sums of x . y per work-group, as reduce_sumsq. */
+__kernel void reduce_dot(__global const float* restrict xv, __global const float* restrict yv, const ulong n,
+                         __global float* restrict partial, __local float* scratch) {
+  const size_t i = get_global_id(0), l = get_local_id(0), ls = get_local_size(0);
+  float acc = 0.0f;
+  for (size_t j = i; j < n; j += get_global_size(0)) acc = fma(xv[j], yv[j], acc);
+  scratch[l] = acc;
+  barrier(CLK_LOCAL_MEM_FENCE);
+  for (size_t s = ls / 2; s > 0; s >>= 1) {
+    if (l < s) scratch[l] += scratch[l + s];
+    barrier(CLK_LOCAL_MEM_FENCE);
+  }
+  if (l == 0) partial[get_group_id(0)] = scratch[0];
+}
