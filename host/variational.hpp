@@ -18,7 +18,10 @@ namespace softshell {
 // The paper's parameters, named as in the paper, on normalised data
 // (intensities in [0, 1], gradients per mm). v_iso is normalised too.
 struct VariationalParams {
-  double alpha = 1.0, beta = 0.03, gamma = 0.1, omega = 0.6, delta = 0.1, epsilon = 0.01, u_ind = 1.0;
+  // Provisional defaults from the first parameter sweep on the face phantom
+  // (docs/parameters.md); the paper's beta = 0.03 was for 0-255 intensities
+  // and is ~2000x too small on normalised data.
+  double alpha = 1.0, beta = 3.0, gamma = 0.3, omega = 0.6, delta = 0.5, epsilon = 0.01, u_ind = 1.0;
   double v_iso = 0.5;
   double sigma_mm = 1.0;  // lowpass giving v~
   // The |grad v| in F_iso's denominator and in F_ind taken from v lowpassed

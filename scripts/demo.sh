@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# The front door: installs, builds, runs softshell on a built-in test volume
-# and on the real spine ultrasound in ../shared/data/plus-spine, and writes
-# the outputs (volumes, reports, pictures) under out/.
+# The front door: installs, builds, and runs softshell's main job on a built-in
+# fetal-face phantom (simulated B-mode ultrasound with ground truth) and on the
+# real spine ultrasound in ../shared/data/plus-spine; writes volumes, reports
+# and pictures under out/.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 
@@ -14,16 +15,30 @@ mkdir -p "$out"
 log "OpenCL devices"
 "$ss" devices
 
-log "built-in input: a speckled sphere (96^3)"
-"$ss" synthetic --size 96 --seed 1 -o "$out/synthetic.nrrd"
-"$ss" info "$out/synthetic.nrrd" | tee "$out/synthetic-info.txt"
-"$ss" lowpass "$out/synthetic.nrrd" --sigma 1.5 -o "$out/synthetic-lowpass.nrrd"
-"$ss" slices "$out/synthetic.nrrd" "$out/synthetic-lowpass.nrrd" --height 192 -o "$out/synthetic-slices.png"
+log "built-in input: a fetal-face phantom, 96^3, with its true surfaces"
+"$ss" phantom --shape face --size 96 --seed 1 -o "$out/face" --slices "$out/face-slices.png"
+"$ss" info "$out/face/volume.nrrd" > "$out/face-info.txt"
+
+# Isovalue near the boundary echo: 1.2 of the way from the fluid to the tissue
+# median (docs/parameters.md explains why, docs/baselines.md shows Levoy's).
+json="$out/face/phantom.json"
+median() { sed -n "s/.*\"$1\": *\([0-9.]*\).*/\1/p" "$json" | head -n 1; }
+iso=$(awk -v f="$(median fluid_median)" -v t="$(median tissue_median)" 'BEGIN { printf "%.0f", f + 1.2 * (t - f) }')
+spacing=$(sed -n 's/.*"spacing_mm": *\([0-9.]*\).*/\1/p' "$json" | head -n 1)
+sigma=$(awk -v h="${spacing:-1}" 'BEGIN { printf "%.3f", 1.5 * h }')
+log "classifying at iso $iso: Levoy (on the volume lowpassed by 1.5 voxels) and variational"
+"$ss" classify "$out/face/volume.nrrd" --method levoy --iso "$iso" --sigma "$sigma" -o "$out/face-levoy.nrrd"
+"$ss" classify "$out/face/volume.nrrd" --iso "$iso" --stats -o "$out/face-variational.nrrd"
+for m in levoy variational; do
+  "$ss" evaluate "$out/face-$m.nrrd" "$out/face/truth_sdf.nrrd" | tee "$out/face-$m-metrics.txt"
+done
+"$ss" slices "$out/face/volume.nrrd" "$out/face-levoy.nrrd" "$out/face-variational.nrrd" --height 192 \
+  -o "$out/face-classified.png"
 
 spine="$ROOT/../shared/data/plus-spine/SpinePhantomFreehandReconstructed.mha"
 if [ -f "$spine" ]; then
   log "real 3D ultrasound: PLUS spine phantom"
-  "$ss" info "$spine" | tee "$out/spine-info.txt"
+  "$ss" info "$spine" > "$out/spine-info.txt"
   "$ss" lowpass "$spine" --sigma 1.0 -o "$out/spine-lowpass.nrrd"
   "$ss" slices "$spine" "$out/spine-lowpass.nrrd" --height 256 -o "$out/spine-slices.png"
 else

@@ -3,6 +3,7 @@
 // (a noisy sphere) with anisotropic spacing and all three terms of the
 // functional active, densities computed on the device. Also: the residual
 // history falls, and plain weighted Jacobi on one level reaches the same u.
+#include <cstring>
 #include <algorithm>
 #include <cmath>
 #include <iostream>
@@ -210,6 +211,121 @@ TEST(Solver, OracleCgAgreesWithLdlt) {
   double num = 0, den = 0;
   for (std::size_t i = 0; i < a.size(); ++i) num += (a[i] - b[i]) * (a[i] - b[i]), den += a[i] * a[i];
   EXPECT_LT(std::sqrt(num / den), 1e-10);
+}
+
+}  // namespace
+}  // namespace softshell
+
+// ---- On the face phantom (issue 4's acceptance tests) ------------------------------------
+
+#include "phantom.hpp"
+
+namespace softshell {
+namespace {
+
+struct FaceCase {
+  Phantom ph;
+  double iso;  // normalised
+};
+
+const FaceCase& face64() {
+  static const FaceCase c = [] {
+    PhantomParams pp;
+    pp.shape = PhantomShape::Face;
+    pp.size = 64;
+    pp.seed = 1;
+    FaceCase f{make_phantom(test::runtime(), pp), 0};
+    f.iso = f.ph.volume.intensity_map().to_unit(160.0);  // near the boundary echo (docs/baselines.md)
+    return f;
+  }();
+  return c;
+}
+
+TEST(SolverFace, VCyclesReduceTheResidualFivefoldEach) {
+  const FaceCase& f = face64();
+  VariationalParams p;  // defaults
+  p.v_iso = f.iso;
+  SolverParams sp;
+  sp.krylov = false;
+  sp.full_multigrid = false;  // from u = 0, so every cycle is measured
+  sp.tol = 1e-6;
+  SolveReport rep;
+  classify_variational(test::runtime(), f.ph.volume, p, sp, &rep);
+  ASSERT_TRUE(rep.converged);
+  ASSERT_GE(rep.levels, 4);
+  ASSERT_GE(rep.residuals.size(), 3u);
+  for (std::size_t i = 1; i < rep.residuals.size(); ++i) {
+    if (rep.residuals[i - 1] < 1e-5) break;  // float32 floor
+    EXPECT_LE(rep.residuals[i], rep.residuals[i - 1] / 5) << "V-cycle " << i;
+  }
+}
+
+TEST(SolverFace, MultigridMatchesALongJacobiRun) {
+  const FaceCase& f = face64();
+  VariationalParams p;
+  p.v_iso = f.iso;
+  SolverParams mg;
+  mg.tol = 1e-6;
+  SolverParams jac;
+  jac.jacobi = true;
+  jac.krylov = false;
+  jac.max_levels = 1;  // one level: every cycle is 60 + 4 plain Jacobi sweeps
+  jac.full_multigrid = false;
+  jac.tol = 1e-6;
+  jac.max_cycles = 2000;
+  SolveReport r1, r2;
+  const Volume a = classify_variational(test::runtime(), f.ph.volume, p, mg, &r1);
+  const Volume b = classify_variational(test::runtime(), f.ph.volume, p, jac, &r2);
+  ASSERT_TRUE(r1.converged);
+  ASSERT_TRUE(r2.converged);
+  double worst = 0;
+  for (std::size_t i = 0; i < a.data.size(); ++i) worst = std::max(worst, double(std::abs(a.data[i] - b.data[i])));
+  EXPECT_LT(worst, 1e-3);
+}
+
+TEST(SolverFace, ConjugateGradientsStayRobustWhenTheTangentialTermDominates) {
+  // beta = 1000 makes the operator strongly anisotropic: plain V-cycles slow
+  // to ~0.65 per cycle, the preconditioned CG must still converge quickly.
+  const FaceCase& f = face64();
+  VariationalParams p;
+  p.v_iso = f.iso;
+  p.beta = 1000;
+  SolverParams sp;
+  sp.max_cycles = 30;
+  SolveReport rep;
+  classify_variational(test::runtime(), f.ph.volume, p, sp, &rep);
+  EXPECT_TRUE(rep.converged);
+  EXPECT_LE(rep.cycles, 15);
+}
+
+TEST(SolverFace, WarmStartAfterAFivePercentIsoChangeIsCheap) {
+  const FaceCase& f = face64();
+  VariationalParams p;
+  p.v_iso = f.iso;
+  p.beta = 100;
+  SolverParams sp;
+  sp.full_multigrid = false;
+  SolveReport cold, warm;
+  const Volume u = classify_variational(test::runtime(), f.ph.volume, p, sp, &cold);
+  p.v_iso *= 1.05;
+  classify_variational(test::runtime(), f.ph.volume, p, sp, &warm, &u);
+  ASSERT_TRUE(cold.converged && warm.converged);
+  EXPECT_LT(warm.residuals.front(), 0.5) << "the previous u is a good start";
+  EXPECT_LE(warm.cycles, cold.cycles);
+}
+
+TEST(SolverFace, BitIdenticalBetweenRuns) {
+  const FaceCase& f = face64();
+  VariationalParams p;
+  p.v_iso = f.iso;
+  p.beta = 100;
+  for (bool jacobi : {false, true}) {
+    SolverParams sp;
+    sp.jacobi = jacobi;
+    const Volume a = classify_variational(test::runtime(), f.ph.volume, p, sp);
+    const Volume b = classify_variational(test::runtime(), f.ph.volume, p, sp);
+    EXPECT_EQ(0, std::memcmp(a.data.data(), b.data.data(), a.data.size() * sizeof(float))) << "jacobi " << jacobi;
+  }
 }
 
 }  // namespace
