@@ -55,7 +55,6 @@ DeviceSystem::DeviceSystem(Runtime& rt, const GridDesc& g) : rt_(rt), grid_(g) {
   gs_ = rt.kernel(kSystem, "relax_gs_colour");
   jacobi_ = rt.kernel(kSystem, "relax_jacobi");
   zero_fixed_ = rt.kernel(kSystem, "system_zero_fixed");
-  reduce_ = rt.kernel(kSystem, "reduce_sumsq");
   dot_ = rt.kernel(kSystem, "reduce_dot");
   axpby_ = rt.kernel(kSystem, "vec_axpby");
 }
@@ -177,10 +176,7 @@ double DeviceSystem::reduce(cl::Kernel& k) const {
   return sum;
 }
 
-double DeviceSystem::norm(const cl::Buffer& x) const {
-  Runtime::set_args(reduce_, x, static_cast<cl_ulong>(voxels()), partial_, cl::Local(kReduceLocal * sizeof(float)));
-  return std::sqrt(reduce(reduce_));
-}
+double DeviceSystem::norm(const cl::Buffer& x) const { return std::sqrt(dot(x, x)); }
 
 double DeviceSystem::dot(const cl::Buffer& x, const cl::Buffer& y) const {
   Runtime::set_args(dot_, x, y, static_cast<cl_ulong>(voxels()), partial_, cl::Local(kReduceLocal * sizeof(float)));

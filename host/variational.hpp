@@ -91,7 +91,7 @@ class DeviceSystem {
   cl::Buffer mu_, rho_, fixed_, coef_, b_, partial_;
   std::array<cl::Buffer, 6> T_;
   double reduce(cl::Kernel& k) const;
-  mutable cl::Kernel apply_, residual_, gs_, jacobi_, zero_fixed_, reduce_, dot_, axpby_;
+  mutable cl::Kernel apply_, residual_, gs_, jacobi_, zero_fixed_, dot_, axpby_;
 };
 
 // Multigrid solver settings and report (docs/numerics.md, "Multigrid").

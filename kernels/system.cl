@@ -1,7 +1,7 @@
 /* The linear system of the variational classifier (docs/numerics.md):
  * per-voxel densities, assembly of the 27-point stencil, operator apply and
  * residual, the two smoothers (8-colour Gauss-Seidel, weighted Jacobi), and a
- * deterministic sum-of-squares reduction.
+ * deterministic dot-product reduction.
  *
  * Stencil storage (kernels/stencil.h): coef[k * N + p], k = 0 diagonal,
  * k = 1..13 the offsets with a positive linear index; A[p][p - off_k] is
@@ -275,23 +275,8 @@ __kernel void vec_axpby(const float a, __global const float* restrict xv, const 
 
 /* ------------------------------------------------------------ reduction */
 
-/* Partial sums of x^2 per work-group (tree in local memory, fixed order):
+/* Partial sums of x . y per work-group (tree in local memory, fixed order):
  * the host adds the partials in order, so the result is deterministic. */
-__kernel void reduce_sumsq(__global const float* restrict xv, const ulong n, __global float* restrict partial,
-                           __local float* scratch) {
-  const size_t i = get_global_id(0), l = get_local_id(0), ls = get_local_size(0);
-  float acc = 0.0f;
-  for (size_t j = i; j < n; j += get_global_size(0)) acc = fma(xv[j], xv[j], acc);
-  scratch[l] = acc;
-  barrier(CLK_LOCAL_MEM_FENCE);
-  for (size_t s = ls / 2; s > 0; s >>= 1) {
-    if (l < s) scratch[l] += scratch[l + s];
-    barrier(CLK_LOCAL_MEM_FENCE);
-  }
-  if (l == 0) partial[get_group_id(0)] = scratch[0];
-}
-
-/* Partial sums of x . y per work-group, as reduce_sumsq. */
 __kernel void reduce_dot(__global const float* restrict xv, __global const float* restrict yv, const ulong n,
                          __global float* restrict partial, __local float* scratch) {
   const size_t i = get_global_id(0), l = get_local_id(0), ls = get_local_size(0);
