@@ -25,11 +25,15 @@ namespace softshell {
 //  3. they reclaim the zero voxels 6-connected to them within `solid`
 //     steps (the ragged edge of the fill that no cube fits into);
 //  4. then grow by `grow` voxels (6-neighbour dilation) over the
-//     partial-volume rim that the reconstruction leaves at the sweep edge.
+//     partial-volume rim that the reconstruction leaves at the sweep edge:
+//     on the PLUS spine sweep the first scanned layer is dim (median 72
+//     against 226 deeper, in the bright near field) and the second still
+//     partly so, and with a 1-voxel growth the classifiers still draw the
+//     lateral sweep edge (docs/real-data.md), so 2.
 struct MaskParams {
   double min_fraction = 0.01;
   int solid = 2;  // cube half-width of step 1, voxels (0: every zero voxel, the plain rule)
-  int grow = 1;
+  int grow = 2;
 };
 
 struct MaskReport {

@@ -128,7 +128,9 @@ std::vector<float> solve(DeviceSystem& fine, const SolverParams& sp, SolveReport
 // (IntensityMap), densities and system on the device, solve, and return the
 // opacity u clamped to [0, 1] with the volume's geometry. `params.v_iso` is
 // normalised (IntensityMap::to_unit of the file value). `init` warm-starts.
-// Non-convergence is reported in `report`, not thrown.
+// Non-convergence is reported in `report`, not thrown. With a `mask`, pass
+// the volume through fill_unscanned (host/mask.hpp) first, as the CLI does,
+// so the lowpass and gradients see no step at the edge of the sweep.
 struct ClassifyTiming {
   double setup = 0, solve = 0;  // seconds: densities + assembly; multigrid
 };

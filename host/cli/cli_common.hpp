@@ -22,6 +22,7 @@ using Action = std::function<int()>;
 void add_classify_command(CLI::App& app, Action& action);
 void add_devices_command(CLI::App& app, Action& action);
 void add_evaluate_command(CLI::App& app, Action& action);
+void add_figure2_command(CLI::App& app, Action& action);
 void add_info_command(CLI::App& app, Action& action);
 void add_lowpass_command(CLI::App& app, Action& action);
 void add_phantom_command(CLI::App& app, Action& action);

@@ -60,8 +60,10 @@ DataMask make_mask(const std::string& option, const Volume& in) {
     m.text = "none (every voxel scanned)";
   } else if (option == "auto") {
     MaskReport r;
-    m.scanned = scanned_mask(in, {}, &r);
-    m.text = "auto: " + percent(r.unscanned) + ", zero fill " + std::to_string(r.zero_fill) + " + 1-voxel rim";
+    const MaskParams params;
+    m.scanned = scanned_mask(in, params, &r);
+    m.text = "auto: " + percent(r.unscanned) + " (zero fill " + std::to_string(r.zero_fill) + " + " +
+             std::to_string(params.grow) + "-voxel rim)";
     if (r.unscanned == 0) m.scanned.clear(), m.text = "auto: no unscanned region (no solid zero fill at the border)";
   } else {
     try {

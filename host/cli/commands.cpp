@@ -28,6 +28,7 @@ int run(int argc, char** argv) {
   add_phantom_command(app, action);
   add_classify_command(app, action);
   add_evaluate_command(app, action);
+  add_figure2_command(app, action);
   add_slices_command(app, action);
   add_synthetic_command(app, action);
 

@@ -1,0 +1,225 @@
+// The bitmap font (host/image.hpp: draw_text) and `softshell figure2` end to
+// end: six grey panels of the expected size, captions, panel (a) equal to the
+// input slice, the default slice, and one-line errors for bad arguments.
+#include <algorithm>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "cli_fixture.hpp"
+#include "image.hpp"
+#include "io.hpp"
+#include "test_support.hpp"
+
+namespace softshell {
+namespace {
+
+namespace fs = std::filesystem;
+
+bool is_grey(const Image& im, int x, int y) {
+  const std::uint8_t* p = im.pixel(x, y);
+  return p[0] == p[1] && p[1] == p[2];
+}
+
+// ---- font --------------------------------------------------------------------------------------------------------
+
+TEST(Figure2Text, GlyphsAreDrawnScaledAndClipped) {
+  const Rgb c{250, 200, 100};
+  Image im(40, 20, 0);
+  draw_text(im, 1, 2, "I", c, 2);
+  // 'I' in the 5x7 font: the middle column full height, the top and bottom
+  // rows three columns wide; each font pixel a 2x2 block.
+  auto set = [&](int x, int y) { return im.pixel(x, y)[0] == c.r && im.pixel(x, y)[1] == c.g && im.pixel(x, y)[2] == c.b; };
+  for (int row = 0; row < 7; ++row)
+    for (int dy = 0; dy < 2; ++dy)
+      for (int dx = 0; dx < 2; ++dx) EXPECT_TRUE(set(1 + 2 * 2 + dx, 2 + 2 * row + dy)) << "row " << row;
+  EXPECT_TRUE(set(1 + 2 * 1, 2)) << "top bar";
+  EXPECT_TRUE(set(1 + 2 * 3, 2 + 2 * 6)) << "bottom bar";
+  EXPECT_FALSE(set(1 + 2 * 0, 2 + 2 * 3)) << "left column is empty in the middle";
+  std::size_t lit = 0;
+  for (int y = 0; y < im.height; ++y)
+    for (int x = 0; x < im.width; ++x) lit += set(x, y);
+  EXPECT_EQ(lit, (7u + 4u) * 4u);  // 11 font pixels of 'I'
+
+  EXPECT_EQ(text_width("ab", 1), 11);
+  EXPECT_EQ(text_width("ab\nabc", 2), 34);
+  EXPECT_EQ(text_height("ab\nabc", 1), 16);
+  EXPECT_EQ(text_width("", 3), 0);
+
+  // Every printable character lights something except the space; bytes
+  // outside printable ASCII draw as '?'.
+  for (int ch = 0x21; ch < 0x7F; ++ch) {
+    Image g(8, 8, 0);
+    draw_text(g, 0, 0, std::string(1, char(ch)), c, 1);
+    EXPECT_TRUE(std::any_of(g.rgb.begin(), g.rgb.end(), [](std::uint8_t b) { return b != 0; })) << char(ch);
+  }
+  Image q1(8, 8, 0), q2(8, 8, 0);
+  draw_text(q1, 0, 0, "\x01", c, 1);
+  draw_text(q2, 0, 0, "?", c, 1);
+  EXPECT_EQ(q1.rgb, q2.rgb);
+
+  // Clipped at every edge, no writes outside.
+  Image small(5, 4, 7);
+  draw_text(small, -3, -3, "W@W", c, 3);
+  draw_text(small, 3, 2, "M", c, 1);
+  EXPECT_EQ(small.rgb.size(), 5u * 4u * 3u);
+}
+
+// ---- figure2 ------------------------------------------------------------------------------------------------------
+
+class CliFigure2 : public test::CliTest {
+ protected:
+  // 24 x 20 x 16 uint8: a speckled sphere of tissue in fluid with a bright rim.
+  std::string write_volume_file() {
+    Volume v({24, 20, 16}, {1, 1, 1}, ScalarType::UInt8);
+    std::mt19937_64 rng(test::seed());
+    std::uniform_real_distribution<double> u(0.6, 1.4);
+    for (std::size_t z = 0; z < 16; ++z)
+      for (std::size_t y = 0; y < 20; ++y)
+        for (std::size_t x = 0; x < 24; ++x) {
+          const double d = std::sqrt((x - 11.5) * (x - 11.5) + (y - 9.5) * (y - 9.5) + (z - 7.5) * (z - 7.5)) - 6.0;
+          const double base = d < 0 ? 150 : 20;
+          v.at(x, y, z) = float(std::clamp(std::round(base * u(rng)), 1.0, 255.0));
+        }
+    write_volume(file("in.nrrd"), v);
+    volume_ = v;
+    return file("in.nrrd");
+  }
+
+  struct Box {
+    int x0, y0, x1, y1;  // inclusive
+    std::size_t pixels;
+  };
+  // Bounding boxes of the 4-connected regions of grey pixels, row-major order
+  // of their top-left corners.
+  static std::vector<Box> grey_regions(const Image& im) {
+    std::vector<int> seen(std::size_t(im.width) * im.height, 0);
+    std::vector<Box> boxes;
+    std::vector<std::pair<int, int>> stack;
+    for (int y = 0; y < im.height; ++y)
+      for (int x = 0; x < im.width; ++x) {
+        if (seen[std::size_t(y) * im.width + x] || !is_grey(im, x, y)) continue;
+        Box b{x, y, x, y, 0};
+        stack.assign(1, {x, y});
+        seen[std::size_t(y) * im.width + x] = 1;
+        while (!stack.empty()) {
+          const auto [px, py] = stack.back();
+          stack.pop_back();
+          ++b.pixels;
+          b.x0 = std::min(b.x0, px), b.x1 = std::max(b.x1, px), b.y0 = std::min(b.y0, py), b.y1 = std::max(b.y1, py);
+          const int nx[4] = {px - 1, px + 1, px, px}, ny[4] = {py, py, py - 1, py + 1};
+          for (int k = 0; k < 4; ++k) {
+            if (nx[k] < 0 || ny[k] < 0 || nx[k] >= im.width || ny[k] >= im.height) continue;
+            int& s = seen[std::size_t(ny[k]) * im.width + nx[k]];
+            if (!s && is_grey(im, nx[k], ny[k])) s = 1, stack.push_back({nx[k], ny[k]});
+          }
+        }
+        boxes.push_back(b);
+      }
+    return boxes;
+  }
+
+  Volume volume_;
+};
+
+TEST_F(CliFigure2, SixLabelledPanelsAndTheInputSlice) {
+  const std::string in = write_volume_file();
+  const int zoom = 4;
+  const test::RunResult r =
+      run({"figure2", in, "-o", file("fig.png"), "--slice", "y:7", "--iso", "85", "--zoom", std::to_string(zoom)});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("y = 7 of 20"), std::string::npos) << r.out;
+  const Image im = read_png(file("fig.png"));
+
+  // Panels: the only grey pixels; six full rectangles of 24 x 16 voxels x zoom,
+  // three across and two down.
+  const auto boxes = grey_regions(im);
+  ASSERT_EQ(boxes.size(), 6u) << "grey regions in a " << im.width << "x" << im.height << " figure";
+  for (std::size_t k = 0; k < 6; ++k) {
+    const Box& b = boxes[k];
+    EXPECT_EQ(b.x1 - b.x0 + 1, 24 * zoom) << "panel " << k;
+    EXPECT_EQ(b.y1 - b.y0 + 1, 16 * zoom) << "panel " << k;
+    EXPECT_EQ(b.pixels, std::size_t(24 * zoom) * (16 * zoom)) << "panel " << k << " is not a full rectangle";
+  }
+  EXPECT_EQ(boxes[0].y0, boxes[2].y0);
+  EXPECT_LT(boxes[0].x0, boxes[1].x0);
+  EXPECT_LT(boxes[1].x0, boxes[2].x0);
+  EXPECT_EQ(boxes[3].x0, boxes[0].x0);
+  EXPECT_GT(boxes[3].y0, boxes[0].y1);
+
+  // Captions: each panel has non-grey, non-background (label) pixels in the
+  // strip just above it, and the strip is otherwise the blank background.
+  const std::uint8_t* bg = im.pixel(0, 0);
+  for (std::size_t k = 0; k < 6; ++k) {
+    std::size_t label = 0;
+    for (int y = std::max(0, boxes[k].y0 - 20); y < boxes[k].y0; ++y)
+      for (int x = boxes[k].x0; x <= boxes[k].x1; ++x) {
+        const std::uint8_t* p = im.pixel(x, y);
+        label += !(p[0] == bg[0] && p[1] == bg[1] && p[2] == bg[2]);
+      }
+    EXPECT_GT(label, 20u) << "no caption above panel " << k;
+  }
+
+  // (a): the input slice y = 7, grey = value (uint8, type range), each voxel
+  // a zoom x zoom block; x to the right, z down.
+  const Box& a = boxes[0];
+  for (int py = 0; py < 16 * zoom; ++py)
+    for (int px = 0; px < 24 * zoom; ++px) {
+      const float want = volume_.at(std::size_t(px / zoom), 7, std::size_t(py / zoom));
+      ASSERT_EQ(im.pixel(a.x0 + px, a.y0 + py)[0], std::uint8_t(want)) << "panel (a) pixel " << px << ", " << py;
+    }
+  // Opacity panels are not all black: the sphere's boundary is drawn.
+  for (std::size_t k = 1; k < 6; ++k) {
+    int brightest = 0;
+    for (int y = boxes[k].y0; y <= boxes[k].y1; ++y)
+      for (int x = boxes[k].x0; x <= boxes[k].x1; ++x) brightest = std::max<int>(brightest, im.pixel(x, y)[0]);
+    EXPECT_GT(brightest, 50) << "panel " << k;
+  }
+}
+
+TEST_F(CliFigure2, DefaultsMiddleYSliceAutoIsoAndZoom) {
+  const std::string in = write_volume_file();
+  const test::RunResult r = run({"figure2", in, "-o", file("fig.png")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("y = 10 of 20"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("(auto)"), std::string::npos) << r.out;
+  const Image im = read_png(file("fig.png"));
+  const auto boxes = grey_regions(im);
+  ASSERT_EQ(boxes.size(), 6u);
+  // Automatic zoom: the long side (24 voxels) to at least 256 pixels.
+  EXPECT_GE(boxes[0].x1 - boxes[0].x0 + 1, 256);
+  EXPECT_EQ((boxes[0].x1 - boxes[0].x0 + 1) % 24, 0);
+  // Other axes: a z slice is 24 x 20, an x slice 20 x 16.
+  ASSERT_EQ(run({"figure2", in, "-o", file("z.png"), "--slice", "z", "--zoom", "2", "--iso", "85", "-q"}).status, 0);
+  const auto bz = grey_regions(read_png(file("z.png")));
+  ASSERT_EQ(bz.size(), 6u);
+  EXPECT_EQ(bz[0].x1 - bz[0].x0 + 1, 48);
+  EXPECT_EQ(bz[0].y1 - bz[0].y0 + 1, 40);
+  ASSERT_EQ(run({"figure2", in, "-o", file("x.png"), "--slice", "x:0", "--zoom", "2", "--iso", "85", "-q"}).status, 0);
+  const auto bx = grey_regions(read_png(file("x.png")));
+  ASSERT_EQ(bx.size(), 6u);
+  EXPECT_EQ(bx[0].x1 - bx[0].x0 + 1, 40);
+  EXPECT_EQ(bx[0].y1 - bx[0].y0 + 1, 32);
+}
+
+TEST_F(CliFigure2, BadArgumentsAreOneLineErrors) {
+  const std::string in = write_volume_file();
+  const std::string out = file("fig.png");
+  expect_one_line_error(run({"figure2", in, "-o", out, "--slice", "q"}), {"--slice", "'q'"});
+  expect_one_line_error(run({"figure2", in, "-o", out, "--slice", "y:"}), {"--slice"});
+  expect_one_line_error(run({"figure2", in, "-o", out, "--slice", "y:-1"}), {"--slice"});
+  expect_one_line_error(run({"figure2", in, "-o", out, "--slice", "y:20"}), {"--slice", "out of range", "20"});
+  expect_one_line_error(run({"figure2", in, "-o", out, "--slice", "z:3x"}), {"--slice"});
+  expect_one_line_error(run({"figure2", in, "-o", out, "--iso", "abc"}), {"--iso", "abc"});
+  expect_one_line_error(run({"figure2", in, "-o", out, "--zoom", "-2"}), {"--zoom"});
+  expect_one_line_error(run({"figure2", in, "-o", out, "--beta", "-1"}), {"--beta"});
+  expect_one_line_error(run({"figure2", file("missing.nrrd"), "-o", out}), {"missing.nrrd"});
+  write_volume(file("small.nrrd"), Volume({4, 4, 4}, {1, 1, 1}, ScalarType::UInt8));
+  expect_one_line_error(run({"figure2", in, "-o", out, "--mask", file("small.nrrd")}), {"--mask", "4x4x4"});
+  expect_one_line_error(run({"figure2", in, "-o", in}), {"in.nrrd"});
+  expect_one_line_error(run({"figure2", in}), {"--output"});
+  EXPECT_FALSE(fs::exists(out));
+}
+
+}  // namespace
+}  // namespace softshell

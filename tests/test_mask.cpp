@@ -1,0 +1,412 @@
+// The scanned-region mask (host/mask.hpp), the data fill behind it, the
+// automatic isovalue (host/auto_iso.hpp), and `classify --mask / --iso auto`
+// end to end; on synthetic volumes, the phantoms and the real spine sweep.
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <random>
+
+#include "auto_iso.hpp"
+#include "cli_fixture.hpp"
+#include "error.hpp"
+#include "io.hpp"
+#include "mask.hpp"
+#include "phantom.hpp"
+#include "test_support.hpp"
+
+namespace softshell {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string shared_data_dir() {
+  const char* env = std::getenv("SOFTSHELL_SHARED_DATA");
+  return env && *env ? env : SOFTSHELL_SHARED_DATA;
+}
+bool in_ci() {
+  const char* ci = std::getenv("CI");
+  return ci && std::string(ci) == "true";
+}
+#define REQUIRE_SHARED_FILE(path)                                                          \
+  do {                                                                                     \
+    if (!fs::exists(path)) {                                                               \
+      if (in_ci()) FAIL() << "shared data missing in CI: " << (path);                     \
+      GTEST_SKIP() << "shared data missing: " << (path) << " (set SOFTSHELL_SHARED_DATA)"; \
+    }                                                                                      \
+  } while (0)
+
+std::string real_spine() { return shared_data_dir() + "/plus-spine/SpinePhantomFreehandReconstructed.mha"; }
+
+// Speckle-like data in [1, 255] (never 0).
+Volume speckle_volume(Dims3 dims, std::uint64_t seed) {
+  Volume v(dims, {1, 1, 1}, ScalarType::UInt8);
+  std::mt19937_64 rng(seed);
+  std::uniform_int_distribution<int> value(1, 255);
+  for (float& f : v.data) f = float(value(rng));
+  return v;
+}
+
+// ---- the rule ------------------------------------------------------------------------------------------------
+
+// A wedge of zeros touching the border (unscanned), isolated zeros and a small
+// enclosed zero block inside the scan (scanned).
+struct WedgeVolume {
+  Volume v;
+  std::vector<bool> wedge;
+};
+WedgeVolume wedge_volume() {
+  WedgeVolume w{speckle_volume({40, 36, 32}, test::seed()), {}};
+  Volume& v = w.v;
+  w.wedge.assign(v.voxels(), false);
+  std::mt19937_64 rng(test::seed() + 1);
+  for (std::size_t z = 0; z < v.dims[2]; ++z)
+    for (std::size_t y = 0; y < v.dims[1]; ++y)
+      for (std::size_t x = 0; x < v.dims[0]; ++x) {
+        const std::size_t i = v.index(x, y, z);
+        if (x + z < 20) {
+          v.data[i] = 0, w.wedge[i] = true;
+        } else if (x + z >= 26 && rng() % 20 == 0) {
+          v.data[i] = 0;  // isolated dark speckle, 5 %
+        }
+      }
+  for (std::size_t z = 20; z < 26; ++z)  // an enclosed 6^3 block of zeros: a dark cyst, not the border
+    for (std::size_t y = 14; y < 20; ++y)
+      for (std::size_t x = 26; x < 32; ++x) v.at(x, y, z) = 0;
+  return w;
+}
+
+TEST(Mask, WedgeTouchingTheBorderIsUnscannedIsolatedZerosAreScanned) {
+  const WedgeVolume w = wedge_volume();
+  MaskParams p;
+  p.grow = 0;
+  MaskReport r;
+  const auto m = scanned_mask(w.v, p, &r);
+  ASSERT_EQ(m.size(), w.v.voxels());
+  std::size_t wedge_voxels = 0;
+  for (std::size_t i = 0; i < m.size(); ++i) {
+    wedge_voxels += w.wedge[i];
+    ASSERT_EQ(m[i], w.wedge[i] ? 0 : 1) << "voxel " << i << " value " << w.v.data[i];
+  }
+  EXPECT_EQ(r.unscanned_regions, 1u);
+  EXPECT_EQ(r.zero_fill, wedge_voxels);
+  EXPECT_EQ(r.unscanned, wedge_voxels);
+  EXPECT_GT(r.zeros, wedge_voxels + 1000);  // the isolated zeros were there
+}
+
+TEST(Mask, GrowthAddsTheRimAtSixNeighbourDistance) {
+  const WedgeVolume w = wedge_volume();
+  for (int grow : {1, 2}) {
+    MaskParams p;
+    p.grow = grow;
+    MaskReport r;
+    const auto m = scanned_mask(w.v, p, &r);
+    // Every voxel within city-block distance `grow` of the wedge x + z < 20
+    // (that distance is x + z - 19), and no other.
+    std::size_t expected = 0;
+    for (std::size_t z = 0; z < w.v.dims[2]; ++z)
+      for (std::size_t y = 0; y < w.v.dims[1]; ++y)
+        for (std::size_t x = 0; x < w.v.dims[0]; ++x) {
+          const bool near = x + z < std::size_t(20 + grow);
+          expected += near;
+          ASSERT_EQ(m[w.v.index(x, y, z)], near ? 0 : 1) << "grow " << grow << " at (" << x << ", " << y << ", " << z << ")";
+        }
+    EXPECT_EQ(r.unscanned, expected) << "grow " << grow;
+    EXPECT_EQ(count_unscanned(m), r.unscanned);
+  }
+}
+
+TEST(Mask, OnePercentRule) {
+  // 50 x 40 x 30 = 60000 voxels; 1 % = 600. A corner block of 500 zeros is
+  // too small to be unscanned, one of 700 is not.
+  for (const auto& [depth, unscanned] : {std::pair<std::size_t, bool>{5, false}, {7, true}}) {
+    Volume v = speckle_volume({50, 40, 30}, test::seed());
+    for (std::size_t z = 0; z < depth; ++z)
+      for (std::size_t y = 0; y < 10; ++y)
+        for (std::size_t x = 0; x < 10; ++x) v.at(x, y, z) = 0;
+    MaskParams p;
+    p.grow = 0;
+    MaskReport r;
+    const auto m = scanned_mask(v, p, &r);
+    EXPECT_EQ(count_unscanned(m), unscanned ? 100 * depth : 0) << "block depth " << depth;
+    EXPECT_EQ(r.regions, 1u);
+    EXPECT_EQ(r.unscanned_regions, unscanned ? 1u : 0u);
+  }
+}
+
+TEST(Mask, EnclosedZeroRegionIsScannedHoweverLarge) {
+  // A 20^3 block of zeros (22 % of the voxels) not touching the border.
+  Volume v = speckle_volume({34, 34, 32}, test::seed());
+  for (std::size_t z = 6; z < 26; ++z)
+    for (std::size_t y = 7; y < 27; ++y)
+      for (std::size_t x = 7; x < 27; ++x) v.at(x, y, z) = 0;
+  EXPECT_EQ(count_unscanned(scanned_mask(v)), 0u);
+}
+
+TEST(Mask, SpeckleZerosThatPercolateAreNotUnscanned) {
+  // 35 % of the voxels exactly 0, independently: above the 6-connected site
+  // percolation threshold (31 %), so the plain rule (solid = 0) finds one
+  // huge boundary-touching zero region; no 5^3 block of zeros exists, so the
+  // default rule finds none. (The face and sphere phantoms hold 25-34 %
+  // exact zeros in their fluid, clustered by the speckle.)
+  Volume v = speckle_volume({48, 48, 48}, test::seed());
+  std::mt19937_64 rng(test::seed() + 7);
+  for (float& f : v.data)
+    if (rng() % 100 < 35) f = 0;
+  MaskParams plain;
+  plain.solid = 0;
+  plain.grow = 0;
+  MaskReport r;
+  scanned_mask(v, plain, &r);
+  EXPECT_EQ(r.unscanned_regions, 1u);
+  EXPECT_GT(r.zero_fill, v.voxels() / 5);
+  EXPECT_EQ(count_unscanned(scanned_mask(v)), 0u);
+}
+
+TEST(Mask, PhantomsHaveNoUnscannedRegion) {
+  for (PhantomShape shape : {PhantomShape::Face, PhantomShape::Spine, PhantomShape::Sphere}) {
+    PhantomParams pp;
+    pp.shape = shape;
+    pp.size = 64;
+    pp.seed = test::seed();
+    const Phantom ph = make_phantom(test::runtime(), pp);
+    MaskReport r;
+    const auto m = scanned_mask(ph.volume, {}, &r);
+    EXPECT_EQ(count_unscanned(m), 0u) << phantom_shape_name(shape) << ": " << r.zeros << " zeros";
+  }
+}
+
+TEST(Mask, AllZeroAndNoZeroVolumes) {
+  Volume zeros({12, 10, 8}, {1, 1, 1}, ScalarType::UInt8);
+  EXPECT_EQ(count_unscanned(scanned_mask(zeros)), zeros.voxels());
+  const Volume none = speckle_volume({12, 10, 8}, 3);
+  EXPECT_EQ(count_unscanned(scanned_mask(none)), 0u);
+  Volume thin({1, 1, 1}, {1, 1, 1}, ScalarType::UInt8);
+  EXPECT_EQ(scanned_mask(thin).size(), 1u);
+}
+
+TEST(Mask, ReadMaskTakesNonzeroAsScannedAndChecksDims) {
+  const fs::path dir = fs::path(::testing::TempDir()) / ("softshell-mask-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  Volume m({6, 5, 4}, {1, 1, 1}, ScalarType::UInt8);
+  for (std::size_t i = 0; i < m.voxels(); ++i) m.data[i] = float(i % 3 == 0 ? 0 : (i % 3) * 100);
+  const std::string path = (dir / "m.nrrd").string();
+  write_volume(path, m);
+  const auto mask = read_mask(path, m.dims);
+  for (std::size_t i = 0; i < mask.size(); ++i) EXPECT_EQ(mask[i], i % 3 == 0 ? 0 : 1);
+  try {
+    read_mask(path, {6, 5, 5});
+    ADD_FAILURE() << "no error for other dims";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("6x5x4"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(read_mask((dir / "missing.nrrd").string(), m.dims), InputError);
+  fs::remove_all(dir);
+}
+
+TEST(Mask, FillContinuesTheScannedDataAcrossTheEdge) {
+  // Scanned: x >= 10, samples 100 + x + 3 y; unscanned x < 10 (zeros). The
+  // fill extends each row with its edge value: no step for the lowpass.
+  Volume v({24, 9, 7}, {1, 1, 1}, ScalarType::UInt8);
+  std::vector<std::uint8_t> mask(v.voxels());
+  for (std::size_t z = 0; z < 7; ++z)
+    for (std::size_t y = 0; y < 9; ++y)
+      for (std::size_t x = 0; x < 24; ++x) {
+        const bool scanned = x >= 10;
+        v.at(x, y, z) = scanned ? float(100 + x + 3 * y) : 0.0f;
+        mask[v.index(x, y, z)] = scanned;
+      }
+  const Volume f = fill_unscanned(v, mask);
+  for (std::size_t z = 0; z < 7; ++z)
+    for (std::size_t y = 0; y < 9; ++y)
+      for (std::size_t x = 0; x < 24; ++x)
+        ASSERT_FLOAT_EQ(f.at(x, y, z), x >= 10 ? v.at(x, y, z) : float(110 + 3 * y)) << x << "," << y << "," << z;
+  // Limited depth leaves the rest untouched.
+  const Volume g = fill_unscanned(v, mask, 3);
+  EXPECT_FLOAT_EQ(g.at(7, 4, 3), 122.0f);
+  EXPECT_FLOAT_EQ(g.at(6, 4, 3), 0.0f);
+}
+
+TEST(Mask, RealSpineSweepIsAbout71PercentUnscanned) {
+  REQUIRE_SHARED_FILE(real_spine());
+  const Volume v = read_volume(real_spine());
+  MaskReport r;
+  const auto m = scanned_mask(v, {}, &r);
+  const double n = double(v.voxels());
+  std::cout << "[ mask     ] zeros " << r.zeros / n << ", zero fill " << r.zero_fill / n << ", unscanned after growing "
+            << r.unscanned / n << '\n';
+  EXPECT_EQ(r.unscanned_regions, 1u);
+  EXPECT_NEAR(r.zero_fill / n, 0.71, 0.015);  // the unswept region, README: about 71 %
+  EXPECT_LE(r.zero_fill, r.zeros);
+  EXPECT_GT(r.unscanned, r.zero_fill);        // the 2-voxel rim
+  EXPECT_LT(r.unscanned / n, 0.77);
+  EXPECT_EQ(count_unscanned(m), r.unscanned);
+}
+
+// ---- automatic isovalue --------------------------------------------------------------------------------------
+
+// Median of the samples whose truth SDF lies in [lo, hi] voxels.
+double median_in_band(const Phantom& ph, double lo, double hi) {
+  std::vector<float> s;
+  for (std::size_t i = 0; i < ph.volume.voxels(); ++i)
+    if (ph.truth_sdf.data[i] >= lo && ph.truth_sdf.data[i] <= hi) s.push_back(ph.volume.data[i]);
+  if (s.empty()) return std::nan("");
+  std::nth_element(s.begin(), s.begin() + s.size() / 2, s.end());
+  return s[s.size() / 2];
+}
+
+TEST(IsoAuto, PhantomsLieBetweenTheMaterials) {
+  for (PhantomShape shape : {PhantomShape::Face, PhantomShape::Sphere, PhantomShape::Spine}) {
+    PhantomParams pp;
+    pp.shape = shape;
+    pp.size = 64;
+    pp.seed = test::seed();
+    const Phantom ph = make_phantom(test::runtime(), pp);
+    AutoIsoReport rep;
+    const double iso = auto_iso(ph.volume, nullptr, {}, &rep);
+    EXPECT_DOUBLE_EQ(iso, rep.iso);
+    std::cout << "[ iso      ] " << phantom_shape_name(shape) << " 64^3: auto iso " << iso << ", fluid median "
+              << ph.fluid_median << ", tissue median " << ph.tissue_median << '\n';
+    if (shape != PhantomShape::Spine) {
+      EXPECT_GT(iso, ph.fluid_median) << phantom_shape_name(shape);
+      EXPECT_LT(iso, ph.tissue_median) << phantom_shape_name(shape);
+      // and well inside: not hugging either class
+      EXPECT_GT(iso, ph.fluid_median + 0.2 * (ph.tissue_median - ph.fluid_median));
+      EXPECT_LT(iso, ph.tissue_median - 0.2 * (ph.tissue_median - ph.fluid_median));
+    } else {
+      // Bone in soft tissue: at 64^3 no voxel lies deep enough inside a
+      // vertebra for a "tissue" median; the surface is the bright echo on
+      // the bone, so the isovalue lies between the soft tissue around it and
+      // the brightest part of that echo.
+      const double echo = median_in_band(ph, -1.0, 0.0);
+      std::cout << "[ iso      ] spine: echo median (sdf in [-1, 0]) " << echo << '\n';
+      EXPECT_GT(iso, ph.fluid_median + 20);
+      EXPECT_LT(iso, echo);
+    }
+  }
+}
+
+TEST(IsoAuto, MaskedSweepFindsTheRealBoundary) {
+  // Fluid (20) above tissue (180) along z, and a slab of zeros (unscanned)
+  // touching the border: the isovalue is the fluid/tissue midpoint.
+  Volume v({48, 40, 40}, {0.5, 0.5, 0.5}, ScalarType::UInt8);
+  std::mt19937_64 rng(test::seed());
+  std::normal_distribution<double> noise(0.0, 8.0);
+  for (std::size_t z = 0; z < 40; ++z)
+    for (std::size_t y = 0; y < 40; ++y)
+      for (std::size_t x = 0; x < 48; ++x) {
+        const double base = z < 20 ? 20 : 180;
+        v.at(x, y, z) = x < 16 ? 0.0f : float(std::clamp(std::round(base + noise(rng)), 1.0, 255.0));
+      }
+  const auto mask = scanned_mask(v);
+  ASSERT_GT(count_unscanned(mask), 16u * 40 * 40);
+  const double with = auto_iso(v, &mask);
+  EXPECT_GT(with, 60);
+  EXPECT_LT(with, 140);
+}
+
+TEST(IsoAuto, ConstantOrEmptyInputsFailCleanly) {
+  Volume c({10, 10, 10}, {1, 1, 1}, ScalarType::UInt8);
+  for (float& f : c.data) f = 50;
+  EXPECT_THROW(auto_iso(c, nullptr), InputError);
+  const Volume s = speckle_volume({10, 10, 10}, 1);
+  const std::vector<std::uint8_t> none(s.voxels(), 0);
+  EXPECT_THROW(auto_iso(s, &none), InputError);
+  const Volume flat = speckle_volume({10, 10, 2}, 1);
+  EXPECT_THROW(auto_iso(flat, nullptr), InputError);
+}
+
+TEST(IsoAuto, RealSpineIsOnTheBoneEchoFlank) {
+  REQUIRE_SHARED_FILE(real_spine());
+  const Volume v = read_volume(real_spine());
+  const auto mask = scanned_mask(v);
+  const double iso = auto_iso(v, &mask);
+  std::cout << "[ iso      ] real spine: auto iso " << iso << " (masked), " << auto_iso(v, nullptr) << " (no mask)\n";
+  // Between the dark shadow / gel (scanned median about 15) and the bright
+  // bone echo and near field (about 200-230).
+  EXPECT_GT(iso, 90);
+  EXPECT_LT(iso, 170);
+}
+
+// ---- classify --mask / --iso auto -----------------------------------------------------------------------------
+
+class CliMask : public test::CliTest {
+ protected:
+  // A volume with a wedge of zeros (unscanned) and a fluid/tissue boundary.
+  std::string write_sweep() {
+    Volume v({32, 28, 24}, {0.5, 0.5, 0.5}, ScalarType::UInt8);
+    std::mt19937_64 rng(test::seed());
+    std::normal_distribution<double> noise(0.0, 10.0);
+    for (std::size_t z = 0; z < 24; ++z)
+      for (std::size_t y = 0; y < 28; ++y)
+        for (std::size_t x = 0; x < 32; ++x) {
+          const double base = z < 12 ? 30 : 170;
+          v.at(x, y, z) = x + y < 14 ? 0.0f : float(std::clamp(std::round(base + noise(rng)), 1.0, 255.0));
+        }
+    write_volume(file("in.nrrd"), v);
+    return file("in.nrrd");
+  }
+};
+
+TEST_F(CliMask, AutoMaskFixesUnscannedVoxelsAndIsReported) {
+  const std::string in = write_sweep();
+  const Volume v = read_volume(in);
+  const auto mask = scanned_mask(v);
+  const std::size_t unscanned = count_unscanned(mask);
+  ASSERT_GT(unscanned, 0u);
+  for (const char* method : {"variational", "levoy"}) {
+    SCOPED_TRACE(method);
+    const test::RunResult r = run({"classify", in, "--method", method, "--iso", "100", "-o", file("u.nrrd")});
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_NE(r.out.find("mask     auto: " + std::to_string(unscanned) + " voxels unscanned"), std::string::npos)
+        << r.out;
+    const Volume u = read_volume(file("u.nrrd"));
+    for (std::size_t i = 0; i < u.voxels(); ++i)
+      if (!mask[i]) ASSERT_EQ(u.data[i], 0.0f) << "unscanned voxel " << i;
+    // Without the mask the edge of the zero wedge is drawn.
+    const test::RunResult r2 =
+        run({"classify", in, "--method", method, "--iso", "100", "--mask", "none", "-o", file("u0.nrrd")});
+    ASSERT_EQ(r2.status, 0) << r2.err;
+    EXPECT_NE(r2.out.find("mask     none"), std::string::npos) << r2.out;
+    const Volume u0 = read_volume(file("u0.nrrd"));
+    double edge0 = 0;
+    for (std::size_t z = 2; z < 22; ++z)  // a voxel of the wedge face away from the fluid/tissue boundary
+      for (std::size_t y = 2; y < 10; ++y) edge0 = std::max(edge0, double(u0.at(14 - y, y, z)));
+    EXPECT_GT(edge0, 0.2);
+  }
+}
+
+TEST_F(CliMask, MaskFromFileAndIsoAuto) {
+  const std::string in = write_sweep();
+  Volume m = read_volume(in);
+  for (std::size_t i = 0; i < m.voxels(); ++i) m.data[i] = (i % 32) < 4 ? 0.0f : 1.0f;  // x < 4 unscanned
+  write_volume(file("mask.nrrd"), m);
+  const test::RunResult r =
+      run({"classify", in, "--iso", "auto", "--mask", file("mask.nrrd"), "-o", file("u.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("(auto)"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(std::to_string(4 * 28 * 24) + " voxels unscanned"), std::string::npos) << r.out;
+  const Volume u = read_volume(file("u.nrrd"));
+  for (std::size_t i = 0; i < u.voxels(); ++i)
+    if (i % 32 < 4) ASSERT_EQ(u.data[i], 0.0f);
+}
+
+TEST_F(CliMask, BadMaskOrIsoIsAOneLineError) {
+  const std::string in = write_sweep();
+  write_volume(file("small.nrrd"), Volume({4, 4, 4}, {1, 1, 1}, ScalarType::UInt8));
+  expect_one_line_error(run({"classify", in, "--iso", "100", "--mask", file("small.nrrd"), "-o", file("u.nrrd")}),
+                        {"--mask", "small.nrrd", "4x4x4"});
+  expect_one_line_error(run({"classify", in, "--iso", "100", "--mask", file("missing.nrrd"), "-o", file("u.nrrd")}),
+                        {"--mask", "missing.nrrd"});
+  expect_one_line_error(run({"classify", in, "--iso", "automatic", "-o", file("u.nrrd")}), {"--iso", "auto"});
+  expect_one_line_error(run({"classify", in, "--iso", "auto", "--mask", "", "-o", file("u.nrrd")}), {"--mask"});
+  Volume flat({8, 8, 8}, {1, 1, 1}, ScalarType::UInt8);
+  for (float& f : flat.data) f = 7;
+  write_volume(file("flat.nrrd"), flat);
+  expect_one_line_error(run({"classify", file("flat.nrrd"), "--iso", "auto", "-o", file("u.nrrd")}), {"constant"});
+  EXPECT_FALSE(fs::exists(file("u.nrrd")));
+}
+
+}  // namespace
+}  // namespace softshell
