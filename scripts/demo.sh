@@ -34,6 +34,8 @@ for m in levoy variational; do
 done
 "$ss" slices "$out/face/volume.nrrd" "$out/face-levoy.nrrd" "$out/face-variational.nrrd" --height 192 \
   -o "$out/face-classified.png"
+log "the paper's Figure 2 on a slice of the face"
+"$ss" figure2 "$out/face/volume.nrrd" --iso "$iso" -o "$out/face-figure2.png"
 
 spine="$ROOT/../shared/data/plus-spine/SpinePhantomFreehandReconstructed.mha"
 if [ -f "$spine" ]; then
@@ -41,6 +43,10 @@ if [ -f "$spine" ]; then
   "$ss" info "$spine" > "$out/spine-info.txt"
   "$ss" lowpass "$spine" --sigma 1.0 -o "$out/spine-lowpass.nrrd"
   "$ss" slices "$spine" "$out/spine-lowpass.nrrd" --height 256 -o "$out/spine-slices.png"
+  # Unscanned voxels (the zero fill around the sweep) are masked by default.
+  "$ss" classify "$spine" --iso auto -o "$out/spine-variational.nrrd"
+  "$ss" classify "$spine" --method levoy --iso auto --sigma 1.0 -o "$out/spine-levoy.nrrd"
+  "$ss" figure2 "$spine" --iso auto -o "$out/spine-figure2.png"
 else
   log "skipping the real spine volume: $spine not found"
 fi
