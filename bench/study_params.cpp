@@ -5,7 +5,7 @@
 //
 //   softshell_study_params [--shapes face,spine] [--sizes 96] [--seeds 1,2,3]
 //                          [--iso-frac F] [--top K] [KEY=V1:V2:...]...
-// KEY is one of alpha beta gamma omega delta epsilon u_ind sigma grad_sigma.
+// KEY is one of alpha beta gamma omega delta epsilon u_ind sigma grad_sigma kappa.
 // Goals (issue 4): precision >= 0.60, recall >= 0.92, blobs <= 5, normal <= 15.
 #include <algorithm>
 #include <cstdio>
@@ -41,6 +41,7 @@ void set_param(VariationalParams& p, const std::string& key, double v) {
   else if (key == "u_ind") p.u_ind = v;
   else if (key == "sigma") p.sigma_mm = v;
   else if (key == "grad_sigma") p.grad_sigma_mm = v;
+  else if (key == "kappa") p.kappa = v;
   else throw InputError("unknown parameter " + key);
 }
 

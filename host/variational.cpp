@@ -37,6 +37,7 @@ ClassifyCoeffs VariationalParams::coeffs() const {
   ClassifyCoeffs k;
   k.alpha = float(alpha), k.beta = float(beta), k.gamma = float(gamma), k.omega = float(omega);
   k.delta = float(delta), k.epsilon = float(epsilon), k.u_ind = float(u_ind), k.v_iso = float(v_iso);
+  k.kappa = float(kappa), k.pad0 = k.pad1 = k.pad2 = 0.0f;
   return k;
 }
 

@@ -18,16 +18,20 @@ namespace softshell {
 // The paper's parameters, named as in the paper, on normalised data
 // (intensities in [0, 1], gradients per mm). v_iso is normalised too.
 struct VariationalParams {
-  // Provisional defaults from the first parameter sweep on the face phantom
+  // Provisional defaults from the parameter study on the face phantom
   // (docs/parameters.md); the paper's beta = 0.03 was for 0-255 intensities
   // and is ~2000x too small on normalised data.
-  double alpha = 1.0, beta = 3.0, gamma = 0.3, omega = 0.6, delta = 0.5, epsilon = 0.01, u_ind = 1.0;
+  double alpha = 1.0, beta = 3.0, gamma = 3.0, omega = 0.6, delta = 0.02, epsilon = 0.01, u_ind = 1.0;
   double v_iso = 0.5;
   double sigma_mm = 1.0;  // lowpass giving v~
   // The |grad v| in F_iso's denominator and in F_ind taken from v lowpassed
   // with this sigma (mm) instead of from the raw v: speckle then no longer
   // reads as edges everywhere in tissue. 0: the paper's literal functional.
-  double grad_sigma_mm = 0.0;
+  double grad_sigma_mm = 1.5;
+  // Weight of an isotropic smoothness term kappa |grad u|^2 added to the
+  // paper's functional (T -> T + kappa I): smooths the shell across its
+  // thickness as well. 0: the paper's literal functional.
+  double kappa = 1.0;
   ClassifyCoeffs coeffs() const;
 };
 

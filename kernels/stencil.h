@@ -20,6 +20,7 @@
 /* Parameters of the functional, as the kernels take them (normalised data). */
 typedef struct ClassifyCoeffs {
   float alpha, beta, gamma, omega, delta, epsilon, u_ind, v_iso;
+  float kappa, pad0, pad1, pad2; /* kappa: isotropic smoothness (0: the paper's functional) */
 } ClassifyCoeffs;
 
 #endif /* SOFTSHELL_STENCIL_H */

@@ -18,8 +18,9 @@ inline bool on_boundary(const GridDesc g, int x, int y, int z) {
 
 /* ------------------------------------------------------------ densities */
 
-/* mu = alpha W + gamma c, rho = gamma c u_ind, T = beta (|g|^2 I - g g^T) with
- * g = grad v~; fixed = boundary or unscanned (mask == 0). */
+/* mu = alpha W + gamma c, rho = gamma c u_ind, T = beta (|g|^2 I - g g^T) + kappa I
+ * with g = grad v~ (kappa: the optional isotropic smoothness term, 0 in the
+ * paper's functional); fixed = boundary or unscanned (mask == 0). */
 __kernel void system_densities(__global const float* restrict v, __global const float* restrict vs,
                                __global const float* restrict gvx, __global const float* restrict gvy,
                                __global const float* restrict gvz, __global const float* restrict gsx,
@@ -41,9 +42,9 @@ __kernel void system_densities(__global const float* restrict v, __global const 
   rho[p] = k.gamma * c * k.u_ind;
   const float ax = gsx[p], ay = gsy[p], az = gsz[p];
   const float s2 = ax * ax + ay * ay + az * az;
-  txx[p] = k.beta * (s2 - ax * ax);
-  tyy[p] = k.beta * (s2 - ay * ay);
-  tzz[p] = k.beta * (s2 - az * az);
+  txx[p] = k.beta * (s2 - ax * ax) + k.kappa;
+  tyy[p] = k.beta * (s2 - ay * ay) + k.kappa;
+  tzz[p] = k.beta * (s2 - az * az) + k.kappa;
   txy[p] = -k.beta * ax * ay;
   txz[p] = -k.beta * ax * az;
   tyz[p] = -k.beta * ay * az;

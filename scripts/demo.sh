@@ -19,11 +19,11 @@ log "built-in input: a fetal-face phantom, 96^3, with its true surfaces"
 "$ss" phantom --shape face --size 96 --seed 1 -o "$out/face" --slices "$out/face-slices.png"
 "$ss" info "$out/face/volume.nrrd" > "$out/face-info.txt"
 
-# Isovalue near the boundary echo: 1.2 of the way from the fluid to the tissue
+# Isovalue near the boundary echo: 1.4 of the way from the fluid to the tissue
 # median (docs/parameters.md explains why, docs/baselines.md shows Levoy's).
 json="$out/face/phantom.json"
 median() { sed -n "s/.*\"$1\": *\([0-9.]*\).*/\1/p" "$json" | head -n 1; }
-iso=$(awk -v f="$(median fluid_median)" -v t="$(median tissue_median)" 'BEGIN { printf "%.0f", f + 1.2 * (t - f) }')
+iso=$(awk -v f="$(median fluid_median)" -v t="$(median tissue_median)" 'BEGIN { printf "%.0f", f + 1.4 * (t - f) }')
 spacing=$(sed -n 's/.*"spacing_mm": *\([0-9.]*\).*/\1/p' "$json" | head -n 1)
 sigma=$(awk -v h="${spacing:-1}" 'BEGIN { printf "%.3f", 1.5 * h }')
 log "classifying at iso $iso: Levoy (on the volume lowpassed by 1.5 voxels) and variational"

@@ -211,7 +211,13 @@ Densities reference_densities(const Volume& v, const VariationalParams& p, const
   const std::vector<double> smooth = reference_lowpass(v, p.sigma_mm, 3.0);
   Volume vs(v.dims, v.spacing);
   for (std::size_t i = 0; i < n; ++i) vs.data[i] = float(smooth[i]);
-  const auto gv = reference_gradient(v), gs = reference_gradient(vs);
+  // |grad v| of F_iso and F_ind from v lowpassed by grad_sigma when set.
+  Volume vg = v;
+  if (p.grad_sigma_mm > 0) {
+    const std::vector<double> g_smooth = reference_lowpass(v, p.grad_sigma_mm, 3.0);
+    for (std::size_t i = 0; i < vg.data.size(); ++i) vg.data[i] = float(g_smooth[i]);
+  }
+  const auto gv = reference_gradient(vg), gs = reference_gradient(vs);
 
   Densities d;
   d.dims = v.dims;
@@ -231,9 +237,9 @@ Densities reference_densities(const Volume& v, const VariationalParams& p, const
         d.rho[i] = float(p.gamma * c * p.u_ind);
         const double g[3] = {gs[0][i], gs[1][i], gs[2][i]};
         const double g2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
-        d.T[0][i] = float(p.beta * (g2 - g[0] * g[0]));
-        d.T[1][i] = float(p.beta * (g2 - g[1] * g[1]));
-        d.T[2][i] = float(p.beta * (g2 - g[2] * g[2]));
+        d.T[0][i] = float(p.beta * (g2 - g[0] * g[0]) + p.kappa);
+        d.T[1][i] = float(p.beta * (g2 - g[1] * g[1]) + p.kappa);
+        d.T[2][i] = float(p.beta * (g2 - g[2] * g[2]) + p.kappa);
         d.T[3][i] = float(-p.beta * g[0] * g[1]);
         d.T[4][i] = float(-p.beta * g[0] * g[2]);
         d.T[5][i] = float(-p.beta * g[1] * g[2]);

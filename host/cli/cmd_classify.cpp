@@ -27,7 +27,7 @@ struct ClassifyOptions {
   double sigma = -1;  // unset: 1 mm for variational, 0 (raw) for levoy
   VariationalParams vp;
   SolverParams sp;
-  bool compress = false, quiet = false, stats = false, no_fmg = false;
+  bool compress = false, quiet = false, stats = false, no_fmg = false, literal = false;
   RawOptions raw;
 };
 
@@ -124,6 +124,8 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
   if (p.alpha < 0 || p.beta < 0) throw InputError("--alpha and --beta must be >= 0");
   if (!(p.epsilon > 0)) throw InputError("--epsilon must be > 0");
   if (!(p.grad_sigma_mm >= 0)) throw InputError("--grad-sigma must be >= 0");
+  if (!(p.kappa >= 0)) throw InputError("--kappa must be >= 0");
+  if (o.literal) p.grad_sigma_mm = 0, p.kappa = 0;
   if (p.omega < 0 || p.omega > 1 || p.delta > 1) throw InputError("--omega and --delta must be in [0, 1]");
   SolverParams sp = o.sp;
   if (o.cycle != "pcg" && o.cycle != "v") throw InputError("--cycle must be pcg or v");
@@ -166,7 +168,8 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
               << "  mask     " << mask.text << '\n'
               << "  params   alpha " << p.alpha << " beta " << p.beta << " gamma " << p.gamma << " omega " << p.omega
               << " delta " << p.delta << " epsilon " << p.epsilon << " u_ind " << p.u_ind << " sigma " << p.sigma_mm
-              << " mm\n"
+              << " mm, kappa " << p.kappa << " grad-sigma " << p.grad_sigma_mm << " mm"
+              << (p.kappa == 0 && p.grad_sigma_mm == 0 ? " (the paper's functional)" : "") << "\n"
               << "  solve    " << report.levels << " levels, " << report.cycles << (sp.krylov ? " PCG iterations" : " V-cycles")
               << ", relative residual " << std::scientific << std::setprecision(2) << report.residuals.back()
               << std::fixed << std::setprecision(3) << '\n'
@@ -238,6 +241,11 @@ void add_classify_command(CLI::App& app, Action& action) {
   g->add_option("--delta", o->vp.delta, "Share of F_ind independent of |grad v| (> 0)")->capture_default_str();
   g->add_option("--epsilon", o->vp.epsilon, "Regulariser of 1/(|grad v|^2 + epsilon) in F_iso")->capture_default_str();
   g->add_option("--u-ind", o->vp.u_ind, "Opacity that F_ind pulls toward")->capture_default_str();
+  g->add_option("--kappa", o->vp.kappa,
+                "Weight of an added isotropic smoothness term kappa |grad u|^2; 0: the paper's functional")
+      ->capture_default_str();
+  g->add_flag("--literal", o->literal,
+              "The paper's functional exactly: --grad-sigma 0 --kappa 0 (overrides both)");
   g->add_option("--grad-sigma", o->vp.grad_sigma_mm,
                 "Take |grad v| (F_iso, F_ind) from v lowpassed by this sigma in mm; 0: the paper's literal terms")
       ->capture_default_str();
