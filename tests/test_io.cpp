@@ -21,6 +21,7 @@
 
 #include "error.hpp"
 #include "io.hpp"
+#include "test_support.hpp"
 #include "volume.hpp"
 
 namespace softshell {
@@ -165,25 +166,6 @@ void teem_save(const std::string& path, Volume v, const NrrdEncoding* encoding, 
   }
 }
 
-// Shared data: $SOFTSHELL_SHARED_DATA, else the path baked in at build time.
-std::string shared_data_dir() {
-  const char* env = std::getenv("SOFTSHELL_SHARED_DATA");
-  return env && *env ? env : SOFTSHELL_SHARED_DATA;
-}
-
-bool in_ci() {
-  const char* ci = std::getenv("CI");
-  return ci && std::string(ci) == "true";
-}
-
-// Skips (locally) or fails (in CI) when the shared data is absent.
-#define REQUIRE_SHARED_FILE(path)                                                      \
-  do {                                                                                 \
-    if (!fs::exists(path)) {                                                           \
-      if (in_ci()) FAIL() << "shared data missing in CI: " << (path);                 \
-      GTEST_SKIP() << "shared data missing: " << (path) << " (set SOFTSHELL_SHARED_DATA)"; \
-    }                                                                                  \
-  } while (0)
 
 // ---- scalar types ----------------------------------------------------------------
 
@@ -807,7 +789,7 @@ TEST(IoMemory, FitsInMemory) {
 // ---- real data --------------------------------------------------------------------------------
 
 TEST(IoRealData, SpinePhantomFreehandReconstructed) {
-  const std::string path = shared_data_dir() + "/plus-spine/SpinePhantomFreehandReconstructed.mha";
+  const std::string path = test::shared_data_dir() + "/plus-spine/SpinePhantomFreehandReconstructed.mha";
   REQUIRE_SHARED_FILE(path);
   const Volume v = read_volume(path);
   EXPECT_EQ(v.dims, (Dims3{147, 106, 104}));
@@ -824,7 +806,7 @@ TEST(IoRealData, SpinePhantomFreehandReconstructed) {
 }
 
 TEST(IoRealData, VolumeReconstructorLnMeanCrop) {
-  const std::string path = shared_data_dir() + "/plus-spine/vtkVolumeReconstructorTestLNMEANvolumeRef.mha";
+  const std::string path = test::shared_data_dir() + "/plus-spine/vtkVolumeReconstructorTestLNMEANvolumeRef.mha";
   REQUIRE_SHARED_FILE(path);
   const Volume v = read_volume(path);
   EXPECT_EQ(v.dims, (Dims3{80, 93, 98}));
@@ -837,7 +819,7 @@ TEST(IoRealData, VolumeReconstructorLnMeanCrop) {
 }
 
 TEST(IoRealData, SpinePhantomSurvivesEveryFormat) {
-  const std::string path = shared_data_dir() + "/plus-spine/SpinePhantomFreehandReconstructed.mha";
+  const std::string path = test::shared_data_dir() + "/plus-spine/SpinePhantomFreehandReconstructed.mha";
   REQUIRE_SHARED_FILE(path);
   const Volume v = read_volume(path);
   ScratchDir dir;

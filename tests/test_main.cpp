@@ -27,6 +27,16 @@ std::uint64_t seed() {
   return s;
 }
 
+std::string shared_data_dir() {
+  const char* env = std::getenv("SOFTSHELL_SHARED_DATA");
+  return env && *env ? env : SOFTSHELL_SHARED_DATA;
+}
+
+bool in_ci() {
+  const char* ci = std::getenv("CI");
+  return ci && std::string(ci) == "true";
+}
+
 Volume random_volume(Dims3 dims, Vec3d spacing, std::uint64_t s, float lo, float hi) {
   Volume v(dims, spacing, ScalarType::Float32);
   std::mt19937_64 rng(s);

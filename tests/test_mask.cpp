@@ -20,23 +20,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string shared_data_dir() {
-  const char* env = std::getenv("SOFTSHELL_SHARED_DATA");
-  return env && *env ? env : SOFTSHELL_SHARED_DATA;
-}
-bool in_ci() {
-  const char* ci = std::getenv("CI");
-  return ci && std::string(ci) == "true";
-}
-#define REQUIRE_SHARED_FILE(path)                                                          \
-  do {                                                                                     \
-    if (!fs::exists(path)) {                                                               \
-      if (in_ci()) FAIL() << "shared data missing in CI: " << (path);                     \
-      GTEST_SKIP() << "shared data missing: " << (path) << " (set SOFTSHELL_SHARED_DATA)"; \
-    }                                                                                      \
-  } while (0)
 
-std::string real_spine() { return shared_data_dir() + "/plus-spine/SpinePhantomFreehandReconstructed.mha"; }
+std::string real_spine() { return test::shared_data_dir() + "/plus-spine/SpinePhantomFreehandReconstructed.mha"; }
 
 // Speckle-like data in [1, 255] (never 0).
 Volume speckle_volume(Dims3 dims, std::uint64_t seed) {

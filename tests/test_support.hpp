@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <filesystem>
 #include <random>
 #include <string>
 #include <vector>
@@ -24,6 +25,20 @@ std::uint64_t seed();
 
 // A volume of uniform random samples in [lo, hi).
 Volume random_volume(Dims3 dims, Vec3d spacing, std::uint64_t seed, float lo = 0.0f, float hi = 1.0f);
+
+// Directory of the shared test data: $SOFTSHELL_SHARED_DATA, else the path
+// baked in at build time (../shared/data beside the source tree).
+std::string shared_data_dir();
+bool in_ci();  // $CI == "true"
+
+// Skips a test locally, or fails it in CI, when a shared data file is absent.
+#define REQUIRE_SHARED_FILE(path)                                                          \
+  do {                                                                                     \
+    if (!std::filesystem::exists(path)) {                                                  \
+      if (::softshell::test::in_ci()) FAIL() << "shared data missing in CI: " << (path);  \
+      GTEST_SKIP() << "shared data missing: " << (path) << " (set SOFTSHELL_SHARED_DATA)"; \
+    }                                                                                      \
+  } while (0)
 
 // Upload / download helpers.
 cl::Buffer upload(Runtime& rt, const std::vector<float>& host);
