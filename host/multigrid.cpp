@@ -20,7 +20,12 @@ struct Level {
 
 class Multigrid {
  public:
-  Multigrid(DeviceSystem& fine, const SolverParams& sp) : sp_(sp), rt_(fine.runtime()) {
+  Multigrid(DeviceSystem& fine, const SolverParams& sp)
+      : sp_(sp),
+        rt_(fine.runtime()),
+        restrict_(rt_.kernel("multigrid.cl", "mg_restrict_residual")),
+        prolong_(rt_.kernel("multigrid.cl", "mg_prolong_add")),
+        b_norm_(fine.norm(fine.b())) {
     add_level(nullptr, &fine);
     while (int(levels_.size()) < std::max(1, sp.max_levels)) {
       const GridDesc& g = levels_.back().sys->grid();
@@ -32,6 +37,7 @@ class Multigrid {
   }
 
   int levels() const { return int(levels_.size()); }
+  double b_norm() const { return b_norm_; }
   Level& fine() { return levels_.front(); }
 
   void smooth(int l, int sweeps, bool reverse) {
@@ -96,8 +102,7 @@ class Multigrid {
   double relative_residual() {
     Level& F = fine();
     F.sys->residual(F.sys->b(), F.u, F.r);
-    const double nb = F.sys->norm(F.sys->b());
-    return nb > 0 ? F.sys->norm(F.r) / nb : F.sys->norm(F.r);
+    return b_norm_ > 0 ? F.sys->norm(F.r) / b_norm_ : F.sys->norm(F.r);
   }
 
  private:
@@ -121,19 +126,19 @@ class Multigrid {
   }
 
   void restrict_residual(const Level& F, const Level& C) {
-    cl::Kernel k = rt_.kernel("multigrid.cl", "mg_restrict_residual");
-    Runtime::set_args(k, F.r, C.sys->fixed(), C.rhs, F.sys->grid(), C.sys->grid());
-    rt_.enqueue_3d(k, C.sys->grid());
+    Runtime::set_args(restrict_, F.r, C.sys->fixed(), C.rhs, F.sys->grid(), C.sys->grid());
+    rt_.enqueue_3d(restrict_, C.sys->grid());
   }
 
   void prolong_add(const Level& C, const Level& F) {
-    cl::Kernel k = rt_.kernel("multigrid.cl", "mg_prolong_add");
-    Runtime::set_args(k, C.u, F.sys->fixed(), F.u, F.sys->grid(), C.sys->grid());
-    rt_.enqueue_3d(k, F.sys->grid());
+    Runtime::set_args(prolong_, C.u, F.sys->fixed(), F.u, F.sys->grid(), C.sys->grid());
+    rt_.enqueue_3d(prolong_, F.sys->grid());
   }
 
   SolverParams sp_;
   Runtime& rt_;
+  cl::Kernel restrict_, prolong_;  // created once: the V-cycle launches them every level
+  double b_norm_;                   // ||b|| of the fine level, fixed for the solve
   std::vector<Level> levels_;
 };
 
@@ -178,7 +183,7 @@ std::vector<float> solve(DeviceSystem& fine, const SolverParams& sp, SolveReport
                q = rt.buffer(bytes);
     rt.queue().enqueueCopyBuffer(F.u, x, 0, 0, bytes);
     fine.residual(x, r);
-    const double nb = fine.norm(fine.b());
+    const double nb = mg.b_norm();
     mg.precondition(r, z);
     rt.queue().enqueueCopyBuffer(z, p, 0, 0, bytes);
     double rz = fine.dot(r, z);

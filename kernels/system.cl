@@ -209,13 +209,19 @@ inline float stencil_row(__global const float* restrict coef, __global const flo
   return acc;
 }
 
+/* (A x)_p for any voxel: boundary voxels are fixed, their row is the diagonal. */
+inline float apply_row(__global const float* restrict coef, __global const float* restrict xv, const GridDesc g,
+                       const int x, const int y, const int z, const size_t p) {
+  return on_boundary(g, x, y, z) ? coef[p] * xv[p]
+                                 : stencil_row(coef, xv, grid_voxels(g), p, g.nx, (long)g.nx * g.ny);
+}
+
 __kernel void system_apply(__global const float* restrict coef, __global const float* restrict xv,
                            __global float* restrict yv, const GridDesc g) {
   const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
   if (!grid_contains(g, x, y, z)) return;
   const size_t p = grid_index(g, x, y, z);
-  const size_t N = grid_voxels(g);
-  yv[p] = on_boundary(g, x, y, z) ? coef[p] * xv[p] : stencil_row(coef, xv, N, p, g.nx, (long)g.nx * g.ny);
+  yv[p] = apply_row(coef, xv, g, x, y, z, p);
 }
 
 __kernel void system_residual(__global const float* restrict coef, __global const float* restrict bv,
@@ -223,9 +229,7 @@ __kernel void system_residual(__global const float* restrict coef, __global cons
   const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
   if (!grid_contains(g, x, y, z)) return;
   const size_t p = grid_index(g, x, y, z);
-  const size_t N = grid_voxels(g);
-  const float ax = on_boundary(g, x, y, z) ? coef[p] * xv[p] : stencil_row(coef, xv, N, p, g.nx, (long)g.nx * g.ny);
-  rv[p] = bv[p] - ax;
+  rv[p] = bv[p] - apply_row(coef, xv, g, x, y, z, p);
 }
 
 /* ------------------------------------------------------------ smoothers */
@@ -256,9 +260,7 @@ __kernel void relax_jacobi(__global const float* restrict coef, __global const f
   const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
   if (!grid_contains(g, x, y, z)) return;
   const size_t p = grid_index(g, x, y, z);
-  const size_t N = grid_voxels(g);
-  const float ax = on_boundary(g, x, y, z) ? coef[p] * xv[p] : stencil_row(coef, xv, N, p, g.nx, (long)g.nx * g.ny);
-  xnew[p] = xv[p] + w * (bv[p] - ax) / coef[p];
+  xnew[p] = xv[p] + w * (bv[p] - apply_row(coef, xv, g, x, y, z, p)) / coef[p];
 }
 
 /* u = 0 at fixed voxels (after a warm start from an arbitrary u). */
