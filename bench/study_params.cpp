@@ -5,7 +5,9 @@
 //
 //   softshell_study_params [--shapes face,spine] [--sizes 96] [--seeds 1,2,3]
 //                          [--iso-frac F] [--top K] [KEY=V1:V2:...]...
-// KEY is one of alpha beta gamma omega delta epsilon u_ind sigma grad_sigma kappa.
+// KEY is one of alpha beta gamma omega delta epsilon u_ind sigma grad_sigma kappa,
+// or iso_frac (v_iso = fluid + iso_frac (tissue - fluid), overriding --iso-frac).
+// --tensor-sigma S scores the structure-tensor splat orientation (0: grad u).
 // Goals (issue 4): precision >= 0.60, recall >= 0.92, blobs <= 5, normal <= 15.
 #include <algorithm>
 #include <cstdio>
@@ -61,7 +63,7 @@ struct Mean {
 
 int main(int argc, char** argv) {
   std::vector<std::string> shapes{"face"}, sizes{"96"}, seeds{"1", "2", "3"};
-  double iso_frac = 0.5;
+  double iso_frac = 0.5, tensor_sigma = 0;
   int top = 20;
   std::vector<std::pair<std::string, std::vector<double>>> grid;
   for (int i = 1; i < argc; ++i) {
@@ -72,13 +74,14 @@ int main(int argc, char** argv) {
     else if (a == "--seeds") seeds = split(next(), ',');
     else if (a == "--iso-frac") iso_frac = std::stod(next());
     else if (a == "--top") top = std::stoi(next());
+    else if (a == "--tensor-sigma") tensor_sigma = std::stod(next());
     else if (a.find('=') != std::string::npos) {
       std::vector<double> vals;
       for (const auto& v : split(a.substr(a.find('=') + 1), ':')) vals.push_back(std::stod(v));
       grid.emplace_back(a.substr(0, a.find('=')), vals);
     } else {
       std::fprintf(stderr, "usage: softshell_study_params [--shapes ..] [--sizes ..] [--seeds ..] [--iso-frac F] "
-                           "[--top K] [KEY=V1:V2...]...\n");
+                           "[--top K] [--tensor-sigma S] [KEY=V1:V2...]...\n");
       return 2;
     }
   }
@@ -87,6 +90,9 @@ int main(int argc, char** argv) {
     struct Case {
       Phantom ph;
       double iso;
+      double iso_at(double frac) const {
+        return ph.volume.intensity_map().to_unit(ph.fluid_median + frac * (ph.tissue_median - ph.fluid_median));
+      }
     };
     std::vector<Case> cases;
     for (const auto& sh : shapes)
@@ -97,7 +103,7 @@ int main(int argc, char** argv) {
           pp.size = std::stoi(sz);
           pp.seed = std::stoull(sd);
           Case c{make_phantom(rt, pp), 0};
-          c.iso = c.ph.volume.intensity_map().to_unit(c.ph.fluid_median + iso_frac * (c.ph.tissue_median - c.ph.fluid_median));
+          c.iso = c.iso_at(iso_frac);
           cases.push_back(std::move(c));
         }
     std::size_t combos = 1;
@@ -107,23 +113,26 @@ int main(int argc, char** argv) {
       VariationalParams p;
       std::string label;
       std::size_t rest = c;
+      double frac = iso_frac;
       for (const auto& [key, vals] : grid) {
         const double v = vals[rest % vals.size()];
         rest /= vals.size();
-        set_param(p, key, v);
+        if (key == "iso_frac") frac = v;
+        else set_param(p, key, v);
         char buf[64];
         std::snprintf(buf, sizeof buf, "%s=%g ", key.c_str(), v);
         label += buf;
       }
       Mean m;
       for (const Case& k : cases) {
-        p.v_iso = k.iso;
+        p.v_iso = frac == iso_frac ? k.iso : k.iso_at(frac);
         SolverParams sp;
         sp.max_cycles = 60;
         SolveReport rep;
         const Volume u = classify_variational(rt, k.ph.volume, p, sp, &rep);
         MetricsParams mp;
         mp.beam = k.ph.beam;
+        mp.tensor_sigma = tensor_sigma;
         const Metrics met = evaluate_opacity(u, k.ph.truth_sdf, mp);
         m.precision += met.precision, m.recall += met.recall, m.blobs += double(met.spurious_blobs);
         m.normal += met.normal_error_deg, m.opaque += met.percent_opaque, m.splats += double(met.splats);

@@ -22,6 +22,7 @@
 #include <thread>
 
 #include "error.hpp"
+#include "orientation.hpp"
 #include "text.hpp"
 
 namespace softshell {
@@ -149,6 +150,8 @@ void validate(const Volume& opacity, const Volume& truth, const MetricsParams& p
     throw InputError("tolerance must be a finite number >= 0 (voxels), got " + std::to_string(p.tolerance));
   if (!std::isfinite(p.opaque) || p.opaque < 0)
     throw InputError("opaque must be a finite number >= 0, got " + std::to_string(p.opaque));
+  if (!(p.tensor_sigma >= 0 && p.tensor_sigma <= 8))
+    throw InputError("tensor sigma must be in [0, 8] voxels, got " + std::to_string(p.tensor_sigma));
   if (!(p.facing_cos >= -1 && p.facing_cos <= 1))
     throw InputError("facing_cos must be in [-1, 1], got " + std::to_string(p.facing_cos));
   const double b = std::sqrt(p.beam[0] * p.beam[0] + p.beam[1] * p.beam[1] + p.beam[2] * p.beam[2]);
@@ -253,7 +256,13 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
           if (near) {
             s.near_u += ui;
             g.gradient(u, i, x, y, z, gu);
-            const double nu = std::sqrt(gu[0] * gu[0] + gu[1] * gu[1] + gu[2] * gu[2]);
+            double nu = std::sqrt(gu[0] * gu[0] + gu[1] * gu[1] + gu[2] * gu[2]);
+            if (p.tensor_sigma > 0) {  // the renderer's default orientation
+              const std::array<double, 3> t =
+                  tensor_orientation_reference(opacity, {double(x), double(y), double(z)}, p.tensor_sigma);
+              gu[0] = t[0], gu[1] = t[1], gu[2] = t[2];
+              nu = std::sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]);
+            }
             if (nu > min_grad_u) {
               g.gradient(sdf, i, x, y, z, gs);
               have_gs = true;
@@ -379,7 +388,8 @@ std::string metrics_json(const Metrics& m, const MetricsParams& p) {
     << ", \"facing_surface_voxels\": " << m.facing_surface_voxels << ", \"normal_voxels\": " << m.normal_voxels
     << ", \"spurious_voxels\": " << m.spurious_voxels << ", \"threshold\": " << json_number(p.threshold)
     << ", \"tolerance\": " << json_number(p.tolerance) << ", \"opaque\": " << json_number(p.opaque)
-    << ", \"facing_cos\": " << json_number(p.facing_cos) << ", \"beam\": [" << json_number(b[0] + 0.0) << ", "
+    << ", \"facing_cos\": " << json_number(p.facing_cos) << ", \"tensor_sigma\": " << json_number(p.tensor_sigma)
+    << ", \"beam\": [" << json_number(b[0] + 0.0) << ", "
     << json_number(b[1] + 0.0) << ", " << json_number(b[2] + 0.0) << "]}";
   return o.str();
 }

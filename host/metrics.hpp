@@ -17,6 +17,11 @@ struct MetricsParams {
   double opaque = 0.01;     // u > opaque counts toward % opaque
   double facing_cos = 0.3;  // a surface voxel faces the transducer if n . (-beam) >= facing_cos
   std::array<double, 3> beam{0, 0, 1};
+  // How splats are oriented, hence which normal is scored: > 0 = the
+  // principal eigenvector of the structure tensor of u with this Gaussian
+  // sigma in voxels (the renderer's default, host/orientation.hpp); 0 = grad u
+  // by central differences (the paper's orientation).
+  double tensor_sigma = 1.5;
 };
 
 struct Metrics {

@@ -129,8 +129,15 @@ void validate_phantom_params(const PhantomParams& p) {
     s << v;
     return s.str();
   };
-  if (p.size < k_min_size || p.size > k_max_size)
+  const bool any_dims = p.dims[0] != 0 || p.dims[1] != 0 || p.dims[2] != 0;
+  if (any_dims) {
+    for (int d : p.dims)
+      if (d < k_min_size || d > k_max_size)
+        throw InputError("--dims " + std::to_string(p.dims[0]) + "x" + std::to_string(p.dims[1]) + "x" +
+                         std::to_string(p.dims[2]) + ": every dimension must be in [16, 512]");
+  } else if (p.size < k_min_size || p.size > k_max_size) {
     throw InputError("--size " + std::to_string(p.size) + " is out of range [16, 512]");
+  }
   for (double s : {p.psf_axial, p.psf_lateral})
     if (!(s >= k_min_sigma && s <= k_max_sigma))
       throw InputError("--speckle: PSF sigma " + num(s) + " voxels is out of range [0.2, 8]");
@@ -147,14 +154,25 @@ void validate_phantom_params(const PhantomParams& p) {
   if (p.lanes != 0 && p.lanes != 1 && p.lanes != 8) throw InputError("lanes must be 0 (by device), 1 or 8");
 }
 
+std::array<std::size_t, 3> phantom_dims(const PhantomParams& params) {
+  if (params.dims[0] != 0 || params.dims[1] != 0 || params.dims[2] != 0)
+    return {static_cast<std::size_t>(params.dims[0]), static_cast<std::size_t>(params.dims[1]),
+            static_cast<std::size_t>(params.dims[2])};
+  const std::size_t n = static_cast<std::size_t>(params.size);
+  return {n, n, n};
+}
+
 Phantom make_phantom(Runtime& rt, const PhantomParams& params) {
   const auto t0 = std::chrono::steady_clock::now();
   validate_phantom_params(params);
-  const std::size_t n = static_cast<std::size_t>(params.size);
+  const std::array<std::size_t, 3> dims = phantom_dims(params);
+  // The longest axis spans the field of view (the design cube [-50, 50]);
+  // the others are centred crops of it (kernels/phantom.cl, design_coord).
+  const double n_max = static_cast<double>(std::max({dims[0], dims[1], dims[2]}));
   const double fov = params.fov_mm > 0 ? params.fov_mm : phantom_default_fov(params.shape);
-  const double h = fov / params.size;      // mm per voxel
-  const double vox = 100.0 / params.size;  // design units per voxel (kernels/phantom.cl)
-  const GridDesc g = make_grid({n, n, n}, {h, h, h});
+  const double h = fov / n_max;      // mm per voxel
+  const double vox = 100.0 / n_max;  // design units per voxel (kernels/phantom.cl)
+  const GridDesc g = make_grid({dims[0], dims[1], dims[2]}, {h, h, h});
   const std::size_t voxels = grid_voxels(g), bytes = voxels * sizeof(float);
 
   const std::vector<float> w_lat = psf_weights(params.psf_lateral), w_ax = psf_weights(params.psf_axial);
@@ -227,14 +245,14 @@ Phantom make_phantom(Runtime& rt, const PhantomParams& params) {
 
   p.fov_mm = fov;
   p.device = rt.info().label();
-  p.truth_sdf = Volume({n, n, n}, {h, h, h}, ScalarType::Float32);
+  p.truth_sdf = Volume({dims[0], dims[1], dims[2]}, {h, h, h}, ScalarType::Float32);
   rt.queue().enqueueReadBuffer(d_sdf, CL_FALSE, 0, bytes, p.truth_sdf.data.data());
   std::vector<std::uint8_t> bmode_bytes(voxels);
   rt.queue().enqueueReadBuffer(d_out, CL_TRUE, 0, voxels, bmode_bytes.data());
   p.device_seconds = event_span_seconds(events.front(), events.back());
   for (std::size_t i = 0; i < events.size(); ++i) p.kernel_seconds[i].second = event_seconds(events[i]);
 
-  p.volume = Volume({n, n, n}, {h, h, h}, ScalarType::UInt8);
+  p.volume = Volume({dims[0], dims[1], dims[2]}, {h, h, h}, ScalarType::UInt8);
   std::array<std::size_t, 256> fluid{}, tissue{};
   const std::vector<float>& sdf = p.truth_sdf.data;
   for (std::size_t i = 0; i < voxels; ++i) {
@@ -256,7 +274,7 @@ std::string phantom_json(const PhantomParams& params, const Phantom& p) {
   std::ostringstream j;
   j << "{\n"
     << "  \"shape\": \"" << phantom_shape_name(params.shape) << "\",\n"
-    << "  \"size\": " << params.size << ",\n"
+    << "  \"size\": " << (params.dims[0] != 0 ? std::string("null") : std::to_string(params.size)) << ",\n"
     << "  \"dims\": [" << p.volume.dims[0] << ", " << p.volume.dims[1] << ", " << p.volume.dims[2] << "],\n"
     << "  \"seed\": " << params.seed << ",\n"
     << "  \"fov_mm\": " << json_number(p.fov_mm) << ",\n"

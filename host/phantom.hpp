@@ -9,7 +9,8 @@
 //  - the transducer lies on the z = 0 face of the volume and every beam runs
 //    along +z (depth): axial = z, lateral = x and y;
 //  - the truth SDF is in voxels, negative inside tissue, zero on the boundary;
-//  - the volume is uint8 with isotropic spacing fov_mm / size.
+//  - the volume is uint8 with isotropic spacing fov_mm / size (fov_mm /
+//    max(dims) for a non-cubic phantom).
 #pragma once
 
 #include <array>
@@ -31,6 +32,12 @@ bool parse_phantom_shape(const std::string& name, PhantomShape& out);
 struct PhantomParams {
   PhantomShape shape = PhantomShape::Face;
   int size = 96;                     // voxels along each axis
+  // Non-cubic volumes (the paper's Table 1 shapes, e.g. 314x85x43): when any
+  // entry is non-zero all must be, each in [16, 512]; `size` is then ignored.
+  // Voxels stay isotropic, h = fov / max(dims): the volume is the centred
+  // max(dims)^3 phantom cropped to dims (the transducer on the crop's z = 0
+  // face), so the longest axis spans the whole field of view.
+  std::array<int, 3> dims{0, 0, 0};
   std::uint64_t seed = 1;
   double fov_mm = 0;                 // field of view; 0: the shape's default
   // Point-spread function, standard deviations in voxels: finer axially.
@@ -47,8 +54,11 @@ struct PhantomParams {
 // spine 60, sphere 80.
 double phantom_default_fov(PhantomShape s);
 
+// The phantom's dims: `dims` when set, else size^3.
+std::array<std::size_t, 3> phantom_dims(const PhantomParams& params);
+
 // Throws InputError (one line naming the CLI option) for out-of-range
-// parameters: size outside [16, 512], PSF sigmas outside [0.2, 8] voxels,
+// parameters: size or a dims entry outside [16, 512], PSF sigmas outside [0.2, 8] voxels,
 // dynamic range outside [10, 100] dB, negative noise / attenuation /
 // specular, fov negative or above 10 m, lanes other than 0, 1, 8.
 void validate_phantom_params(const PhantomParams& params);

@@ -18,10 +18,10 @@ namespace softshell {
 // The paper's parameters, named as in the paper, on normalised data
 // (intensities in [0, 1], gradients per mm). v_iso is normalised too.
 struct VariationalParams {
-  // Provisional defaults from the parameter study on the face phantom
+  // Defaults from the parameter study on the face and spine phantoms
   // (docs/parameters.md); the paper's beta = 0.03 was for 0-255 intensities
   // and is ~2000x too small on normalised data.
-  double alpha = 1.0, beta = 3.0, gamma = 3.0, omega = 0.6, delta = 0.02, epsilon = 0.01, u_ind = 1.0;
+  double alpha = 0.25, beta = 3.0, gamma = 3.5, omega = 0.6, delta = 0.02, epsilon = 0.01, u_ind = 1.0;
   double v_iso = 0.5;
   double sigma_mm = 1.0;  // lowpass giving v~
   // The |grad v| in F_iso's denominator and in F_ind taken from v lowpassed

@@ -13,6 +13,7 @@ SOFTSHELL_PACKAGES=(
   libteem-dev zlib1g-dev libpng-dev
   libcli11-dev libgtest-dev libeigen3-dev
   libglfw3-dev libglm-dev libgl-dev
+  libepoxy-dev libimgui-dev libstb-dev
   xvfb xauth
 )
 

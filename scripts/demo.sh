@@ -51,5 +51,34 @@ else
   log "skipping the real spine volume: $spine not found"
 fi
 
+# Oriented splatting (paper Section 4): headless renders of the classified
+# volumes; under Xvfb when there is no display (docs/rendering.md).
+gl=()
+if [ -z "${DISPLAY:-}" ] && command -v xvfb-run >/dev/null 2>&1; then gl=(xvfb-run -a); fi
+if "$ss" render --help >/dev/null 2>&1; then
+  log "oriented splats of the classified face (the paper's Figure 1 right and Figure 3)"
+  # The crop drops the uterine wall behind the head (z > 84 % of the depth).
+  crop=0,1,0,1,0,0.84
+  "${gl[@]}" "$ss" render "$out/face-variational.nrrd" --view -30,10 --crop "$crop" --size 600x600 \
+    -o "$out/render-face-oriented.png"
+  "${gl[@]}" "$ss" render "$out/face-variational.nrrd" --view -30,10 --crop "$crop" --size 600x600 \
+    --method isosplat -o "$out/render-face-isotropic.png"
+  "${gl[@]}" "$ss" render "$out/face-variational.nrrd" --view 0,0 --size 400x400 --benchmark 20 \
+    -o "$out/render-face-front.png"
+  mkdir -p "$out/turntable"
+  "${gl[@]}" "$ss" render "$out/face-variational.nrrd" --view 0,10 --crop "$crop" --size 200x200 --turntable 12 \
+    -q -o "$out/turntable/face-%03d.png"
+  if [ -f "$out/spine-variational.nrrd" ]; then
+    log "oriented splats of the real spine (classified with the defaults)"
+    "${gl[@]}" "$ss" render "$out/spine-variational.nrrd" --view 0,35 --size 800x500 -o "$out/render-spine.png"
+  fi
+  if [ -n "${DISPLAY:-}" ] && [ -t 1 ]; then
+    log "opening the viewer on the face (Esc quits)"
+    "$ss" view "$out/face-variational.nrrd" --view -30,10 --crop "$crop" || true
+  fi
+else
+  log "skipping rendering: softshell was built without the viewer (SOFTSHELL_BUILD_VIEWER=OFF)"
+fi
+
 log "done; outputs in $out:"
 ls -1 "$out" >&2

@@ -91,6 +91,22 @@ TEST(MetricsSphere, PerfectShellScoresPerfectly) {
   EXPECT_GT(m.facing_surface_voxels, surface / 2) << "a two-sided layer holds more voxels than x-crossings";
 }
 
+TEST(MetricsSphere, TensorOrientationIsRightOnTheRidgeOfAThinShell) {
+  // The tent shell max(0, 1 - |sdf| / 1.5): on its middle sheet grad u is
+  // undefined (central differences see only the variation along the
+  // surface); the structure tensor takes both flanks and finds the normal.
+  const Volume sdf = sphere_sdf();
+  const Volume tent = shell(sdf);
+  MetricsParams gradient, tensor;
+  gradient.tensor_sigma = 0;
+  tensor.tensor_sigma = 1.5;
+  const Metrics g = evaluate_opacity(tent, sdf, gradient), t = evaluate_opacity(tent, sdf, tensor);
+  EXPECT_GT(g.normal_error_deg, 10.0);
+  EXPECT_LT(t.normal_error_deg, 0.5 * g.normal_error_deg) << "grad u: " << g.normal_error_deg;
+  EXPECT_LT(t.normal_error_deg, 7.0) << "what remains is the sphere's curvature across the window";
+  EXPECT_GE(t.normal_voxels, g.normal_voxels) << "the ridge voxels, skipped by grad u, count now";
+}
+
 TEST(MetricsSphere, SmoothShellHasAccurateNormals) {
   const Volume sdf = sphere_sdf();
   const Metrics smooth = evaluate_opacity(smooth_shell(sdf), sdf);
@@ -174,7 +190,9 @@ TEST(MetricsSphere, RandomOpacityAlongTheSurfaceRaisesNormalError) {
   std::mt19937_64 rng(test::seed());
   std::uniform_real_distribution<double> amp(0.3, 1.0);
   for (float& f : noisy.data) f = float(f * amp(rng));
-  const Metrics a = evaluate_opacity(clean, sdf), b = evaluate_opacity(noisy, sdf);
+  MetricsParams gradient;  // grad u orientation: sees every voxel's noise
+  gradient.tensor_sigma = 0;
+  const Metrics a = evaluate_opacity(clean, sdf, gradient), b = evaluate_opacity(noisy, sdf, gradient);
   EXPECT_GT(b.normal_error_deg, a.normal_error_deg + 10.0) << a.normal_error_deg << " vs " << b.normal_error_deg;
   EXPECT_LE(b.normal_error_deg, 90.0);
   EXPECT_GT(b.precision, a.precision) << "the damped outskirts fall below the threshold";

@@ -188,7 +188,7 @@ TEST(Solver, MaskedVolumeMatchesOracle) {
   const Densities d = sys.download_densities();
   const std::vector<double> u_ref = test::oracle_solve(test::assemble_oracle(d));
   SolverParams sp;
-  sp.tol = 1e-6;
+  sp.tol = 4e-6;  // a margin above float's floor, which PCG meets near 1e-6 here
   SolveReport rep;
   const std::vector<float> u = solve(sys, sp, &rep);
   std::cout << "[ solver   ] masked: " << rep.levels << " levels, " << rep.cycles << " cycles; residuals"

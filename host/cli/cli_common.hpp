@@ -19,6 +19,7 @@ namespace softshell::cli {
 
 using Action = std::function<int()>;
 
+void add_bench_command(CLI::App& app, Action& action);
 void add_classify_command(CLI::App& app, Action& action);
 void add_devices_command(CLI::App& app, Action& action);
 void add_evaluate_command(CLI::App& app, Action& action);
@@ -28,6 +29,11 @@ void add_lowpass_command(CLI::App& app, Action& action);
 void add_phantom_command(CLI::App& app, Action& action);
 void add_slices_command(CLI::App& app, Action& action);
 void add_synthetic_command(CLI::App& app, Action& action);
+#ifdef SOFTSHELL_HAVE_VIEWER
+// In the viewer library (viewer/CMakeLists.txt): OpenGL rendering commands.
+void add_render_command(CLI::App& app, Action& action);
+void add_view_command(CLI::App& app, Action& action);
+#endif
 
 // --raw / --type / --spacing / --big-endian for headerless input.
 struct RawOptions {

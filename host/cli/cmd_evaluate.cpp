@@ -98,7 +98,9 @@ int run_evaluate(EvaluateOptions o) {
            " voxels)"},
       {"components", std::to_string(m.components), "drawn 26-connected components in all"},
       {"normal_error_deg", fixed(m.normal_error_deg, 2),
-       "opacity-weighted mean angle (0-90) between the line of grad u and the true normal, over " +
+       "opacity-weighted mean angle (0-90) between the splat normal (" +
+           (p.tensor_sigma > 0 ? "structure tensor, sigma " + fixed(p.tensor_sigma, 1) + " voxels" : std::string("grad u")) +
+           ") and the true normal, over " +
            std::to_string(m.normal_voxels) + " drawn voxels near a surface"},
       {"percent_opaque", fixed(m.percent_opaque, 2), "% of voxels with u > " + fixed(p.opaque, 3) + " (paper Table 1)"},
       {"splats", std::to_string(m.splats), "voxels with u > " + thr + ", one splat each (paper Table 1)"},
@@ -138,6 +140,10 @@ void add_evaluate_command(CLI::App& app, Action& action) {
       ->capture_default_str();
   sub->add_option("--facing-cos", o->params.facing_cos,
                   "A surface faces the transducer if its outward normal n has n.(-beam) >= this")
+      ->capture_default_str();
+  sub->add_option("--tensor-sigma", o->params.tensor_sigma,
+                  "Splat orientation scored by the normal error: the structure tensor of u with this sigma in voxels "
+                  "(the renderer's default), or 0 for grad u (the paper's)")
       ->capture_default_str();
   sub->add_option("--opaque", o->params.opaque, "u > this counts toward percent_opaque")->capture_default_str();
   sub->callback([&action, o] { action = [o] { return run_evaluate(*o); }; });

@@ -23,7 +23,7 @@ namespace {
 namespace fs = std::filesystem;
 
 struct PhantomOptions {
-  std::string shape = "face", out, speckle, slices, device;
+  std::string shape = "face", out, speckle, slices, device, dims;
   PhantomParams params;
   bool quiet = false;
 };
@@ -59,6 +59,11 @@ int run_phantom(PhantomOptions o) {
   if (!parse_phantom_shape(o.shape, o.params.shape))
     throw InputError("--shape '" + o.shape + "' is not one of face, spine, sphere");
   if (!o.speckle.empty()) parse_speckle(o.speckle, o.params);
+  if (!o.dims.empty()) {
+    const Dims3 d = parse_dims(o.dims, "--dims");
+    for (int a = 0; a < 3; ++a)
+      o.params.dims[a] = static_cast<int>(std::min<std::size_t>(d[a], 1u << 20));  // range checked below
+  }
   validate_phantom_params(o.params);  // before anything touches the disk or the device
 
   const fs::path dir(o.out);
@@ -120,7 +125,12 @@ void add_phantom_command(CLI::App& app, Action& action) {
                   "face: fetal face in amniotic fluid with the uterine wall behind; spine: vertebrae in soft "
                   "tissue (tissue = bone); sphere: one sphere of tissue in fluid")
       ->capture_default_str();
-  sub->add_option("--size", o->params.size, "Voxels along each axis, in [16, 512]")->capture_default_str();
+  auto* size = sub->add_option("--size", o->params.size, "Voxels along each axis, in [16, 512]")->capture_default_str();
+  sub->add_option("--dims", o->dims,
+                  "X,Y,Z: a non-cubic volume (e.g. 314,85,43, the paper's largest), each in [16, 512]; isotropic "
+                  "voxels of FOV / max(X,Y,Z) mm, the centred crop of the cubic phantom")
+      ->type_name("X,Y,Z")
+      ->excludes(size);
   sub->add_option("--seed", o->params.seed, "Random seed (speckle, texture, noise; the geometry is fixed)")
       ->check(CLI::Validator(
           [](std::string& v) {

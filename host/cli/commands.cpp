@@ -31,6 +31,11 @@ int run(int argc, char** argv) {
   add_figure2_command(app, action);
   add_slices_command(app, action);
   add_synthetic_command(app, action);
+#ifdef SOFTSHELL_HAVE_VIEWER
+  add_render_command(app, action);
+  add_view_command(app, action);
+#endif
+  add_bench_command(app, action);
 
   // CLI11 reports a misspelt command as "a subcommand is required"; name it.
   if (argc > 1 && argv[1][0] != '-') {

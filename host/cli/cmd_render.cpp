@@ -1,0 +1,161 @@
+// `softshell render IN -o OUT.png`: oriented (or isotropic) splats of an
+// opacity volume drawn by the OpenGL renderer of viewer/ into a hidden GLFW
+// window (headless under `xvfb-run -a`). Built into the viewer library; the
+// CLI registers it only when the viewer is built (SOFTSHELL_HAVE_VIEWER).
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <iomanip>
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <vector>
+
+#include "cli_common.hpp"
+#include "cli_render_common.hpp"
+#include "error.hpp"
+#include "headless.hpp"
+#include "image.hpp"
+#include "text.hpp"
+
+namespace softshell::cli {
+namespace {
+
+struct RenderOptions {
+  std::string in, out, device, size = "400x400", view = "0,0", crop, iso = "auto";
+  int turntable = 0, benchmark = 0;
+  bool quiet = false;
+  SplatViewOptions splat;
+};
+
+// OUT.png -> OUT-007.png for turntable frame 7 (or printf-style when OUT has
+// a %d conversion).
+std::string frame_path(const std::string& out, int i) {
+  if (out.find('%') != std::string::npos) {
+    char buf[4096];
+    std::snprintf(buf, sizeof buf, out.c_str(), i);
+    return buf;
+  }
+  const std::size_t dot = out.rfind('.'), slash = out.rfind('/');
+  const std::size_t cut = dot == std::string::npos || (slash != std::string::npos && dot < slash) ? out.size() : dot;
+  char num[16];
+  std::snprintf(num, sizeof num, "-%03d", i);
+  return out.substr(0, cut) + num + out.substr(cut);
+}
+
+// Box of the splat centres that the crop box keeps (the camera frames what
+// is drawn).
+std::array<Vec3d, 2> kept_box(const SplatSet& set, const viewer::RenderSettings& s) {
+  SplatSet kept = set;
+  kept.splats.clear();
+  for (const Splat& sp : set.splats) {
+    bool in = true;
+    for (int a = 0; a < 3; ++a) {
+      const double f = set.dims[a] > 1 ? (sp.centre[a] - set.origin[a]) / (set.spacing[a] * double(set.dims[a] - 1)) : 0.5;
+      in = in && f >= s.crop_lo[a] - 1e-6 && f <= s.crop_hi[a] + 1e-6;
+    }
+    if (in) kept.splats.push_back(sp);
+  }
+  return kept.splat_box();
+}
+
+int run_render(const RenderOptions& o) {
+  const auto t0 = Clock::now();
+  const auto [width, height] = parse_size(o.size, "--size");
+  const auto [az, el] = parse_view(o.view, "--view");
+  if (o.turntable < 0 || o.turntable > 3600) throw InputError("--turntable must be in [0, 3600]");
+  if (o.benchmark < 0 || o.benchmark > 100000) throw InputError("--benchmark must be in [0, 100000]");
+  if (o.out.size() < 4 || o.out.substr(o.out.size() - 4) != ".png") throw InputError("-o " + o.out + ": expected a .png file");
+  if (o.out.find('%') != std::string::npos && o.turntable == 0)
+    throw InputError("-o " + o.out + ": a %d pattern needs --turntable");
+  viewer::RenderSettings settings = o.splat.settings();
+  if (!o.crop.empty()) parse_crop(o.crop, settings);
+  ensure_distinct_output(o.in, o.out);
+
+  Runtime rt(o.device);
+  const viewer::OpacityInput input = viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso);
+  SplatTiming st;
+  const SplatSet set = generate_splats(rt, input.u, o.splat.params(), &st);
+  if (set.splats.empty())
+    throw input_error(o.in, "no voxel has opacity above the threshold " + format_number(o.splat.threshold) +
+                                " (all-zero opacity?); nothing to render");
+
+  viewer::HeadlessRenderer r(width, height);
+  r.upload(set);
+  viewer::OrbitCamera cam;
+  const auto box = kept_box(set, settings);
+  cam.fit(box[0], box[1]);
+  cam.azimuth = az;
+  cam.elevation = el;
+
+  const int frames = std::max(o.turntable, 1);
+  viewer::DrawStats stats;
+  for (int i = 0; i < frames; ++i) {
+    cam.azimuth = az + 360.0f * float(i) / float(frames);
+    stats = r.render(cam, settings);
+    write_png(o.turntable ? frame_path(o.out, i) : o.out, r.read().rgb());
+  }
+
+  double ms = 0, sort_ms = 0;
+  if (o.benchmark > 0) {
+    // Frames as the viewer draws them: order (sort or list), draw, glFinish;
+    // the camera turns a little each frame so the sort has work to do.
+    r.render(cam, settings);  // warm-up
+    const auto tb = Clock::now();
+    for (int i = 0; i < o.benchmark; ++i) {
+      cam.azimuth = az + 0.5f * float(i);
+      sort_ms += r.render(cam, settings).sort_ms / o.benchmark;
+    }
+    ms = 1000.0 * seconds_since(tb) / o.benchmark;
+  }
+
+  if (!o.quiet) {
+    std::cout << std::fixed << std::setprecision(3) << "render (" << method_name(settings) << ") " << o.in << " -> "
+              << (o.turntable ? frame_path(o.out, 0) + " ... (" + std::to_string(frames) + " frames)" : o.out) << '\n'
+              << "  input    " << input.note << '\n'
+              << "  splats   " << set.splats.size() << " (u > " << format_number(o.splat.threshold) << ", a = "
+              << set.a << " voxels, lambda " << set.lambda << " (" << splat_gaussian_name(set.params.gaussian) << "), normals " << splat_normals_name(set.params.normals)
+              << "), generated in " << st.total << " s on " << rt.info().label() << '\n'
+              << "  image    " << width << "x" << height << ", view " << format_number(az) << ","
+              << format_number(el) << ", " << (settings.three_normals ? "three normals" : "one normal") << ", order "
+              << (settings.order == viewer::DrawOrder::Sort ? "exact depth sort" : "six presorted lists") << '\n'
+              << "  gl       " << r.description() << "; splats copied through the host (no cl_khr_gl_sharing path)\n";
+    if (o.benchmark > 0)
+      std::cout << "  speed    " << std::setprecision(2) << ms << " ms/frame (" << std::setprecision(1)
+                << 1000.0 / ms << " fps) over " << o.benchmark << " frames"
+                << (settings.order == viewer::DrawOrder::Sort ? ", of which depth sort + upload " + format_number(sort_ms) + " ms" : "")
+                << '\n';
+    std::cout << std::setprecision(3) << "  time     " << seconds_since(t0) << " s\n";
+  }
+  return 0;
+}
+
+}  // namespace
+
+void add_render_command(CLI::App& app, Action& action) {
+  auto o = std::make_shared<RenderOptions>();
+  auto* sub = app.add_subcommand(
+      "render",
+      "Render an opacity volume with oriented (or isotropic) splats to a PNG, headless (a hidden OpenGL window; "
+      "run under xvfb-run -a without a display). A raw ultrasound volume is classified first with the defaults.");
+  sub->add_option("IN", o->in, "Opacity volume (float in [0, 1]) or raw ultrasound volume")->required();
+  sub->add_option("-o,--output", o->out, "Output PNG (with --turntable: OUT-000.png, ... or a %d pattern)")->required();
+  sub->add_option("--size", o->size, "Image size in pixels")->capture_default_str()->type_name("WxH");
+  sub->add_option("--view", o->view,
+                  "Camera azimuth,elevation in degrees; 0,0 looks down the beam (+z) from the transducer, x right, "
+                  "-y up")
+      ->capture_default_str()
+      ->type_name("AZ,EL");
+  sub->add_option("--turntable", o->turntable, "Write N frames around the object (azimuth steps of 360/N)");
+  sub->add_option("--crop", o->crop,
+                  "Keep splats inside this box, fractions of the volume's extent per axis (e.g. 0,1,0,1,0,0.6)")
+      ->type_name("X0,X1,Y0,Y1,Z0,Z1");
+  sub->add_option("--iso", o->iso, "Isovalue for classifying a raw volume (its units, or auto)")->capture_default_str();
+  sub->add_option("--benchmark", o->benchmark, "Also time N frames and report frames per second");
+  o->splat.add_to(sub);
+  sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
+  add_device_option(sub, o->device);
+  sub->callback([&action, o] { action = [o] { return run_render(*o); }; });
+}
+
+}  // namespace softshell::cli

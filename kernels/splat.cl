@@ -1,0 +1,148 @@
+/* Splat generation for oriented splatting (paper Section 4.1).
+ *
+ * Every voxel with opacity u > threshold becomes one splat triangle centred
+ * at the voxel, lying in the plane perpendicular to the splat normal. Two
+ * passes over x-rows (one work-item per (y, z) row) make the compaction
+ * deterministic: splat_count counts each row's splats, the host turns the
+ * counts into exclusive offsets, and splat_emit writes each row's splats at
+ * its offset in x order. The output is therefore in voxel-index order
+ * (x fastest), bit-identical from run to run.
+ *
+ * Output record, 7 float4 per splat (host/splats.hpp, struct Splat):
+ *   [0] centre in mm (origin + h * index), alpha = u
+ *   [1] unit normal (mm space), w = |normal field| before normalising
+ *   [2] S, [3] T: the triangle's half-axes in mm; the vertices are
+ *       centre + S, centre - (S + sqrt3 T) / 2, centre - (S - sqrt3 T) / 2
+ *   [4..6] unit normals midway between the centre and vertex 0, 1, 2 (the
+ *       paper's "three normals" shading), sign-aligned with [1]
+ *
+ * S and T are a * h * s and a * h * t (componentwise h) for an orthonormal
+ * pair s, t perpendicular to the normal field in voxel coordinates: the
+ * triangle then lies in the plane perpendicular to the mm-space normal and
+ * covers one voxel's share of the surface at any voxel spacing.
+ *
+ * The normal field is ONE function, splat_normal, chosen by -D SPLAT_NORMALS:
+ *   0  gradient: central-difference grad u per mm (the paper), trilinearly
+ *      interpolated between voxels for the three-normal points.
+ *   1  tensor (the default): the principal eigenvector of the structure
+ *      tensor of u with Gaussian sigma -D TENSOR_SIGMA (voxels), evaluated at
+ *      the point itself (orientation.h, which says why: on the middle sheet
+ *      of a shell grad u has no reliable direction).
+ */
+#include "grid.h"
+
+#define SPLAT_NORMALS_GRADIENT 0
+#define SPLAT_NORMALS_TENSOR 1
+#ifndef SPLAT_NORMALS
+#define SPLAT_NORMALS SPLAT_NORMALS_TENSOR
+#endif
+#if SPLAT_NORMALS == SPLAT_NORMALS_TENSOR
+#include "orientation.h"
+#ifndef TENSOR_SIGMA
+#define TENSOR_SIGMA 1.5f
+#endif
+#endif
+
+/* The gradient rule of gradient.cl: central inside, one-sided on the first
+ * and last sample of an axis, 0 along an axis of one sample; per mm. */
+inline float splat_diff(__global const float* restrict u, const size_t idx, const int c, const int n,
+                        const size_t stride, const float h) {
+  if (n < 2) return 0.0f;
+  if (c == 0) return (u[idx + stride] - u[idx]) / h;
+  if (c == n - 1) return (u[idx] - u[idx - stride]) / h;
+  return (u[idx + stride] - u[idx - stride]) / (2.0f * h);
+}
+
+inline float3 splat_gradient_at(__global const float* restrict u, const GridDesc g, const int x, const int y,
+                                const int z) {
+  const size_t idx = grid_index(g, x, y, z);
+  const size_t sy = (size_t)g.nx, sz = (size_t)g.nx * (size_t)g.ny;
+  return (float3)(splat_diff(u, idx, x, g.nx, 1, g.hx), splat_diff(u, idx, y, g.ny, sy, g.hy),
+                  splat_diff(u, idx, z, g.nz, sz, g.hz));
+}
+
+/* The splat normal field at a point p in voxel coordinates (p = index at
+ * voxel centres; clamped into the grid), in mm space, not normalised. This is
+ * the one place that decides splat orientation and shading normals. */
+inline float3 splat_normal(__global const float* restrict u, const GridDesc g, float3 p) {
+#if SPLAT_NORMALS == SPLAT_NORMALS_GRADIENT
+  p = clamp(p, (float3)(0.0f), (float3)((float)(g.nx - 1), (float)(g.ny - 1), (float)(g.nz - 1)));
+  const float3 f0 = floor(p);
+  const float3 w = p - f0;
+  const int x0 = (int)f0.x, y0 = (int)f0.y, z0 = (int)f0.z;
+  const int x1 = min(x0 + 1, g.nx - 1), y1 = min(y0 + 1, g.ny - 1), z1 = min(z0 + 1, g.nz - 1);
+  /* At a voxel centre every weight but one is 0: skip the other corners so
+   * the centre normal is exactly the voxel's central difference. */
+  if (w.x == 0.0f && w.y == 0.0f && w.z == 0.0f) return splat_gradient_at(u, g, x0, y0, z0);
+  const float3 c00 = mix(splat_gradient_at(u, g, x0, y0, z0), splat_gradient_at(u, g, x1, y0, z0), w.x);
+  const float3 c10 = mix(splat_gradient_at(u, g, x0, y1, z0), splat_gradient_at(u, g, x1, y1, z0), w.x);
+  const float3 c01 = mix(splat_gradient_at(u, g, x0, y0, z1), splat_gradient_at(u, g, x1, y0, z1), w.x);
+  const float3 c11 = mix(splat_gradient_at(u, g, x0, y1, z1), splat_gradient_at(u, g, x1, y1, z1), w.x);
+  return mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
+#elif SPLAT_NORMALS == SPLAT_NORMALS_TENSOR
+  return tensor_orientation(u, g, p, TENSOR_SIGMA);  /* handles points outside the grid */
+#else
+#error "unknown SPLAT_NORMALS"
+#endif
+}
+
+/* Unit vector of v, or `fallback` where v vanishes (a flat spot of u). */
+inline float3 splat_unit(const float3 v, const float3 fallback) {
+  const float n = length(v);
+  return n > 1e-20f ? v / n : fallback;
+}
+
+/* Number of splats in each x-row: counts[y + ny * z]. */
+__kernel void splat_count(__global const float* restrict u, __global uint* restrict counts, const GridDesc g,
+                          const float threshold) {
+  const size_t row = get_global_id(0);
+  if (row >= (size_t)g.ny * (size_t)g.nz) return;
+  __global const float* r = u + row * (size_t)g.nx;
+  uint n = 0;
+  for (int x = 0; x < g.nx; ++x) n += r[x] > threshold ? 1u : 0u;
+  counts[row] = n;
+}
+
+/* Writes each row's splats at offsets[row] (exclusive prefix sum of counts).
+ * origin.xyz is the position of voxel (0, 0, 0) in mm; a is the triangle
+ * size in voxels (paper: a = sqrt(1 / lambda)). */
+__kernel void splat_emit(__global const float* restrict u, __global const uint* restrict offsets,
+                         __global float4* restrict out, const GridDesc g, const float4 origin, const float threshold,
+                         const float a) {
+  const size_t row = get_global_id(0);
+  if (row >= (size_t)g.ny * (size_t)g.nz) return;
+  const int y = (int)(row % (size_t)g.ny), z = (int)(row / (size_t)g.ny);
+  const float3 h = (float3)(g.hx, g.hy, g.hz);
+  const float sqrt3 = 1.7320508f;
+  /* Texture-space corners of the triangle (paper Figure 4), in (s, t). */
+  const float2 corner[3] = {(float2)(1.0f, 0.0f), (float2)(-0.5f, -0.5f * sqrt3), (float2)(-0.5f, 0.5f * sqrt3)};
+  size_t k = offsets[row];
+  __global const float* r = u + row * (size_t)g.nx;
+  for (int x = 0; x < g.nx; ++x) {
+    const float alpha = r[x];
+    if (!(alpha > threshold)) continue;
+    const float3 p = (float3)((float)x, (float)y, (float)z);
+    const float3 grad = splat_normal(u, g, p);
+    /* A flat spot has no orientation; face the transducer (-z). */
+    const float3 n = splat_unit(grad, (float3)(0.0f, 0.0f, -1.0f));
+    /* Plane basis in voxel coordinates, perpendicular to the covector n h. */
+    const float3 nv = splat_unit(n * h, n);
+    const float3 helper = fabs(nv.x) < 0.9f ? (float3)(1.0f, 0.0f, 0.0f) : (float3)(0.0f, 1.0f, 0.0f);
+    const float3 s = normalize(cross(nv, helper));
+    const float3 t = cross(nv, s);
+    const float3 S = a * h * s, T = a * h * t;
+    __global float4* o = out + 7 * k;
+    o[0] = (float4)(origin.xyz + h * p, alpha);
+    o[1] = (float4)(n, length(grad));
+    o[2] = (float4)(S, 0.0f);
+    o[3] = (float4)(T, 0.0f);
+    for (int c = 0; c < 3; ++c) {
+      /* Midway between the centre and vertex c, in voxel coordinates. */
+      const float3 q = p + 0.5f * a * (corner[c].x * s + corner[c].y * t);
+      float3 m = splat_unit(splat_normal(u, g, q), n);
+      if (dot(m, n) < 0.0f) m = -m;
+      o[4 + c] = (float4)(m, 0.0f);
+    }
+    ++k;
+  }
+}

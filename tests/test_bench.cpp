@@ -1,0 +1,352 @@
+// The benchmark (host/bench.hpp, `softshell bench`): the pieces the peers and
+// the bandwidth checks rely on against independent references (the float64
+// oracle's matrix, the device's own sweep), the peers reaching the residual
+// of softshell's solve on the same small system, and the CLI end to end:
+// `bench --quick --json` is valid JSON with the stable keys and sane values,
+// bad options are one-line errors with exit status 2.
+#include <cctype>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <map>
+#include <memory>
+#include <numeric>
+#include <random>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "bench.hpp"
+#include "cli_fixture.hpp"
+#include "image.hpp"
+#include "oracle.hpp"
+#include "phantom.hpp"
+#include "test_support.hpp"
+#include "variational.hpp"
+
+namespace softshell {
+namespace {
+
+using test::CliTest;
+using test::RunResult;
+using test::runtime;
+
+// ------------------------------------------------------------ a small JSON reader
+
+struct Json {
+  enum Kind { Null, Bool, Number, String, Array, Object } kind = Null;
+  bool b = false;
+  double num = 0;
+  std::string str;
+  std::vector<Json> arr;
+  std::map<std::string, Json> obj;
+  bool has(const std::string& k) const { return kind == Object && obj.count(k); }
+  const Json& operator[](const std::string& k) const {
+    if (!has(k)) throw std::runtime_error("missing key " + k);
+    return obj.at(k);
+  }
+};
+
+class JsonParser {
+ public:
+  explicit JsonParser(const std::string& s) : s_(s) {}
+  Json parse() {
+    Json v = value();
+    ws();
+    if (i_ != s_.size()) fail("trailing characters");
+    return v;
+  }
+
+ private:
+  [[noreturn]] void fail(const std::string& what) {
+    throw std::runtime_error("JSON: " + what + " at offset " + std::to_string(i_));
+  }
+  void ws() {
+    while (i_ < s_.size() && std::isspace(static_cast<unsigned char>(s_[i_]))) ++i_;
+  }
+  bool eat(const char* lit) {
+    const std::size_t n = std::strlen(lit);
+    if (s_.compare(i_, n, lit) == 0) return i_ += n, true;
+    return false;
+  }
+  std::string string() {
+    if (s_[i_] != '"') fail("expected a string");
+    std::string out;
+    for (++i_; i_ < s_.size() && s_[i_] != '"'; ++i_) {
+      if (static_cast<unsigned char>(s_[i_]) < 0x20) fail("control character in a string");
+      if (s_[i_] == '\\') {
+        if (++i_ >= s_.size()) fail("bad escape");
+        const char e = s_[i_];
+        if (e == 'u') {
+          if (i_ + 4 >= s_.size()) fail("bad \\u escape");
+          out += '?', i_ += 4;
+        } else if (std::string("\"\\/bfnrt").find(e) != std::string::npos) {
+          out += e == 'n' ? '\n' : e;
+        } else {
+          fail("bad escape");
+        }
+      } else {
+        out += s_[i_];
+      }
+    }
+    if (i_ >= s_.size()) fail("unterminated string");
+    ++i_;
+    return out;
+  }
+  Json value() {
+    ws();
+    if (i_ >= s_.size()) fail("unexpected end");
+    Json v;
+    const char c = s_[i_];
+    if (c == '{') {
+      v.kind = Json::Object;
+      ++i_, ws();
+      if (s_[i_] == '}') return ++i_, v;
+      for (;;) {
+        ws();
+        const std::string k = string();
+        ws();
+        if (s_[i_++] != ':') fail("expected ':'");
+        if (v.obj.count(k)) fail("duplicate key " + k);
+        v.obj[k] = value();
+        ws();
+        if (s_[i_] == ',') { ++i_; continue; }
+        if (s_[i_] == '}') return ++i_, v;
+        fail("expected ',' or '}'");
+      }
+    }
+    if (c == '[') {
+      v.kind = Json::Array;
+      ++i_, ws();
+      if (s_[i_] == ']') return ++i_, v;
+      for (;;) {
+        v.arr.push_back(value());
+        ws();
+        if (s_[i_] == ',') { ++i_; continue; }
+        if (s_[i_] == ']') return ++i_, v;
+        fail("expected ',' or ']'");
+      }
+    }
+    if (c == '"') return v.kind = Json::String, v.str = string(), v;
+    if (eat("true")) return v.kind = Json::Bool, v.b = true, v;
+    if (eat("false")) return v.kind = Json::Bool, v;
+    if (eat("null")) return v;
+    char* end = nullptr;
+    v.num = std::strtod(s_.c_str() + i_, &end);
+    if (end == s_.c_str() + i_) fail("unexpected character");
+    i_ = std::size_t(end - s_.c_str());
+    v.kind = Json::Number;
+    return v;
+  }
+  const std::string& s_;
+  std::size_t i_ = 0;
+};
+
+double number(const Json& j, const std::string& key) {
+  const Json& v = j[key];
+  if (v.kind != Json::Number) throw std::runtime_error(key + " is not a number");
+  return v.num;
+}
+
+// ------------------------------------------------------------ library pieces
+
+// The system of a small face phantom as the device assembled it.
+struct SmallSystem {
+  std::unique_ptr<DeviceSystem> sys;
+  HostStencil hs;
+};
+
+SmallSystem small_system(int size) {
+  Runtime& rt = runtime();
+  PhantomParams pp;
+  pp.size = size;
+  pp.seed = 3;
+  const Phantom ph = make_phantom(rt, pp);
+  Volume vn = ph.volume;
+  const IntensityMap map = vn.intensity_map();
+  for (float& f : vn.data) f = float(map.to_unit(f));
+  VariationalParams vp;
+  vp.v_iso = map.to_unit(ph.fluid_median + 0.5 * (ph.tissue_median - ph.fluid_median));
+  SmallSystem s;
+  s.sys = std::make_unique<DeviceSystem>(rt, vn, vp);
+  rt.queue().finish();  // the constructor uploads from vn without waiting
+  s.hs.grid = s.sys->grid();
+  s.hs.coef = s.sys->download_coefficients();
+  s.hs.b = s.sys->download_b();
+  s.hs.fixed = s.sys->download_densities().fixed;
+  return s;
+}
+
+TEST(BenchPieces, HostApplyIsTheOracleMatrix) {
+  // The bench's reading of the stored stencil (host_apply, and the Eigen
+  // matrix built the same way) against the oracle's A, assembled from the
+  // energy on the host: a wrong offset or a mirrored lower coefficient fails.
+  const Densities d = test::random_densities({11, 9, 8}, {0.9, 1.1, 1.3}, test::seed(), 2.0, 0.05);
+  const DeviceSystem sys(runtime(), d);
+  HostStencil hs;
+  hs.grid = sys.grid();
+  hs.coef = sys.download_coefficients();
+  hs.b = sys.download_b();
+  hs.fixed = d.fixed;
+  const test::OracleSystem o = test::assemble_oracle(d);
+  std::mt19937 rng(unsigned(test::seed()));
+  std::uniform_real_distribution<float> U(-1.0f, 1.0f);
+  std::vector<float> x(hs.voxels());
+  for (std::size_t i = 0; i < x.size(); ++i) x[i] = d.fixed[i] ? 0.0f : U(rng);
+  Eigen::VectorXd xe(long(x.size()));
+  for (std::size_t i = 0; i < x.size(); ++i) xe[long(i)] = x[i];
+  const Eigen::VectorXd want = o.A * xe;
+  const std::vector<double> got = host_apply(hs, x);
+  double worst = 0, scale = 0;
+  for (std::size_t i = 0; i < got.size(); ++i)
+    worst = std::max(worst, std::abs(got[i] - want[long(i)])), scale = std::max(scale, std::abs(want[long(i)]));
+  EXPECT_LT(worst, 1e-5 * scale) << "worst " << worst << " of " << scale;
+}
+
+TEST(BenchPieces, HostColourSweepIsTheDeviceSweep) {
+  SmallSystem s = small_system(20);
+  Runtime& rt = runtime();
+  const std::size_t n = s.hs.voxels();
+  std::vector<float> u(n, 0.0f);
+  cl::Buffer x = test::upload(rt, u);
+  s.sys->relax_gs(s.sys->b(), x, 1, false);
+  s.sys->relax_gs(s.sys->b(), x, 1, false);
+  host_gs_colour_sweep(s.hs, u);
+  host_gs_colour_sweep(s.hs, u);
+  const std::vector<float> dev = test::download(rt, x, n);
+  double worst = 0, scale = 0;
+  for (std::size_t i = 0; i < n; ++i) worst = std::max(worst, double(std::abs(dev[i] - u[i]))), scale = std::max(scale, double(std::abs(u[i])));
+  ASSERT_GT(scale, 0.0);
+  EXPECT_LT(worst, 1e-5 * scale);
+}
+
+TEST(BenchPeers, ReachTheResidualOfTheSoftshellSolve) {
+  SmallSystem s = small_system(28);
+  SolverParams sp;
+  sp.tol = 1e-4;
+  SolveReport rep;
+  const std::vector<float> u = solve(*s.sys, sp, &rep);
+  ASSERT_TRUE(rep.converged);
+  const double soft = host_relative_residual(s.hs, u);
+  EXPECT_LE(soft, 1.1e-4);
+  EXPECT_GT(soft, 0.0);
+  const double unorm = std::sqrt(std::inner_product(u.begin(), u.end(), u.begin(), 0.0));
+  auto distance = [&](const std::vector<float>& v) {
+    double d = 0;
+    for (std::size_t i = 0; i < u.size(); ++i) d += (double(v[i]) - u[i]) * (double(v[i]) - u[i]);
+    return std::sqrt(d) / unorm;
+  };
+  for (bool f64 : {true, false}) {
+    SCOPED_TRACE(f64 ? "eigen cg float64" : "eigen cg float32");
+    const PeerSolve p = eigen_cg_peer(s.hs, 1e-4, f64);
+    EXPECT_LE(p.residual, 1e-4);
+    EXPECT_GT(p.iterations, 1);
+    EXPECT_LT(distance(p.u), 1e-2);  // the same system: the same solution
+  }
+  auto coarse = DeviceSystem::coarsen(*s.sys);
+  HostStencil hc;
+  hc.grid = coarse->grid();
+  hc.coef = coarse->download_coefficients();
+  hc.b = coarse->download_b();
+  hc.fixed = coarse->download_densities().fixed;
+  const PeerSolve gs = gauss_seidel_two_level_peer(s.hs, hc, 1e-4);
+  EXPECT_LE(gs.residual, 1.1e-4);
+  EXPECT_LT(distance(gs.u), 1e-2);
+  // A wrong coarse grid is refused rather than silently mis-indexed.
+  EXPECT_THROW(gauss_seidel_two_level_peer(s.hs, s.hs, 1e-4), std::invalid_argument);
+}
+
+TEST(BenchPieces, SummariseTakesMinAndMedian) {
+  const Timing t = summarise({0.3, 0.1, 0.2, 0.5});
+  EXPECT_DOUBLE_EQ(t.min, 0.1);
+  EXPECT_DOUBLE_EQ(t.median, 0.25);
+  EXPECT_EQ(t.reps, 4);
+}
+
+// ------------------------------------------------------------ the CLI
+
+TEST_F(CliTest, BenchQuickJsonHasTheStableKeysAndSaneValues) {
+  const std::string plot = file("bench.png");
+  const RunResult r = run({"bench", "--quick", "--json", "-o", plot});
+  ASSERT_EQ(r.status, 0) << r.err;
+  Json j;
+  ASSERT_NO_THROW(j = JsonParser(r.out).parse()) << r.out;
+  ASSERT_TRUE(j.has("devices"));
+  EXPECT_TRUE(j["all_checks_passed"].b);
+  const Json& devices = j["devices"];
+  ASSERT_EQ(devices.kind, Json::Array);
+  ASSERT_FALSE(devices.arr.empty());
+  int run_devices = 0;
+  for (const Json& d : devices.arr) {
+    for (const char* key : {"name", "type", "table1", "stream_gbps", "sweep_gbps", "sweep_fraction",
+                            "speedup_vs_eigen_cg", "warm_start_fraction", "scaling"})
+      EXPECT_TRUE(d.has(key)) << key;
+    EXPECT_EQ(d["name"].kind, Json::String);
+    EXPECT_FALSE(d["name"].str.empty());
+    if (d["skipped"].b) continue;
+    ++run_devices;
+    const double copy = number(d["stream_gbps"], "copy");
+    EXPECT_GT(copy, 0.05);
+    EXPECT_LT(copy, 1e5);
+    EXPECT_GT(number(d["stream_gbps"], "triad"), 0.0);
+    EXPECT_GT(number(d, "sweep_gbps"), 0.0);
+    for (const char* f : {"sweep_fraction", "apply_fraction"}) {
+      EXPECT_GT(number(d, f), 0.0) << f;
+      EXPECT_LT(number(d, f), 2.0) << f;
+    }
+    EXPECT_GT(number(d, "speedup_vs_eigen_cg"), 0.0);
+    EXPECT_GT(number(d, "warm_start_fraction"), 0.0);
+    EXPECT_LT(number(d, "warm_start_fraction"), 5.0);
+    EXPECT_TRUE(d["failed_checks"].arr.empty());
+    ASSERT_EQ(d["peers"].arr.size(), 4u);
+    for (const Json& p : d["peers"].arr) {
+      EXPECT_TRUE(p["ok"].b) << p["name"].str;
+      EXPECT_LE(number(p, "residual"), 1.1e-4) << p["name"].str;
+      EXPECT_GT(number(p["time"], "min_s"), 0.0) << p["name"].str;
+    }
+    ASSERT_EQ(d["table1"].arr.size(), 4u);
+    for (const Json& t : d["table1"].arr) {
+      SCOPED_TRACE(t["dataset"].str);
+      for (const char* k : {"filter_s", "gradients_s", "solve_s", "total_s"}) EXPECT_GT(number(t, k), 0.0) << k;
+      EXPECT_GE(number(t, "setup_s"), 0.0);
+      EXPECT_GE(number(t, "total_s"), number(t, "solve_s"));
+      EXPECT_GT(number(t, "opaque_percent"), 0.0);
+      EXPECT_LT(number(t, "opaque_percent"), 100.0);
+      EXPECT_GT(number(t, "splats"), 0.0);
+      EXPECT_TRUE(t["converged"].b);
+      EXPECT_GT(number(t["paper"], "total_s"), 0.0);
+      EXPECT_EQ(t["dims"].arr.size(), 3u);
+    }
+    const Json& sc = d["scaling"];
+    ASSERT_GE(sc.arr.size(), 3u);
+    for (std::size_t k = 0; k < sc.arr.size(); ++k) {
+      EXPECT_GT(number(sc.arr[k], "total_s"), 0.0);
+      if (k) EXPECT_GT(number(sc.arr[k], "voxels"), number(sc.arr[k - 1], "voxels"));
+    }
+    EXPECT_GT(number(d, "scaling_exponent"), 0.0);
+    EXPECT_LT(number(d, "scaling_exponent"), 3.0);
+  }
+  EXPECT_GE(run_devices, 1);
+  // Progress on stderr, the plot written and readable.
+  EXPECT_NE(r.err.find("bench: "), std::string::npos);
+  const Image img = read_png(plot);
+  EXPECT_GT(img.width, 100);
+  EXPECT_GT(img.height, 100);
+}
+
+TEST_F(CliTest, BenchBadOptionsAreOneLineErrors) {
+  expect_one_line_error(run({"bench", "--reps", "0"}), {"--reps"});
+  expect_one_line_error(run({"bench", "--reps", "many"}), {"--reps"});
+  expect_one_line_error(run({"bench", "--bogus"}), {"--bogus"});
+  expect_one_line_error(run({"bench", "-o", file("plot.txt")}), {"plot.txt", "PNG"});
+  expect_one_line_error(run({"bench", "-o", file("no/such/dir/plot.png")}), {"does not exist"});
+  expect_one_line_error(run({"bench", "--device", "no-such-gpu"}), {"no-such-gpu"});
+  expect_one_line_error(run({"bench", "--device", "cpu,"}), {"--device"});
+  const std::string empty = file("vendors");
+  std::filesystem::create_directory(empty);
+  expect_one_line_error(run({"bench", "--quick"}, {"OCL_ICD_VENDORS=" + empty}), {"no OpenCL platform found"});
+  EXPECT_TRUE(listing() == std::vector<std::string>{"vendors"});
+}
+
+}  // namespace
+}  // namespace softshell

@@ -1,0 +1,117 @@
+// `softshell render` and `softshell view` end to end (the real binary, under
+// xvfb-run like the other GL tests): outputs, turntable frames, the viewer's
+// scripted path, and the error contract for bad input (not a volume,
+// all-zero opacity, no display, bad options): exit 2 and one line.
+#include <cmath>
+
+#include "cli_fixture.hpp"
+#include "image.hpp"
+#include "io.hpp"
+
+namespace softshell::test {
+namespace {
+
+// A soft spherical shell as a float opacity volume.
+Volume shell(int n) {
+  Volume u({std::size_t(n), std::size_t(n), std::size_t(n)}, {0.8, 0.8, 0.8});
+  const double c = 0.5 * (n - 1), r = 0.3 * n;
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        const double d = std::sqrt((x - c) * (x - c) + (y - c) * (y - c) + (z - c) * (z - c));
+        u.at(x, y, z) = float(std::max(0.0, 1.0 - std::abs(d - r) / 1.5));
+      }
+  return u;
+}
+
+// Share of pixels that differ from the corner (background) pixel.
+double covered(const Image& img) {
+  std::size_t n = 0;
+  const std::uint8_t* bg = img.pixel(0, 0);
+  for (int y = 0; y < img.height; ++y)
+    for (int x = 0; x < img.width; ++x) {
+      const std::uint8_t* p = img.pixel(x, y);
+      n += p[0] != bg[0] || p[1] != bg[1] || p[2] != bg[2];
+    }
+  return double(n) / (double(img.width) * img.height);
+}
+
+class RenderCli : public CliTest {};
+
+TEST_F(RenderCli, RendersAnOpacityVolumeToPng) {
+  const std::string in = file("u.nrrd");
+  write_volume(in, shell(32));
+  for (const std::string method : {"splat", "isosplat"}) {
+    const std::string out = file(method + ".png");
+    const RunResult r = run({"render", in, "--method", method, "-o", out, "--size", "160x120", "--view", "30,20"});
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_NE(r.out.find("splats"), std::string::npos) << r.out;
+    const Image img = read_png(out);
+    EXPECT_EQ(img.width, 160);
+    EXPECT_EQ(img.height, 120);
+    // The shell's bounding sphere fills the view; the sphere (0.6 of the
+    // volume's width) covers a good part of it.
+    EXPECT_GT(covered(img), 0.15) << method;
+    EXPECT_LT(covered(img), 0.6) << method;
+  }
+}
+
+TEST_F(RenderCli, TurntableWritesFrames) {
+  const std::string in = file("u.nrrd");
+  write_volume(in, shell(24));
+  const RunResult r = run({"render", in, "-o", file("turn.png"), "--size", "64x64", "--turntable", "3", "--order", "sort",
+                           "--normals", "one", "-q"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_TRUE(r.out.empty()) << r.out;
+  for (const char* f : {"turn-000.png", "turn-001.png", "turn-002.png"}) EXPECT_TRUE(fs::exists(file(f))) << f;
+  EXPECT_FALSE(fs::exists(file("turn.png")));
+}
+
+TEST_F(RenderCli, ViewerDrawsScriptedFramesAndSavesAScreenshot) {
+  const std::string in = file("u.nrrd");
+  write_volume(in, shell(24));
+  const std::string shot = file("shot.png");
+  const RunResult r = run({"view", in, "--frames", "3", "--screenshot", shot, "--size", "320x240", "-q"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const Image img = read_png(shot);
+  EXPECT_EQ(img.width, 320);
+  EXPECT_EQ(img.height, 240);
+  EXPECT_GT(covered(img), 0.05);
+}
+
+TEST_F(RenderCli, BadInputIsOneLineExit2) {
+  const std::string junk = write("junk.nrrd", "this is not a volume\n");
+  expect_one_line_error(run({"render", junk, "-o", file("a.png")}), {"junk.nrrd"});
+
+  const std::string zero = file("zero.nrrd");
+  write_volume(zero, Volume({12, 10, 8}));
+  expect_one_line_error(run({"render", zero, "-o", file("a.png")}), {"zero.nrrd", "no voxel has opacity above"});
+
+  const std::string in = file("u.nrrd");
+  write_volume(in, shell(16));
+  expect_one_line_error(run({"render", in, "-o", file("a.png")}, {"DISPLAY=", "WAYLAND_DISPLAY="}),
+                        {"no display", "xvfb-run"});
+  expect_one_line_error(run({"view", in}, {"DISPLAY=", "WAYLAND_DISPLAY="}), {"no display"});
+  expect_one_line_error(run({"render", in, "-o", file("a.png"), "--size", "0x10"}), {"--size"});
+  expect_one_line_error(run({"render", in, "-o", file("a.png"), "--view", "10"}), {"--view"});
+  expect_one_line_error(run({"render", in, "-o", file("a.png"), "--method", "raycast"}), {"--method"});
+  expect_one_line_error(run({"render", in, "-o", file("a.png"), "--threshold", "1.5"}), {"--threshold"});
+  expect_one_line_error(run({"render", in, "-o", file("a.png"), "--crop", "0,1,0.5,0.2,0,1"}), {"--crop"});
+  expect_one_line_error(run({"render", in, "-o", file("a.jpg")}), {"png"});
+  expect_one_line_error(run({"view", in, "--screenshot", file("s.png")}), {"--frames"});
+  // Nothing was written by any failing run.
+  for (const auto& name : listing()) EXPECT_EQ(name.find(".png"), std::string::npos) << name;
+}
+
+TEST_F(RenderCli, RawVolumeIsClassifiedFirst) {
+  // The speckled sphere of `softshell synthetic`, uint8: not an opacity volume.
+  const std::string in = file("raw.nrrd");
+  ASSERT_EQ(run({"synthetic", "--size", "32", "-o", in, "-q"}).status, 0);
+  const RunResult r = run({"render", in, "-o", file("raw.png"), "--size", "96x96"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("classified"), std::string::npos) << r.out;
+  EXPECT_GT(covered(read_png(file("raw.png"))), 0.05);
+}
+
+}  // namespace
+}  // namespace softshell::test

@@ -1,0 +1,126 @@
+// Options shared by `render` and `view`.
+#include "cli_render_common.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <sstream>
+#include <vector>
+
+#include "error.hpp"
+
+namespace softshell::cli {
+namespace {
+
+std::vector<double> parse_numbers(const std::string& text, char sep, std::size_t count, const std::string& what,
+                                  const std::string& form) {
+  const InputError bad(what + ": expected " + form + ", got '" + text + "'");
+  std::vector<double> v;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, sep)) {
+    char* end = nullptr;
+    const double d = std::strtod(item.c_str(), &end);
+    if (item.empty() || *end != '\0' || !std::isfinite(d)) throw bad;
+    v.push_back(d);
+  }
+  if (v.size() != count || text.back() == sep) throw bad;
+  return v;
+}
+
+}  // namespace
+
+void SplatViewOptions::add_to(CLI::App* sub) {
+  sub->add_option("--method", method, "splat: oriented splats (the paper); isosplat: isotropic splats facing the viewer")
+      ->capture_default_str();
+  sub->add_option("--threshold", threshold,
+                  "epsilon: voxels with u > epsilon get a splat; the Gaussian falls to epsilon at the splat's rim")
+      ->capture_default_str();
+  sub->add_option("--normals", normals, "Shading normals per splat: one (at the centre) or three (midway to each vertex)")
+      ->capture_default_str();
+  sub->add_option("--orientation", orientation,
+                  "Splat plane and normals from: tensor (principal direction of the structure tensor of u; right on "
+                  "the middle of a shell, where grad u vanishes) or gradient (grad u, the paper); docs/rendering.md")
+      ->capture_default_str();
+  sub->add_option("--tensor-sigma", tensor_sigma, "Gaussian sigma of the structure tensor in voxels, in (0, 8]")
+      ->capture_default_str();
+  sub->add_option("--order", order,
+                  "Back to front: lists (the paper's six presorted lists, by the dominant view axis) or sort (exact "
+                  "per-view depth sort)")
+      ->capture_default_str();
+  sub->add_option("--gaussian", gaussian,
+                  "lambda from epsilon: paper (-0.25 ln eps, as printed) or rim (-0.25 / ln eps, so that G = eps at "
+                  "the splat's rim as the paper intends; larger, smoother splats); docs/rendering.md")
+      ->capture_default_str();
+  sub->add_flag("--opacity", opacity, "Treat IN as an opacity volume (float in [0, 1]) even if unsure");
+  sub->add_flag("--classify", classify, "Classify IN first (with the defaults) even if it looks like an opacity volume");
+}
+
+viewer::RenderSettings SplatViewOptions::settings() const {
+  viewer::RenderSettings s;
+  if (method == "splat" || method == "oriented")
+    s.method = viewer::SplatMethod::Oriented;
+  else if (method == "isosplat" || method == "isotropic")
+    s.method = viewer::SplatMethod::Isotropic;
+  else
+    throw InputError("--method " + method + ": unknown (methods: splat, isosplat)");
+  if (normals != "one" && normals != "three") throw InputError("--normals " + normals + ": expected one or three");
+  s.three_normals = normals == "three";
+  if (order != "lists" && order != "sort") throw InputError("--order " + order + ": expected lists or sort");
+  s.order = order == "sort" ? viewer::DrawOrder::Sort : viewer::DrawOrder::Lists;
+  return s;
+}
+
+SplatParams SplatViewOptions::params() const {
+  if (!(threshold > 0.0f && threshold < 1.0f)) throw InputError("--threshold must be in (0, 1)");
+  SplatParams p;
+  p.threshold = threshold;
+  if (gaussian != "paper" && gaussian != "rim") throw InputError("--gaussian " + gaussian + ": expected paper or rim");
+  p.gaussian = gaussian == "rim" ? SplatGaussian::Rim : SplatGaussian::Paper;
+  if (!parse_splat_normals(orientation, p.normals))
+    throw InputError("--orientation " + orientation + ": expected tensor or gradient");
+  if (!(tensor_sigma > 0 && tensor_sigma <= 8)) throw InputError("--tensor-sigma must be in (0, 8] voxels");
+  p.tensor_sigma = tensor_sigma;
+  return p;
+}
+
+viewer::InputKind SplatViewOptions::input_kind() const {
+  if (opacity && classify) throw InputError("--opacity and --classify exclude each other");
+  return opacity ? viewer::InputKind::Opacity : classify ? viewer::InputKind::Raw : viewer::InputKind::Auto;
+}
+
+std::pair<int, int> parse_size(const std::string& text, const std::string& what) {
+  const std::vector<double> v = parse_numbers(text, 'x', 2, what, "WxH (e.g. 400x400)");
+  for (double d : v)
+    if (d < 1 || d > 8192 || d != std::floor(d)) throw InputError(what + ": width and height must be integers in [1, 8192]");
+  return {int(v[0]), int(v[1])};
+}
+
+std::pair<float, float> parse_view(const std::string& text, const std::string& what) {
+  const std::vector<double> v = parse_numbers(text, ',', 2, what, "AZIMUTH,ELEVATION in degrees (e.g. 30,15)");
+  if (std::abs(v[1]) > 89) throw InputError(what + ": elevation must be in [-89, 89]");
+  return {float(v[0]), float(v[1])};
+}
+
+void parse_crop(const std::string& text, viewer::RenderSettings& s) {
+  const std::vector<double> v = parse_numbers(text, ',', 6, "--crop", "X0,X1,Y0,Y1,Z0,Z1 fractions in [0, 1]");
+  for (int a = 0; a < 3; ++a) {
+    if (v[2 * a] < 0 || v[2 * a + 1] > 1 || !(v[2 * a] < v[2 * a + 1]))
+      throw InputError("--crop: each pair must satisfy 0 <= lo < hi <= 1, got '" + text + "'");
+    s.crop_lo[a] = float(v[2 * a]);
+    s.crop_hi[a] = float(v[2 * a + 1]);
+  }
+}
+
+std::string format_number(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+
+const char* method_name(const viewer::RenderSettings& s) {
+  return s.method == viewer::SplatMethod::Isotropic ? "isotropic splats" : "oriented splats";
+}
+
+}  // namespace softshell::cli

@@ -1,0 +1,38 @@
+// Options shared by `softshell render` and `softshell view`
+// (host/cli/cmd_render.cpp, cmd_view.cpp): splat method, normals, order,
+// threshold, input kind; and parsers for sizes, views and crop boxes. Every
+// parse failure throws InputError naming the option.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <string>
+#include <utility>
+
+#include "opacity_input.hpp"
+#include "splat_renderer.hpp"
+#include "splats.hpp"
+
+namespace softshell::cli {
+
+struct SplatViewOptions {
+  std::string method = "splat", normals = "three", order = "lists", gaussian = "paper", orientation = "tensor";
+  float threshold = 0.2f;
+  double tensor_sigma = 1.5;
+  bool opacity = false, classify = false;
+
+  void add_to(CLI::App* sub);
+  viewer::RenderSettings settings() const;  // validates method, normals, order
+  SplatParams params() const;               // validates the threshold
+  viewer::InputKind input_kind() const;
+};
+
+// "WxH" -> (W, H), each in [1, 8192].
+std::pair<int, int> parse_size(const std::string& text, const std::string& what);
+// "AZ,EL" in degrees, elevation in [-89, 89].
+std::pair<float, float> parse_view(const std::string& text, const std::string& what);
+// "X0,X1,Y0,Y1,Z0,Z1" fractions in [0, 1], X0 < X1 etc., into settings.crop_*.
+void parse_crop(const std::string& text, viewer::RenderSettings& settings);
+std::string format_number(double v);  // shortest of %g
+const char* method_name(const viewer::RenderSettings& s);  // "oriented splats" / "isotropic splats"
+
+}  // namespace softshell::cli

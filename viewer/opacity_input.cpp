@@ -1,0 +1,69 @@
+// Opacity input for the renderers: read, and classify raw data.
+#include "opacity_input.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <iomanip>
+#include <sstream>
+
+#include "auto_iso.hpp"
+#include "error.hpp"
+#include "io.hpp"
+#include "mask.hpp"
+
+namespace softshell::viewer {
+
+bool looks_like_opacity(const Volume& v) {
+  if (v.source_type != ScalarType::Float32 && v.source_type != ScalarType::Float64) return false;
+  return std::all_of(v.data.begin(), v.data.end(), [](float f) { return f >= 0.0f && f <= 1.0f; });
+}
+
+OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, const std::string& iso_text) {
+  OpacityInput in;
+  Volume v = read_volume(path);
+  const bool opacity = kind == InputKind::Opacity || (kind == InputKind::Auto && looks_like_opacity(v));
+  if (opacity) {
+    if (!looks_like_opacity(v))
+      throw input_error(path, "not an opacity volume (expected float samples in [0, 1], got " +
+                                  std::string(scalar_type_name(v.source_type)) + "); drop --opacity to classify it");
+    in.u = std::move(v);
+    in.note = "opacity volume " + path;
+    return in;
+  }
+  // As `softshell classify IN --iso auto` does: auto mask, auto isovalue,
+  // unscanned voxels filled for the lowpass and held at u = 0.
+  MaskReport mr;
+  in.mask = scanned_mask(v, MaskParams{}, &mr);
+  if (mr.unscanned == 0) in.mask.clear();
+  const std::vector<std::uint8_t>* mask = in.mask.empty() ? nullptr : &in.mask;
+  if (iso_text == "auto") {
+    in.iso = auto_iso(v, mask);
+  } else {
+    char* end = nullptr;
+    in.iso = std::strtod(iso_text.c_str(), &end);
+    if (iso_text.empty() || *end != '\0' || !std::isfinite(in.iso))
+      throw InputError("--iso: expected a number in the input's intensity units or 'auto', got '" + iso_text + "'");
+  }
+  in.data = mask ? fill_unscanned(v, in.mask) : std::move(v);
+  in.params.v_iso = in.data.intensity_map().to_unit(in.iso);
+  in.params.sigma_mm = 1.0;
+  in.u = reclassify(rt, in, in.params, nullptr, &in.report);
+  in.classified = true;
+  std::ostringstream note;
+  note << "classified " << path << " (" << scalar_type_name(in.data.source_type) << ") with the defaults: iso "
+       << std::setprecision(4) << in.iso << (iso_text == "auto" ? " (auto)" : "") << ", " << in.report.cycles
+       << " iterations, relative residual " << std::scientific << std::setprecision(2)
+       << (in.report.residuals.empty() ? 0.0 : in.report.residuals.back())
+       << (in.report.converged ? "" : " (NOT converged)");
+  in.note = note.str();
+  return in;
+}
+
+Volume reclassify(Runtime& rt, const OpacityInput& in, const VariationalParams& p, const Volume* init,
+                  SolveReport* report) {
+  const SolverParams sp;
+  return classify_variational(rt, in.data, p, sp, report, init, in.mask.empty() ? nullptr : &in.mask);
+}
+
+}  // namespace softshell::viewer

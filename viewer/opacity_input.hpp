@@ -1,0 +1,48 @@
+// What `render` and `view` draw: an opacity volume in [0, 1]. A raw
+// ultrasound volume (integer samples, or floats outside [0, 1]) is classified
+// first with the defaults of `softshell classify --iso auto` (auto isovalue,
+// auto scanned-region mask, the variational classifier's default
+// parameters). The raw data is kept so the viewer can re-solve.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "cl_runtime.hpp"
+#include "variational.hpp"
+#include "volume.hpp"
+
+namespace softshell::viewer {
+
+enum class InputKind { Auto, Opacity, Raw };
+
+// True when the samples are floats within [0, 1] (an opacity volume).
+bool looks_like_opacity(const Volume& v);
+
+struct OpacityInput {
+  Volume u;                          // opacity in [0, 1]
+  bool classified = false;           // true when u was computed here
+  // Only when classified: the data as the classifier saw it (unscanned voxels
+  // filled), its mask (empty: all scanned), and the parameters used.
+  Volume data;
+  std::vector<std::uint8_t> mask;
+  VariationalParams params;
+  double iso = 0;                    // in the file's units
+  SolveReport report;
+  std::string note;                  // one line for the user
+};
+
+// Reads `path` and returns its opacity (see above). `iso` is "auto" or a
+// number in the file's units. Throws InputError for a file that is not a
+// volume, and for an opacity volume with values outside [0, 1] forced by
+// `kind`.
+OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, const std::string& iso = "auto");
+
+// Re-solves with new parameters (normalised v_iso), warm-starting from
+// `init` when given. Non-convergence is in `report`.
+Volume reclassify(Runtime& rt, const OpacityInput& in, const VariationalParams& p, const Volume* init,
+                  SolveReport* report);
+
+}  // namespace softshell::viewer

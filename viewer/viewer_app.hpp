@@ -1,0 +1,29 @@
+// The interactive viewer behind `softshell view`: a GLFW window (OpenGL 3.3
+// core), the splat renderer, an orbit camera and a Dear ImGui panel.
+// Hooks as in the OpenCL-SDK interop samples: init GL, init CL, update
+// (compute: re-solve, splat generation), render (draw), events.
+#pragma once
+
+#include <string>
+
+#include "cl_runtime.hpp"
+#include "opacity_input.hpp"
+#include "splat_renderer.hpp"
+#include "splats.hpp"
+
+namespace softshell::viewer {
+
+struct ViewerOptions {
+  int width = 1200, height = 800;
+  float azimuth = 0, elevation = 0;
+  RenderSettings settings;
+  SplatParams params;
+  int frames = 0;           // > 0: draw this many frames, then quit (tests, scripts)
+  std::string screenshot;   // with frames: save the last frame's scene here
+  bool quiet = false;
+};
+
+// Runs until the window closes, Esc, or `frames` frames. Returns 0.
+int run_viewer(Runtime& rt, OpacityInput input, const ViewerOptions& options);
+
+}  // namespace softshell::viewer
