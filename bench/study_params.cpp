@@ -7,6 +7,7 @@
 //                          [--iso-frac F] [--top K] [KEY=V1:V2:...]...
 // KEY is one of alpha beta gamma omega delta epsilon u_ind sigma grad_sigma kappa,
 // or iso_frac (v_iso = fluid + iso_frac (tissue - fluid), overriding --iso-frac).
+// --iso-frac auto takes v_iso from `--iso auto` instead.
 // --tensor-sigma S scores the structure-tensor splat orientation (0: grad u).
 // Goals (issue 4): precision >= 0.60, recall >= 0.92, blobs <= 5, normal <= 15.
 #include <algorithm>
@@ -16,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "auto_iso.hpp"
 #include "error.hpp"
 #include "metrics.hpp"
 #include "phantom.hpp"
@@ -64,6 +66,7 @@ struct Mean {
 int main(int argc, char** argv) {
   std::vector<std::string> shapes{"face"}, sizes{"96"}, seeds{"1", "2", "3"};
   double iso_frac = 0.5, tensor_sigma = 0;
+  bool iso_auto = false;  // --iso-frac auto: v_iso by `--iso auto` (host/auto_iso.hpp)
   int top = 20;
   std::vector<std::pair<std::string, std::vector<double>>> grid;
   for (int i = 1; i < argc; ++i) {
@@ -72,7 +75,11 @@ int main(int argc, char** argv) {
     if (a == "--shapes") shapes = split(next(), ',');
     else if (a == "--sizes") sizes = split(next(), ',');
     else if (a == "--seeds") seeds = split(next(), ',');
-    else if (a == "--iso-frac") iso_frac = std::stod(next());
+    else if (a == "--iso-frac") {
+      const std::string f = next();
+      iso_auto = f == "auto";
+      if (!iso_auto) iso_frac = std::stod(f);
+    }
     else if (a == "--top") top = std::stoi(next());
     else if (a == "--tensor-sigma") tensor_sigma = std::stod(next());
     else if (a.find('=') != std::string::npos) {
@@ -103,7 +110,7 @@ int main(int argc, char** argv) {
           pp.size = std::stoi(sz);
           pp.seed = std::stoull(sd);
           Case c{make_phantom(rt, pp), 0};
-          c.iso = c.iso_at(iso_frac);
+          c.iso = iso_auto ? c.ph.volume.intensity_map().to_unit(auto_iso(c.ph.volume, nullptr)) : c.iso_at(iso_frac);
           cases.push_back(std::move(c));
         }
     std::size_t combos = 1;

@@ -127,9 +127,60 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     if (s / w > best_value) best_value = s / w, best = b;
   }
   if (best < 0) throw InputError("--iso auto: too few scanned voxels to take the isovalue from");
-  const double iso = lo + (best + 0.5) * width;
+  const double edge_iso = lo + (best + 0.5) * width;
+
+  // The echo ridge: from every strong-edge voxel (|grad v~| in the top
+  // edge_share of the usable voxels) climb v~ through the 26 neighbours to
+  // the crest of the boundary echo; the median crest value is the ridge.
+  std::vector<float> gmag;
+  gmag.reserve(used);
+  std::vector<float> gfield(n, -1.0f);
+  for (std::size_t z = 1; z + 1 < d[2]; ++z)
+    for (std::size_t y = 1; y + 1 < d[1]; ++y)
+      for (std::size_t x = 1; x + 1 < d[0]; ++x) {
+        const std::size_t i = v.index(x, y, z);
+        if (!usable(i)) continue;
+        const double gx = (num[i + sx] - num[i - sx]) / (2 * hx), gy = (num[i + sy] - num[i - sy]) / (2 * hy),
+                     gz = (num[i + sz] - num[i - sz]) / (2 * hz);
+        gfield[i] = float(std::sqrt(gx * gx + gy * gy + gz * gz));
+        gmag.push_back(gfield[i]);
+      }
+  const std::size_t kth = std::min(gmag.size() - 1, std::size_t(double(gmag.size()) * (1.0 - params.edge_share)));
+  std::nth_element(gmag.begin(), gmag.begin() + long(kth), gmag.end());
+  const float edge_threshold = gmag[kth];
+  std::vector<float> crests;
+  for (std::size_t z = 1; z + 1 < d[2]; ++z)
+    for (std::size_t y = 1; y + 1 < d[1]; ++y)
+      for (std::size_t x = 1; x + 1 < d[0]; ++x) {
+        std::size_t i = v.index(x, y, z);
+        if (!(gfield[i] >= edge_threshold) || gfield[i] <= 0) continue;
+        long cx = long(x), cy = long(y), cz = long(z);
+        for (int step = 0; step < params.climb_steps; ++step) {
+          std::size_t best_i = i;
+          long bx = cx, by = cy, bz = cz;
+          for (int dz = -1; dz <= 1; ++dz)
+            for (int dy = -1; dy <= 1; ++dy)
+              for (int dx = -1; dx <= 1; ++dx) {
+                const long nx = cx + dx, ny = cy + dy, nz = cz + dz;
+                if (nx < 1 || ny < 1 || nz < 1 || nx + 1 >= long(d[0]) || ny + 1 >= long(d[1]) || nz + 1 >= long(d[2]))
+                  continue;
+                const std::size_t j = v.index(std::size_t(nx), std::size_t(ny), std::size_t(nz));
+                if (gfield[j] < 0) continue;  // not usable
+                if (num[j] > num[best_i]) best_i = j, bx = nx, by = ny, bz = nz;
+              }
+          if (best_i == i) break;
+          i = best_i, cx = bx, cy = by, cz = bz;
+        }
+        crests.push_back(num[i]);
+      }
+  std::nth_element(crests.begin(), crests.begin() + long(crests.size() / 2), crests.end());
+  const double ridge_iso = crests[crests.size() / 2];
+  const double iso = params.rule == AutoIsoRule::EchoRidge ? ridge_iso : edge_iso;
   if (report) {
     report->iso = iso;
+    report->edge_iso = edge_iso;
+    report->ridge_iso = ridge_iso;
+    report->crests = crests.size();
     report->lo = lo;
     report->hi = hi;
     report->mean_gradient = std::move(mean);

@@ -1,13 +1,18 @@
 // `--iso auto`: an isovalue picked from the data (docs/real-data.md,
 // "Automatic isovalue").
 //
-// Rule: the value at which the boundaries of the volume lie, found the way
-// Kindlmann and Durkin (1998) find boundaries for transfer functions: across
-// a boundary blurred by the imaging, |grad v| peaks at the value midway
-// between the two materials. On the lowpassed volume v~ (speckle averaged
-// out), over the scanned voxels, the mean |grad v~| is taken per value bin,
-// and the bin where it peaks is the isovalue: the fluid/tissue midpoint of an
-// obstetric scan, the flank of the bright echo of a bone surface.
+// Two rules, both on the lowpassed volume v~ (speckle averaged out) over the
+// scanned voxels:
+//  - EchoRidge (the default, for the variational classifier): ultrasound
+//    draws a boundary as a bright echo layer, and the variational shell sits
+//    best on its crest (docs/parameters.md). From every strong-edge voxel
+//    (|grad v~| in the top 5 %) climb v~ through the 26 neighbours, at most 6
+//    steps, to the crest of the echo; the median crest value is v_iso.
+//  - Edge (for Levoy's contours): the value at which the boundaries lie,
+//    found the way Kindlmann and Durkin (1998) find boundaries for transfer
+//    functions: across a boundary blurred by the imaging, |grad v| peaks
+//    midway between the two materials; the mean |grad v~| is taken per value
+//    bin and the bin where it peaks is the isovalue.
 #pragma once
 
 #include <cstddef>
@@ -18,14 +23,21 @@
 
 namespace softshell {
 
+enum class AutoIsoRule { EchoRidge, Edge };
+
 struct AutoIsoParams {
+  AutoIsoRule rule = AutoIsoRule::EchoRidge;
+  double edge_share = 0.05;  // share of usable voxels, by |grad v~|, that seed the climb to the echo crest
+  int climb_steps = 6;       // voxels climbed at most from an edge voxel to its crest
   double sigma_mm = 1.0;        // lowpass of v~, at least 1 voxel per axis
   int bins = 64;                // over the range of v~ in the scanned voxels
   double min_bin_share = 0.001; // bins with fewer voxels than this share are ignored
 };
 
 struct AutoIsoReport {
-  double iso = 0;                     // file units
+  double iso = 0;                     // file units, by the rule asked for
+  double edge_iso = 0, ridge_iso = 0; // both rules' values
+  std::size_t crests = 0;             // strong-edge voxels that climbed to a crest
   double lo = 0, hi = 0;              // range of v~ binned
   std::vector<double> mean_gradient;  // per bin, per mm (NaN where too few voxels)
   std::vector<std::size_t> count;     // voxels per bin

@@ -20,7 +20,9 @@ constexpr std::size_t kReduceGroups = 64, kReduceLocal = 256;
 template <class T>
 cl::Buffer upload(Runtime& rt, const std::vector<T>& host) {
   cl::Buffer b = rt.buffer(std::max<std::size_t>(host.size(), 1) * sizeof(T));
-  if (!host.empty()) rt.queue().enqueueWriteBuffer(b, CL_FALSE, 0, host.size() * sizeof(T), host.data());
+  // Blocking: callers pass temporaries (e.g. an all-ones mask), which must
+  // outlive the transfer.
+  if (!host.empty()) rt.queue().enqueueWriteBuffer(b, CL_TRUE, 0, host.size() * sizeof(T), host.data());
   return b;
 }
 

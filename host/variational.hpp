@@ -21,7 +21,7 @@ struct VariationalParams {
   // Defaults from the parameter study on the face and spine phantoms
   // (docs/parameters.md); the paper's beta = 0.03 was for 0-255 intensities
   // and is ~2000x too small on normalised data.
-  double alpha = 0.25, beta = 3.0, gamma = 3.5, omega = 0.6, delta = 0.02, epsilon = 0.01, u_ind = 1.0;
+  double alpha = 0.2, beta = 3.0, gamma = 3.5, omega = 0.6, delta = 0.02, epsilon = 0.01, u_ind = 1.0;
   double v_iso = 0.5;
   double sigma_mm = 1.0;  // lowpass giving v~
   // The |grad v| in F_iso's denominator and in F_ind taken from v lowpassed

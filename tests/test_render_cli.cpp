@@ -94,7 +94,9 @@ TEST_F(RenderCli, BadInputIsOneLineExit2) {
   expect_one_line_error(run({"view", in}, {"DISPLAY=", "WAYLAND_DISPLAY="}), {"no display"});
   expect_one_line_error(run({"render", in, "-o", file("a.png"), "--size", "0x10"}), {"--size"});
   expect_one_line_error(run({"render", in, "-o", file("a.png"), "--view", "10"}), {"--view"});
-  expect_one_line_error(run({"render", in, "-o", file("a.png"), "--method", "raycast"}), {"--method"});
+  expect_one_line_error(run({"render", in, "-o", file("a.png"), "--method", "bogus"}), {"--method"});
+  expect_one_line_error(run({"render", in, "-o", file("a.png"), "--orientation", "bogus"}), {"--orientation"});
+  expect_one_line_error(run({"render", in, "-o", file("a.png"), "--tensor-sigma", "0"}), {"--tensor-sigma"});
   expect_one_line_error(run({"render", in, "-o", file("a.png"), "--threshold", "1.5"}), {"--threshold"});
   expect_one_line_error(run({"render", in, "-o", file("a.png"), "--crop", "0,1,0.5,0.2,0,1"}), {"--crop"});
   expect_one_line_error(run({"render", in, "-o", file("a.jpg")}), {"png"});

@@ -10,6 +10,7 @@
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 
@@ -26,6 +27,7 @@ void add_evaluate_command(CLI::App& app, Action& action);
 void add_figure2_command(CLI::App& app, Action& action);
 void add_info_command(CLI::App& app, Action& action);
 void add_lowpass_command(CLI::App& app, Action& action);
+void add_mesh_command(CLI::App& app, Action& action);
 void add_phantom_command(CLI::App& app, Action& action);
 void add_slices_command(CLI::App& app, Action& action);
 void add_synthetic_command(CLI::App& app, Action& action);
@@ -33,6 +35,21 @@ void add_synthetic_command(CLI::App& app, Action& action);
 // In the viewer library (viewer/CMakeLists.txt): OpenGL rendering commands.
 void add_render_command(CLI::App& app, Action& action);
 void add_view_command(CLI::App& app, Action& action);
+// cmd_figures.cpp: the paper's Figures 5 and 6, and `render --method raycast`.
+void add_figure5_command(CLI::App& app, Action& action);
+void add_figure6_command(CLI::App& app, Action& action);
+struct RaycastRenderOptions;  // the ray caster's own options on `render`
+std::shared_ptr<RaycastRenderOptions> add_raycast_render_options(CLI::App* sub);
+struct RaycastRenderRequest {  // `render`'s common options
+  std::string in, out, device, size, view, crop, iso;
+  int turntable = 0, benchmark = 0;
+  bool quiet = false, opacity = false, classify = false;
+};
+int run_raycast_render(const RaycastRenderOptions& o, const RaycastRenderRequest& request);
+// cmd_render_methods.cpp: `render --method mc` (Marching Cubes at --level, drawn with GL) and
+// `render --method shearwarp` (VolPack).
+int run_mesh_render(double level, const RaycastRenderRequest& request);
+int run_shearwarp_render(const RaycastRenderRequest& request);
 #endif
 
 // --raw / --type / --spacing / --big-endian for headerless input.

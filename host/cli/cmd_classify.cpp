@@ -33,11 +33,12 @@ struct ClassifyOptions {
 
 // A number, or nullopt for "auto".
 std::optional<double> parse_iso(const std::string& text) {
-  if (text == "auto") return std::nullopt;
+  if (text == "auto" || text == "auto-ridge" || text == "auto-edge") return std::nullopt;
   char* end = nullptr;
   const double v = std::strtod(text.c_str(), &end);
   if (text.empty() || *end != '\0' || !std::isfinite(v))
-    throw InputError("--iso: expected a number in the input's intensity units or 'auto', got '" + text + "'");
+    throw InputError("--iso: expected a number in the input's intensity units, auto, auto-ridge or auto-edge, got '" +
+                     text + "'");
   return v;
 }
 
@@ -200,8 +201,13 @@ int run_classify(const ClassifyOptions& o) {
   if (given_iso) {
     iso = *given_iso;
   } else {
-    iso = auto_iso(in, mask.scanned.empty() ? nullptr : &mask.scanned);
-    iso_text = " (auto)";
+    // auto: the echo crest for the variational shell, the edge midpoint for
+    // Levoy's contours (host/auto_iso.hpp); auto-ridge / auto-edge force one.
+    AutoIsoParams ap;
+    const bool ridge = o.iso == "auto-ridge" || (o.iso == "auto" && o.method != "levoy");
+    ap.rule = ridge ? AutoIsoRule::EchoRidge : AutoIsoRule::Edge;
+    iso = auto_iso(in, mask.scanned.empty() ? nullptr : &mask.scanned, ap);
+    iso_text = ridge ? " (auto: echo ridge)" : " (auto: edge)";
   }
   // Unscanned samples continue the scanned data, so the lowpass and the
   // gradients see no step at the edge of the sweep (host/mask.hpp).
@@ -219,10 +225,11 @@ void add_classify_command(CLI::App& app, Action& action) {
   sub->add_option("IN", o->in, "Input volume")->required();
   sub->add_option("-o,--output", o->out, "Output opacity volume (.nrrd, .mha, .mhd), float")->required();
   sub->add_option("--iso", o->iso,
-                  "Isovalue, in the input's own intensity units (e.g. 0-255 for 8-bit data), or auto: where the mean "
-                  "gradient of the lowpassed data peaks (docs/real-data.md)")
+                  "Isovalue, in the input's own intensity units (e.g. 0-255 for 8-bit data), or auto: the crest of the "
+                  "boundary echoes (auto-ridge) for the variational method, where the gradient of the lowpassed data "
+                  "peaks (auto-edge) for levoy (docs/real-data.md)")
       ->required()
-      ->type_name("V|auto");
+      ->type_name("V|auto|auto-ridge|auto-edge");
   sub->add_option("--mask", o->mask,
                   "Scanned region: auto (the solid zero fill at the border is unscanned), none, or a volume FILE whose "
                   "nonzero voxels are scanned; unscanned voxels get opacity 0 (docs/real-data.md)")

@@ -153,11 +153,14 @@ int run_figure2(const Figure2Options& o) {
   const auto t0 = Clock::now();
   const SliceSpec spec = parse_slice(o.slice);
   std::optional<double> given_iso;
-  if (o.iso != "auto") {
+  AutoIsoParams auto_params;  // auto / auto-ridge: the echo crest; auto-edge: the edge midpoint
+  if (o.iso == "auto-edge") auto_params.rule = AutoIsoRule::Edge;
+  if (o.iso != "auto" && o.iso != "auto-ridge" && o.iso != "auto-edge") {
     char* end = nullptr;
     const double v = std::strtod(o.iso.c_str(), &end);
     if (o.iso.empty() || *end != '\0' || !std::isfinite(v))
-      throw InputError("--iso: expected a number in the input's intensity units or 'auto', got '" + o.iso + "'");
+      throw InputError("--iso: expected a number in the input's intensity units, auto, auto-ridge or auto-edge, got '" +
+                       o.iso + "'");
     given_iso = v;
   }
   if (o.zoom < 0 || o.zoom > 64) throw InputError("--zoom must be in [0, 64] (0: automatic)");
@@ -187,7 +190,7 @@ int run_figure2(const Figure2Options& o) {
   const std::size_t unscanned = mask.empty() ? 0 : count_unscanned(mask);
   if (unscanned == 0) mask.clear();
   const std::vector<std::uint8_t>* mask_ptr = mask.empty() ? nullptr : &mask;
-  const double iso = given_iso ? *given_iso : auto_iso(in, mask_ptr);
+  const double iso = given_iso ? *given_iso : auto_iso(in, mask_ptr, auto_params);
   const Volume filled = mask.empty() ? Volume() : fill_unscanned(in, mask);
   const Volume& data = mask.empty() ? in : filled;
   auto apply_mask = [&](Volume& u) {
@@ -281,7 +284,7 @@ void add_figure2_command(CLI::App& app, Action& action) {
   sub->add_option("--slice", o->slice, "Slice: x, y or z (the middle one) or AXIS:INDEX")
       ->capture_default_str()
       ->type_name("z|y|x[:INDEX]");
-  sub->add_option("--iso", o->iso, "Isovalue in the input's units, or auto (as in classify)")
+  sub->add_option("--iso", o->iso, "Isovalue in the input's units, or auto|auto-ridge|auto-edge (as in classify)")
       ->capture_default_str()
       ->type_name("V|auto");
   sub->add_option("--mask", o->mask, "Scanned region: auto, none or FILE (as in classify)")

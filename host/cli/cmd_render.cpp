@@ -26,6 +26,8 @@ struct RenderOptions {
   int turntable = 0, benchmark = 0;
   bool quiet = false;
   SplatViewOptions splat;
+  std::shared_ptr<RaycastRenderOptions> raycast;  // --method raycast (cmd_figures.cpp)
+  double level = 0.5;                             // --method mc (cmd_render_methods.cpp)
 };
 
 // OUT.png -> OUT-007.png for turntable frame 7 (or printf-style when OUT has
@@ -61,6 +63,14 @@ std::array<Vec3d, 2> kept_box(const SplatSet& set, const viewer::RenderSettings&
 
 int run_render(const RenderOptions& o) {
   const auto t0 = Clock::now();
+  if (o.splat.method == "raycast")
+    return run_raycast_render(*o.raycast, {o.in, o.out, o.device, o.size, o.view, o.crop, o.iso, o.turntable,
+                                           o.benchmark, o.quiet, o.splat.opacity, o.splat.classify});
+  if (o.splat.method == "mc" || o.splat.method == "shearwarp") {
+    const RaycastRenderRequest req{o.in,        o.out,     o.device,         o.size,          o.view, o.crop, o.iso,
+                                   o.turntable, o.benchmark, o.quiet, o.splat.opacity, o.splat.classify};
+    return o.splat.method == "mc" ? run_mesh_render(o.level, req) : run_shearwarp_render(req);
+  }
   const auto [width, height] = parse_size(o.size, "--size");
   const auto [az, el] = parse_view(o.view, "--view");
   if (o.turntable < 0 || o.turntable > 3600) throw InputError("--turntable must be in [0, 3600]");
@@ -153,6 +163,9 @@ void add_render_command(CLI::App& app, Action& action) {
   sub->add_option("--iso", o->iso, "Isovalue for classifying a raw volume (its units, or auto)")->capture_default_str();
   sub->add_option("--benchmark", o->benchmark, "Also time N frames and report frames per second");
   o->splat.add_to(sub);
+  o->raycast = add_raycast_render_options(sub);
+  sub->add_option("--level", o->level, "--method mc: isovalue of the Marching Cubes surface (0.5: mid-shell)")
+      ->capture_default_str();
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   add_device_option(sub, o->device);
   sub->callback([&action, o] { action = [o] { return run_render(*o); }; });

@@ -29,11 +29,14 @@ int run(int argc, char** argv) {
   add_classify_command(app, action);
   add_evaluate_command(app, action);
   add_figure2_command(app, action);
+  add_mesh_command(app, action);
   add_slices_command(app, action);
   add_synthetic_command(app, action);
 #ifdef SOFTSHELL_HAVE_VIEWER
   add_render_command(app, action);
   add_view_command(app, action);
+  add_figure5_command(app, action);
+  add_figure6_command(app, action);
 #endif
   add_bench_command(app, action);
 
