@@ -14,6 +14,7 @@ SOFTSHELL_PACKAGES=(
   libcli11-dev libgtest-dev libeigen3-dev
   libglfw3-dev libglm-dev libgl-dev
   libepoxy-dev libimgui-dev libstb-dev
+  libvolpack1-dev
   xvfb xauth
 )
 

@@ -87,5 +87,18 @@ else
   log "skipping rendering: softshell was built without the viewer (SOFTSHELL_BUILD_VIEWER=OFF)"
 fi
 
+# Marching Cubes on the classified face (docs/renderers.md): a binary PLY for MeshLab or
+# ParaView, at the splats' epsilon.
+log "Marching Cubes mesh of the classified face"
+"$ss" mesh "$out/face-variational.nrrd" --level 0.2 -o "$out/face-mesh.ply"
+
+# The paper's Figures 5 and 6 (docs/renderers.md): ray casting before / after classification, and
+# ray casting, Marching Cubes, shear-warp, oriented splats of the same classified volume.
+if "$ss" figure6 --help >/dev/null 2>&1; then
+  log "the paper's Figures 5 and 6 on the face"
+  "${gl[@]}" "$ss" figure5 "$out/face/volume.nrrd" --iso auto --view -30,10 --crop "$crop" -o "$out/figure5-face.png"
+  "${gl[@]}" "$ss" figure6 "$out/face-variational.nrrd" --view -30,10 --crop "$crop" -o "$out/figure6-face.png"
+fi
+
 log "done; outputs in $out:"
 ls -1 "$out" >&2

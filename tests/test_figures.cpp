@@ -93,7 +93,10 @@ TEST(RaycastVsSplats, PanelsLineUp) {
               << a.cy << "), ray cast r " << b.radius << " at (" << b.cx << ", " << b.cy << ")\n";
     EXPECT_NEAR(a.cx, b.cx, 0.75);
     EXPECT_NEAR(a.cy, b.cy, 0.75);
-    EXPECT_NEAR(a.radius, b.radius, 2.0);  // splats reach a little further out (their Gaussian footprint)
+    // Same size within 1.5 voxels (3.3 px each here): a grazing ray gathers
+    // the soft shell along a chord, so the ray-cast silhouette sits about a
+    // voxel further out than the splats' (edge-on splats add little).
+    EXPECT_NEAR(a.radius, b.radius, 5.0);
   }
 }
 

@@ -259,6 +259,27 @@ TEST(PhantomSdf, FaceAndSpineMatchABruteForceReference) {
   }
 }
 
+TEST(PhantomSdf, NonCubicDimsAreTheCentredCropOfTheCube) {
+  // dims 40x24x20 = the middle of the 40^3 phantom (offsets 8 and 10): the
+  // same geometry at the same voxel size, so the truth agrees away from the
+  // crop's faces (redistancing looks REDIST_RADIUS + 2 voxels around).
+  PhantomParams cube;
+  cube.size = 40;
+  PhantomParams crop = cube;
+  crop.dims = {40, 24, 20};
+  const Phantom a = make_phantom(runtime(), cube), b = make_phantom(runtime(), crop);
+  ASSERT_EQ(b.truth_sdf.dims, (Dims3{40, 24, 20}));
+  EXPECT_DOUBLE_EQ(a.truth_sdf.spacing[0], b.truth_sdf.spacing[0]);
+  std::size_t compared = 0;
+  for (std::size_t z = 8; z + 8 < 20; ++z)
+    for (std::size_t y = 8; y + 8 < 24; ++y)
+      for (std::size_t x = 8; x + 8 < 40; ++x) {
+        ASSERT_NEAR(b.truth_sdf.at(x, y, z), a.truth_sdf.at(x, y + 8, z + 10), 1e-4) << x << "," << y << "," << z;
+        ++compared;
+      }
+  EXPECT_GT(compared, 500u);
+}
+
 TEST(PhantomSdf, FaceGradientIsUnitNearTheSurface) {
   const int n = 64;
   const Phantom p = make_phantom(runtime(), params(PhantomShape::Face, n));
@@ -511,6 +532,27 @@ TEST_F(CliPhantom, BadOptionsAreOneLineErrors) {
   }
   write("plain", "x");
   expect_one_line_error(run({"phantom", "--size", "16", "-o", file("plain")}), {"not a directory"});
+}
+
+TEST_F(CliPhantom, NonCubicDims) {
+  const RunResult r = run({"phantom", "--dims", "40,24,20", "-o", file("p"), "-q"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const Volume v = read_volume(file("p/volume.nrrd")), t = read_volume(file("p/truth_sdf.nrrd"));
+  EXPECT_EQ(v.dims, (Dims3{40, 24, 20}));
+  EXPECT_EQ(t.dims, (Dims3{40, 24, 20}));
+  EXPECT_DOUBLE_EQ(v.spacing[0], v.spacing[2]) << "isotropic voxels";
+  EXPECT_NEAR(v.spacing[0], 100.0 / 40, 1e-9) << "the longest axis spans the face's 100 mm";
+  for (const auto& [bad, option] : std::vector<std::pair<std::vector<std::string>, std::string>>{
+           {{"--dims", "8,20,20"}, "--dims"},
+           {{"--dims", "20,20"}, "--dims"},
+           {{"--dims", "20,20,600"}, "--dims"},
+           {{"--dims", "20,20,20", "--size", "20"}, "--dims"}}) {
+    std::vector<std::string> args{"phantom", "-o", file("bad")};
+    args.insert(args.end(), bad.begin(), bad.end());
+    SCOPED_TRACE(bad[1]);
+    expect_one_line_error(run(args), {option});
+    EXPECT_FALSE(fs::exists(file("bad")));
+  }
 }
 
 TEST_F(CliPhantom, SlicesPngHasTheExpectedSize) {

@@ -135,6 +135,10 @@ class ViewerApp {
     const double ms = 1000.0 * since(t0);
     frame_ms_ = frame_ms_ == 0 ? ms : 0.9 * frame_ms_ + 0.1 * ms;
 
+    // The panel goes into a --frames screenshot only with --screenshot-panel
+    // (documentation pictures); S saves the scene alone.
+    const bool with_panel = o_.screenshot_panel && !screenshot_path.empty();
+    if (with_panel) draw_panel();
     std::string path = screenshot_path;
     if (path.empty() && screenshot_request_) {
       char name[64];
@@ -154,6 +158,10 @@ class ViewerApp {
       if (!o_.quiet) std::cout << "view: screenshot " << path << " (" << fw << "x" << fh << ")\n";
     }
 
+    if (!with_panel) draw_panel();
+  }
+
+  void draw_panel() {
     ImGui_ImplOpenGL3_NewFrame();
     ImGui_ImplGlfw_NewFrame();
     ImGui::NewFrame();
@@ -191,6 +199,16 @@ class ViewerApp {
       settings_.order = order ? DrawOrder::Sort : DrawOrder::Lists;
       ImGui::SliderFloat("threshold", &params_.threshold, 0.02f, 0.9f, "%.2f");
       if (ImGui::IsItemDeactivatedAfterEdit() && !solving_.valid()) regenerate();
+      // Splat orientation: the structure tensor of u (default) or grad u (the paper).
+      int orient = params_.normals == SplatNormals::Tensor ? 0 : 1;
+      const int before = orient;
+      ImGui::RadioButton("tensor normals", &orient, 0);
+      ImGui::SameLine();
+      ImGui::RadioButton("grad u normals", &orient, 1);
+      if (orient != before && !solving_.valid()) {
+        params_.normals = orient == 0 ? SplatNormals::Tensor : SplatNormals::Gradient;
+        regenerate();
+      }
       ImGui::SliderFloat("light azimuth", &settings_.light_azimuth, -90.0f, 90.0f, "%.0f deg");
       ImGui::SliderFloat("light elevation", &settings_.light_elevation, -90.0f, 90.0f, "%.0f deg");
       ImGui::ColorEdit3("colour", &settings_.colour.x, ImGuiColorEditFlags_NoInputs);

@@ -20,6 +20,7 @@ struct ViewerOptions {
   SplatParams params;
   int frames = 0;           // > 0: draw this many frames, then quit (tests, scripts)
   std::string screenshot;   // with frames: save the last frame's scene here
+  bool screenshot_panel = false;  // ... with the ImGui panel drawn on it
   bool quiet = false;
 };
 

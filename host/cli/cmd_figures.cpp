@@ -48,17 +48,17 @@ void add_raycast_options(CLI::App* sub, RaycastRenderOptions& o, bool with_uncla
                   "raycast: ray cast a raw volume's normalised intensity through the transfer function instead of "
                   "classifying it first (the paper's Figure 5, left)");
   sub->add_option("--tf-lo", o.tf_lo,
-                  "raycast: transfer-function ramp start, normalised intensity in [0, 1] (auto: the isovalue for raw "
-                  "data, 0 for an opacity volume)")
+                  "raycast: transfer-function ramp start, normalised intensity in [0, 1] (auto: the isovalue - 0.1 "
+                  "for raw data, 0 for an opacity volume)")
       ->capture_default_str();
   sub->add_option("--tf-hi", o.tf_hi,
-                  "raycast: ramp end where the opacity reaches --tf-max (auto: a quarter of the way from --tf-lo to 1 "
-                  "for raw data, 1 for an opacity volume)")
+                  "raycast: ramp end where the opacity reaches --tf-max (auto: the isovalue + 0.1 for raw data, 1 for "
+                  "an opacity volume)")
       ->capture_default_str();
   sub->add_option("--tf-cut", o.tf_cut,
-                  "raycast: samples below this are transparent (auto: 0.05 for an opacity volume, VolPack's minimum "
-                  "voxel opacity as in the shear-warp panel, which drops the faint haze of u away from surfaces; 0 "
-                  "for raw data)")
+                  "raycast: samples below this are transparent (auto: 0.2 for an opacity volume, the splats' epsilon, "
+                  "so ray casting shows what the splats show and not the faint haze of u away from surfaces; 0 for "
+                  "raw data)")
       ->capture_default_str();
   sub->add_option("--tf-max", o.tf_max, "raycast: largest opacity per voxel length, in (0, 1]")->capture_default_str();
   sub->add_option("--step", o.step, "raycast: sampling distance along the ray, in voxels (smallest spacing)")
@@ -81,10 +81,12 @@ double parse_unit(const std::string& text, const std::string& what) {
 RaycastParams raycast_params(const RaycastRenderOptions& o, double iso_unit, const viewer::RenderSettings& s) {
   RaycastParams p;
   const bool raw = iso_unit >= 0;
-  const double lo = o.tf_lo == "auto" ? (raw ? iso_unit : 0.0) : parse_unit(o.tf_lo, "--tf-lo");
-  const double hi = o.tf_hi == "auto" ? (raw ? lo + 0.25 * (1.0 - lo) : 1.0) : parse_unit(o.tf_hi, "--tf-hi");
+  // Raw data: a ramp 0.2 wide centred on the isovalue (full opacity a
+  // little above the boundary value, speckle below it fades out).
+  const double lo = o.tf_lo == "auto" ? (raw ? std::max(iso_unit - 0.1, 0.0) : 0.0) : parse_unit(o.tf_lo, "--tf-lo");
+  const double hi = o.tf_hi == "auto" ? (raw ? std::min(iso_unit + 0.1, 1.0) : 1.0) : parse_unit(o.tf_hi, "--tf-hi");
   if (!(lo < hi)) throw InputError("--tf-lo must be below --tf-hi (got " + format_number(lo) + ", " + format_number(hi) + ")");
-  const double cut = o.tf_cut == "auto" ? (raw ? 0.0 : 0.05) : parse_unit(o.tf_cut, "--tf-cut");
+  const double cut = o.tf_cut == "auto" ? (raw ? 0.0 : 0.2) : parse_unit(o.tf_cut, "--tf-cut");
   if (!(cut < 1.0)) throw InputError("--tf-cut must be below 1");
   p.tf_cut = float(cut);
   p.tf_lo = float(lo);
@@ -333,7 +335,7 @@ void print_panels(const std::string& what, const std::string& out, const std::ve
 struct FigureOptions {
   std::string in, out, device, size = "400x400", view = "0,0", crop, iso = "auto";
   int repeat = 3;
-  double level = 0.5;  // figure6: the Marching Cubes level
+  double level = 0.2;  // figure6: the Marching Cubes level, as `render --method mc`
   bool quiet = false;
   RaycastRenderOptions raycast;
 };
@@ -394,7 +396,9 @@ int run_figure5(const FigureOptions& o) {
                     f.width, f.height, o.repeat};
   std::vector<Panel> panels;
   panels.push_back(raycast_panel(scene, unit, before, "before classification"));
-  panels.back().detail = "ray cast, ramp " + format_number(before.tf_lo) + "-" + format_number(before.tf_hi);
+  std::ostringstream ramp;
+  ramp << std::fixed << std::setprecision(2) << "ray cast, intensity ramp " << before.tf_lo << "-" << before.tf_hi;
+  panels.back().detail = ramp.str();
   panels.push_back(raycast_panel(scene, input.u, after, "after classification"));
   panels.back().detail = "ray cast, opacity u (> " + format_number(after.tf_cut) + ")";
   write_png(o.out, compose(panels));
@@ -532,7 +536,7 @@ void add_figure6_command(CLI::App& app, Action& action) {
   o->out = "fig6.png";
   sub->add_option("-o,--output", o->out, "Output PNG")->capture_default_str();
   add_figure_options(sub, *o);
-  sub->add_option("--level", o->level, "Level of the Marching Cubes surface of u (0.5: mid-shell)")
+  sub->add_option("--level", o->level, "Level of the Marching Cubes surface of u (default: the splats' epsilon, as render --method mc)")
       ->capture_default_str();
   sub->callback([&action, o] { action = [o] { return run_figure6(*o); }; });
 }

@@ -27,7 +27,7 @@ struct RenderOptions {
   bool quiet = false;
   SplatViewOptions splat;
   std::shared_ptr<RaycastRenderOptions> raycast;  // --method raycast (cmd_figures.cpp)
-  double level = 0.5;                             // --method mc (cmd_render_methods.cpp)
+  double level = 0.2;                             // --method mc (cmd_render_methods.cpp)
 };
 
 // OUT.png -> OUT-007.png for turntable frame 7 (or printf-style when OUT has
@@ -164,7 +164,7 @@ void add_render_command(CLI::App& app, Action& action) {
   sub->add_option("--benchmark", o->benchmark, "Also time N frames and report frames per second");
   o->splat.add_to(sub);
   o->raycast = add_raycast_render_options(sub);
-  sub->add_option("--level", o->level, "--method mc: isovalue of the Marching Cubes surface (0.5: mid-shell)")
+  sub->add_option("--level", o->level, "--method mc: isovalue of the Marching Cubes surface (default: the splats' epsilon)")
       ->capture_default_str();
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   add_device_option(sub, o->device);

@@ -15,6 +15,7 @@ namespace {
 
 struct ViewOptions {
   std::string in, device, size = "1200x800", view = "0,0", crop, iso = "auto", screenshot;
+  bool screenshot_panel = false;
   int frames = 0;
   bool quiet = false;
   SplatViewOptions splat;
@@ -32,6 +33,7 @@ int run_view(const ViewOptions& o) {
   if (!o.screenshot.empty()) ensure_distinct_output(o.in, o.screenshot);
   v.frames = o.frames;
   v.screenshot = o.screenshot;
+  v.screenshot_panel = o.screenshot_panel;
   v.quiet = o.quiet;
   Runtime rt(o.device);
   viewer::OpacityInput input = viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso);
@@ -57,6 +59,7 @@ void add_view_command(CLI::App& app, Action& action) {
   sub->add_option("--iso", o->iso, "Isovalue for classifying a raw volume (its units, or auto)")->capture_default_str();
   sub->add_option("--frames", o->frames, "Draw N frames, then quit (for scripts and tests)");
   sub->add_option("--screenshot", o->screenshot, "With --frames: save the last frame (without the panel) as PNG");
+  sub->add_flag("--screenshot-panel", o->screenshot_panel, "Draw the control panel into the --screenshot too");
   o->splat.add_to(sub);
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing but errors");
   add_device_option(sub, o->device);
