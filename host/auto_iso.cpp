@@ -97,7 +97,10 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   const double width = (hi - lo) / bins;
   std::vector<double> sum(bins, 0.0);
   std::vector<std::size_t> count(bins, 0);
+  // |grad v~| per usable voxel (-1 elsewhere), for both rules.
   const double hx = v.spacing[0], hy = v.spacing[1], hz = v.spacing[2];
+  std::vector<float> gfield(n, -1.0f), gmag;
+  gmag.reserve(used);
   for (std::size_t z = 1; z + 1 < d[2]; ++z)
     for (std::size_t y = 1; y + 1 < d[1]; ++y)
       for (std::size_t x = 1; x + 1 < d[0]; ++x) {
@@ -105,8 +108,10 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
         if (!usable(i)) continue;
         const double gx = (num[i + sx] - num[i - sx]) / (2 * hx), gy = (num[i + sy] - num[i - sy]) / (2 * hy),
                      gz = (num[i + sz] - num[i - sz]) / (2 * hz);
+        gfield[i] = float(std::sqrt(gx * gx + gy * gy + gz * gz));
+        gmag.push_back(gfield[i]);
         const int b = std::clamp(int((num[i] - lo) / width), 0, bins - 1);
-        sum[b] += std::sqrt(gx * gx + gy * gy + gz * gz);
+        sum[b] += gfield[i];
         ++count[b];
       }
 
@@ -132,19 +137,6 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   // The echo ridge: from every strong-edge voxel (|grad v~| in the top
   // edge_share of the usable voxels) climb v~ through the 26 neighbours to
   // the crest of the boundary echo; the median crest value is the ridge.
-  std::vector<float> gmag;
-  gmag.reserve(used);
-  std::vector<float> gfield(n, -1.0f);
-  for (std::size_t z = 1; z + 1 < d[2]; ++z)
-    for (std::size_t y = 1; y + 1 < d[1]; ++y)
-      for (std::size_t x = 1; x + 1 < d[0]; ++x) {
-        const std::size_t i = v.index(x, y, z);
-        if (!usable(i)) continue;
-        const double gx = (num[i + sx] - num[i - sx]) / (2 * hx), gy = (num[i + sy] - num[i - sy]) / (2 * hy),
-                     gz = (num[i + sz] - num[i - sz]) / (2 * hz);
-        gfield[i] = float(std::sqrt(gx * gx + gy * gy + gz * gz));
-        gmag.push_back(gfield[i]);
-      }
   const std::size_t kth = std::min(gmag.size() - 1, std::size_t(double(gmag.size()) * (1.0 - params.edge_share)));
   std::nth_element(gmag.begin(), gmag.begin() + long(kth), gmag.end());
   const float edge_threshold = gmag[kth];

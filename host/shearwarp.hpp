@@ -47,7 +47,8 @@ struct ShearWarpView {
 };
 
 struct ShearWarpClassify {
-  float min_opacity = 0.05f;  // VP_MIN_VOXEL_OPACITY: lighter voxels are left out of the encoding
+  float min_opacity = 0.2f;  // VP_MIN_VOXEL_OPACITY: lighter voxels are left out of the encoding (the
+                             // splats' epsilon, so u's faint floor is no haze; the ray caster cuts there too)
 };
 
 // RGBA8 frame, rows top to bottom; colour composited over the background, alpha = accumulated

@@ -2,7 +2,10 @@
 // xvfb-run like the other GL tests): outputs, turntable frames, the viewer's
 // scripted path, and the error contract for bad input (not a volume,
 // all-zero opacity, no display, bad options): exit 2 and one line.
+#include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdlib>
 
 #include "cli_fixture.hpp"
 #include "image.hpp"
@@ -79,6 +82,45 @@ TEST_F(RenderCli, ViewerDrawsScriptedFramesAndSavesAScreenshot) {
   EXPECT_GT(covered(img), 0.05);
 }
 
+// Bounding box {x0, y0, x1, y1} of the pixels that differ from the corner pixel.
+std::array<int, 4> covered_box(const Image& img) {
+  std::array<int, 4> b{img.width, img.height, -1, -1};
+  const std::uint8_t* bg = img.pixel(0, 0);
+  for (int y = 0; y < img.height; ++y)
+    for (int x = 0; x < img.width; ++x) {
+      const std::uint8_t* p = img.pixel(x, y);
+      if (p[0] == bg[0] && p[1] == bg[1] && p[2] == bg[2]) continue;
+      b = {std::min(b[0], x), std::min(b[1], y), std::max(b[2], x), std::max(b[3], y)};
+    }
+  return b;
+}
+
+TEST_F(RenderCli, ViewerStartsInEachRendererAndTheyLineUp) {
+  const std::string in = file("u.nrrd");
+  write_volume(in, shell(24));
+  auto shot = [&](const std::string& renderer) {
+    const std::string out = file("view-" + renderer + ".png");
+    const RunResult r = run({"view", in, "--frames", "3", "--screenshot", out, "--size", "320x240", "--view", "30,20",
+                             "--renderer", renderer, "-q"});
+    EXPECT_EQ(r.status, 0) << renderer << ": " << r.err;
+    return read_png(out);
+  };
+  const Image splat = shot("splat");
+  const std::array<int, 4> ref = covered_box(splat);
+  ASSERT_GT(covered(splat), 0.05);
+  for (const std::string renderer : {"isosplat", "mc", "raycast"}) {
+    const Image img = shot(renderer);
+    ASSERT_EQ(img.width, 320) << renderer;
+    ASSERT_EQ(img.height, 240) << renderer;
+    EXPECT_GT(covered(img), 0.05) << renderer;
+    // The same camera frames the same object: the boxes agree within 10 % of the image.
+    const std::array<int, 4> box = covered_box(img);
+    for (int i = 0; i < 4; ++i)
+      EXPECT_LE(std::abs(box[i] - ref[i]), (i % 2 ? img.height : img.width) / 10)
+          << renderer << " box side " << i << ": " << box[i] << " vs splats " << ref[i];
+  }
+}
+
 TEST_F(RenderCli, BadInputIsOneLineExit2) {
   const std::string junk = write("junk.nrrd", "this is not a volume\n");
   expect_one_line_error(run({"render", junk, "-o", file("a.png")}), {"junk.nrrd"});
@@ -101,6 +143,8 @@ TEST_F(RenderCli, BadInputIsOneLineExit2) {
   expect_one_line_error(run({"render", in, "-o", file("a.png"), "--crop", "0,1,0.5,0.2,0,1"}), {"--crop"});
   expect_one_line_error(run({"render", in, "-o", file("a.jpg")}), {"png"});
   expect_one_line_error(run({"view", in, "--screenshot", file("s.png")}), {"--frames"});
+  expect_one_line_error(run({"view", in, "--frames", "1", "--screenshot", file("s.png"), "--renderer", "bogus"}),
+                        {"--renderer", "bogus"});
   // Nothing was written by any failing run.
   for (const auto& name : listing()) EXPECT_EQ(name.find(".png"), std::string::npos) << name;
 }

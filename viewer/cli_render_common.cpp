@@ -32,7 +32,9 @@ std::vector<double> parse_numbers(const std::string& text, char sep, std::size_t
 }  // namespace
 
 void SplatViewOptions::add_to(CLI::App* sub) {
-  sub->add_option("--method", method, "splat: oriented splats (the paper); isosplat: isotropic splats facing the viewer")
+  sub->add_option("--method", method,
+                  "splat: oriented splats (the paper); isosplat: isotropic splats facing the viewer; render only: "
+                  "raycast (OpenCL ray casting), mc (Marching Cubes mesh), shearwarp (VolPack); docs/renderers.md")
       ->capture_default_str();
   sub->add_option("--threshold", threshold,
                   "epsilon: voxels with u > epsilon get a splat; the Gaussian falls to epsilon at the splat's rim")

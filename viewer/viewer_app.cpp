@@ -8,15 +8,20 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <future>
 #include <iostream>
 #include <optional>
 #include <utility>
+#include <vector>
 
 #include "camera.hpp"
 #include "error.hpp"
 #include "gl_context.hpp"
 #include "image.hpp"
+#include "mesh.hpp"
+#include "mesh_renderer.hpp"
+#include "raycast.hpp"
 
 namespace softshell::viewer {
 namespace {
@@ -25,10 +30,41 @@ using Clock = std::chrono::steady_clock;
 
 double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
+// The GL camera as the ray caster's: the same eye (pan included), axes and field of view.
+RayCamera ray_camera(const OrbitCamera& c) {
+  RayCamera r;
+  const glm::vec3 e = c.eye(), f = c.forward(), rt = c.right(), u = c.up();
+  for (int a = 0; a < 3; ++a) r.eye[a] = e[a], r.forward[a] = f[a], r.right[a] = rt[a], r.up[a] = u[a];
+  r.fov_y = c.fov_y;
+  return r;
+}
+
+// A full-screen triangle showing the ray-cast image (rows top to bottom).
+constexpr const char* kQuadVert = R"(#version 330 core
+out vec2 v_uv;
+void main() {
+  vec2 p = vec2(gl_VertexID == 1 ? 3.0 : -1.0, gl_VertexID == 2 ? 3.0 : -1.0);
+  v_uv = vec2(0.5 * (p.x + 1.0), 1.0 - 0.5 * (p.y + 1.0));
+  gl_Position = vec4(p, 0.0, 1.0);
+}
+)";
+constexpr const char* kQuadFrag = R"(#version 330 core
+uniform sampler2D u_image;
+in vec2 v_uv;
+out vec4 frag_colour;
+void main() { frag_colour = vec4(texture(u_image, v_uv).rgb, 1.0); }
+)";
+
 class ViewerApp {
  public:
   ViewerApp(Runtime& rt, OpacityInput input, const ViewerOptions& o)
-      : rt_(rt), input_(std::move(input)), o_(o), settings_(o.settings), params_(o.params) {}
+      : rt_(rt),
+        input_(std::move(input)),
+        o_(o),
+        settings_(o.settings),
+        params_(o.params),
+        mode_(o.renderer),
+        mesh_level_(o.mesh_level) {}
 
   int run() {
     init_gl();
@@ -41,6 +77,9 @@ class ViewerApp {
       glfwSwapBuffers(gl_->window());
       if (last) break;
     }
+    glDeleteTextures(1, &ray_texture_);
+    glDeleteVertexArrays(1, &quad_vao_);
+    glDeleteProgram(quad_program_);
     ImGui_ImplOpenGL3_Shutdown();
     ImGui_ImplGlfw_Shutdown();
     ImGui::DestroyContext();
@@ -51,6 +90,16 @@ class ViewerApp {
   void init_gl() {
     gl_.emplace(o_.width, o_.height, "softshell view", true);
     renderer_.emplace();
+    mesh_renderer_.emplace();
+    quad_program_ = build_program("raycast quad.vert", kQuadVert, "raycast quad.frag", kQuadFrag);
+    glGenVertexArrays(1, &quad_vao_);
+    glGenTextures(1, &ray_texture_);
+    glBindTexture(GL_TEXTURE_2D, ray_texture_);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    glBindTexture(GL_TEXTURE_2D, 0);
     IMGUI_CHECKVERSION();
     ImGui::CreateContext();
     ImGui::GetIO().IniFilename = nullptr;  // no imgui.ini next to the user's data
@@ -99,6 +148,8 @@ class ViewerApp {
       solve_seconds_ = since(solve_start_);
       upload_u();
       regenerate();
+      mesh_dirty_ = caster_dirty_ = true;
+      ++u_version_;  // the mesh and the ray caster follow the new u
     }
     ImGuiIO& io = ImGui::GetIO();
     if (!io.WantCaptureMouse) {
@@ -130,7 +181,11 @@ class ViewerApp {
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
     glViewport(0, 0, fw, fh);
     const auto t0 = Clock::now();
-    stats_ = renderer_->draw(camera_, settings_, fw, fh);
+    switch (mode_) {
+      case ViewRenderer::Splats: stats_ = renderer_->draw(camera_, settings_, fw, fh); break;
+      case ViewRenderer::Mesh: draw_mesh(fw, fh); break;
+      case ViewRenderer::Raycast: draw_raycast(fw, fh); break;
+    }
     glFinish();  // honest frame times (llvmpipe would otherwise queue)
     const double ms = 1000.0 * since(t0);
     frame_ms_ = frame_ms_ == 0 ? ms : 0.9 * frame_ms_ + 0.1 * ms;
@@ -161,6 +216,127 @@ class ViewerApp {
     if (!with_panel) draw_panel();
   }
 
+  // The crop box (volume fractions) in mm with half a voxel of slack, as the splat renderer's.
+  std::pair<glm::vec3, glm::vec3> crop_mm() const {
+    const Volume& u = input_.u;
+    glm::vec3 lo, hi;
+    for (int a = 0; a < 3; ++a) {
+      const float o = float(u.origin[a]), ext = float(u.spacing[a] * double(u.dims[a] - 1));
+      const float eps = 0.5f * float(u.spacing[a]);
+      lo[a] = settings_.crop_lo[a] <= 0.0f ? -1e30f : o + settings_.crop_lo[a] * ext - eps;
+      hi[a] = settings_.crop_hi[a] >= 1.0f ? 1e30f : o + settings_.crop_hi[a] * ext + eps;
+    }
+    return {lo, hi};
+  }
+
+  // Marching Cubes of u at the level, on the device, then to GL.
+  void extract_mesh() {
+    MeshTiming t;
+    const Mesh mesh = marching_cubes(rt_, input_.u, mesh_level_, &t);
+    mesh_renderer_->upload(mesh);
+    mesh_triangles_ = mesh.triangle_count();
+    mesh_extracted_level_ = mesh_level_;
+    mesh_ms_ = 1000.0 * t.total;
+    mesh_dirty_ = false;
+    if (!o_.quiet)
+      std::cout << "view: mesh at level " << mesh_level_ << ": " << mesh_triangles_ << " triangles in " << mesh_ms_
+                << " ms\n";
+  }
+
+  void draw_mesh(int fw, int fh) {
+    if (mesh_dirty_ && !solving_.valid()) {  // no OpenCL work while a solve runs
+      try {
+        extract_mesh();
+      } catch (const std::exception& e) {
+        mesh_dirty_ = false;  // until the level or u changes
+        status_ = std::string("mesh: ") + e.what();
+      }
+    }
+    const auto [lo, hi] = crop_mm();
+    mesh_renderer_->draw(camera_, settings_, fw, fh, lo, hi);
+  }
+
+  RaycastParams ray_params() const {
+    RaycastParams p;  // opacity = u, as `render --method raycast` on an opacity volume
+    p.tf_cut = ray_cut_;
+    for (int a = 0; a < 3; ++a) {
+      p.crop_lo[a] = settings_.crop_lo[a];
+      p.crop_hi[a] = settings_.crop_hi[a];
+      p.colour[a] = settings_.colour[a];
+      p.background[a] = settings_.background[a];
+    }
+    p.ambient = settings_.ambient;
+    p.diffuse = settings_.diffuse;
+    p.specular = settings_.specular;
+    p.shininess = settings_.shininess;
+    p.light_azimuth = settings_.light_azimuth;
+    p.light_elevation = settings_.light_elevation;
+    return p;
+  }
+
+  static std::vector<float> params_key(const RaycastParams& p) {
+    std::vector<float> k{p.tf_cut, p.ambient, p.diffuse, p.specular, p.shininess, p.light_azimuth, p.light_elevation};
+    for (int a = 0; a < 3; ++a)
+      k.insert(k.end(), {p.crop_lo[a], p.crop_hi[a], p.colour[a], p.background[a]});
+    return k;
+  }
+
+  // Ray casting: the OpenCL ray caster renders the view into an image of the
+  // framebuffer's size, shown as a full-screen texture. It re-casts only when
+  // the camera, the size, the settings or u change; the ray caster (which
+  // holds the volume and its gradients) is rebuilt only when its parameters
+  // change, and not while a panel widget is being dragged.
+  void draw_raycast(int fw, int fh) {
+    const RaycastParams p = ray_params();
+    const std::vector<float> pkey = params_key(p);
+    std::vector<float> key = pkey;
+    const glm::vec3 t = camera_.target;
+    key.insert(key.end(), {t.x, t.y, t.z, camera_.distance, camera_.azimuth, camera_.elevation, camera_.fov_y,
+                           camera_.pan.x, camera_.pan.y, float(fw), float(fh), float(u_version_)});
+    const bool rebuild = caster_dirty_ || !caster_ || pkey != caster_key_;
+    const bool hold = solving_.valid() || (rebuild && caster_ && ImGui::IsAnyItemActive());
+    if (key != ray_key_ && !hold) {
+      ray_key_ = key;
+      try {
+        p.validate();
+        if (rebuild) {
+          caster_.reset();
+          caster_.emplace(rt_, input_.u, p);
+          caster_key_ = pkey;
+          caster_dirty_ = false;
+        }
+        const auto t0 = Clock::now();
+        double kernel_s = 0;
+        const Image img = caster_->render(ray_camera(camera_), fw, fh, &kernel_s).rgb(p.background);
+        glBindTexture(GL_TEXTURE_2D, ray_texture_);
+        glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+        glTexImage2D(GL_TEXTURE_2D, 0, GL_RGB8, fw, fh, 0, GL_RGB, GL_UNSIGNED_BYTE, img.rgb.data());
+        glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+        glBindTexture(GL_TEXTURE_2D, 0);
+        ray_w_ = fw, ray_h_ = fh;
+        ray_ms_ = 1000.0 * since(t0);
+        ray_kernel_ms_ = 1000.0 * kernel_s;
+        ray_error_.clear();
+      } catch (const std::exception& e) {  // a bad crop box, or the device out of memory
+        ray_error_ = e.what();
+      }
+    }
+    glClearColor(settings_.background.r, settings_.background.g, settings_.background.b, 1.0f);
+    glClear(GL_COLOR_BUFFER_BIT);
+    if (ray_w_ == 0) return;
+    glDisable(GL_DEPTH_TEST);
+    glDisable(GL_BLEND);
+    glUseProgram(quad_program_);
+    glUniform1i(glGetUniformLocation(quad_program_, "u_image"), 0);
+    glActiveTexture(GL_TEXTURE0);
+    glBindTexture(GL_TEXTURE_2D, ray_texture_);
+    glBindVertexArray(quad_vao_);
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+    glBindVertexArray(0);
+    glBindTexture(GL_TEXTURE_2D, 0);
+    glUseProgram(0);
+  }
+
   void draw_panel() {
     ImGui_ImplOpenGL3_NewFrame();
     ImGui_ImplGlfw_NewFrame();
@@ -174,40 +350,42 @@ class ViewerApp {
     ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
     ImGui::SetNextWindowSize(ImVec2(330, 0), ImGuiCond_FirstUseEver);
     ImGui::Begin("softshell");
-    ImGui::Text("%zu splats, %.1f ms/frame (%.0f fps)", stats_.splats, frame_ms_, frame_ms_ > 0 ? 1000.0 / frame_ms_ : 0.0);
-    ImGui::Text("order: %s%s", stats_.list >= 0 ? "presorted list " : "exact sort",
-                stats_.list >= 0 ? (std::string(1, "xyz"[stats_.list / 2]) + (stats_.list % 2 ? " desc" : " asc")).c_str()
-                                 : "");
+    const double fps = frame_ms_ > 0 ? 1000.0 / frame_ms_ : 0.0;
+    if (mode_ == ViewRenderer::Splats) {
+      ImGui::Text("%zu splats, %.1f ms/frame (%.0f fps)", stats_.splats, frame_ms_, fps);
+      ImGui::Text("order: %s%s", stats_.list >= 0 ? "presorted list " : "exact sort",
+                  stats_.list >= 0 ? (std::string(1, "xyz"[stats_.list / 2]) + (stats_.list % 2 ? " desc" : " asc")).c_str()
+                                   : "");
+    } else if (mode_ == ViewRenderer::Mesh) {
+      ImGui::Text("%zu triangles, %.1f ms/frame (%.0f fps)", mesh_triangles_, frame_ms_, fps);
+      ImGui::Text("mesh: level %.2f, extracted in %.1f ms", mesh_extracted_level_, mesh_ms_);
+    } else {
+      ImGui::Text("ray cast %dx%d: %.0f ms (kernel %.0f ms)", ray_w_, ray_h_, ray_ms_, ray_kernel_ms_);
+      ImGui::TextDisabled("re-cast only when the view or settings change");
+      if (!ray_error_.empty()) ImGui::TextColored(ImVec4(1.0f, 0.5f, 0.4f, 1.0f), "%s", ray_error_.c_str());
+    }
     ImGui::TextDisabled("drag: rotate, right-drag: pan, wheel: zoom\nS: screenshot, R: reset view, Esc: quit");
     if (!status_.empty()) ImGui::TextDisabled("%s", status_.c_str());
 
     if (ImGui::CollapsingHeader("Rendering", ImGuiTreeNodeFlags_DefaultOpen)) {
-      int method = settings_.method == SplatMethod::Isotropic;
-      ImGui::RadioButton("oriented", &method, 0);
-      ImGui::SameLine();
-      ImGui::RadioButton("isotropic", &method, 1);
-      settings_.method = method ? SplatMethod::Isotropic : SplatMethod::Oriented;
-      int normals = settings_.three_normals;
-      ImGui::RadioButton("one normal", &normals, 0);
-      ImGui::SameLine();
-      ImGui::RadioButton("three normals", &normals, 1);
-      settings_.three_normals = normals != 0;
-      int order = settings_.order == DrawOrder::Sort;
-      ImGui::RadioButton("six lists", &order, 0);
-      ImGui::SameLine();
-      ImGui::RadioButton("exact sort", &order, 1);
-      settings_.order = order ? DrawOrder::Sort : DrawOrder::Lists;
-      ImGui::SliderFloat("threshold", &params_.threshold, 0.02f, 0.9f, "%.2f");
-      if (ImGui::IsItemDeactivatedAfterEdit() && !solving_.valid()) regenerate();
-      // Splat orientation: the structure tensor of u (default) or grad u (the paper).
-      int orient = params_.normals == SplatNormals::Tensor ? 0 : 1;
-      const int before = orient;
-      ImGui::RadioButton("tensor normals", &orient, 0);
-      ImGui::SameLine();
-      ImGui::RadioButton("grad u normals", &orient, 1);
-      if (orient != before && !solving_.valid()) {
-        params_.normals = orient == 0 ? SplatNormals::Tensor : SplatNormals::Gradient;
-        regenerate();
+      const char* renderers[] = {"oriented splats", "isotropic splats", "Marching Cubes mesh", "ray casting"};
+      int renderer = mode_ == ViewRenderer::Mesh      ? 2
+                     : mode_ == ViewRenderer::Raycast ? 3
+                     : settings_.method == SplatMethod::Isotropic ? 1
+                                                                  : 0;
+      if (ImGui::Combo("renderer", &renderer, renderers, 4)) {
+        mode_ = renderer == 2 ? ViewRenderer::Mesh : renderer == 3 ? ViewRenderer::Raycast : ViewRenderer::Splats;
+        if (renderer < 2) settings_.method = renderer == 1 ? SplatMethod::Isotropic : SplatMethod::Oriented;
+        frame_ms_ = 0;
+      }
+      if (mode_ == ViewRenderer::Mesh) {
+        ImGui::SliderFloat("level", &mesh_level_, 0.02f, 0.98f, "%.2f");
+        if (ImGui::IsItemDeactivatedAfterEdit()) mesh_dirty_ = true;  // re-extracted on release
+        if (mesh_triangles_ == 0 && !mesh_dirty_) ImGui::TextDisabled("no surface at this level");
+      } else if (mode_ == ViewRenderer::Raycast) {
+        ImGui::SliderFloat("opacity cut", &ray_cut_, 0.0f, 0.9f, "%.2f");
+      } else {
+        splat_controls();
       }
       ImGui::SliderFloat("light azimuth", &settings_.light_azimuth, -90.0f, 90.0f, "%.0f deg");
       ImGui::SliderFloat("light elevation", &settings_.light_elevation, -90.0f, 90.0f, "%.0f deg");
@@ -224,6 +402,7 @@ class ViewerApp {
       ImGui::Combo("clip plane", &clip_mode_, planes, 5);
       ImGui::SliderFloat("clip offset", &clip_offset_, -1.0f, 1.0f, "%.2f");
       ImGui::Checkbox("flip side", &clip_flip_);
+      if (mode_ != ViewRenderer::Splats && clip_mode_ != 0) ImGui::TextDisabled("(the clip plane cuts splats only)");
       apply_clip();
       if (ImGui::Button("reset cuts")) {
         settings_.crop_lo = glm::vec3(0.0f), settings_.crop_hi = glm::vec3(1.0f);
@@ -271,6 +450,32 @@ class ViewerApp {
     ImGui::End();
   }
 
+  // The splat-only controls of the Rendering section.
+  void splat_controls() {
+    int normals = settings_.three_normals;
+    ImGui::RadioButton("one normal", &normals, 0);
+    ImGui::SameLine();
+    ImGui::RadioButton("three normals", &normals, 1);
+    settings_.three_normals = normals != 0;
+    int order = settings_.order == DrawOrder::Sort;
+    ImGui::RadioButton("six lists", &order, 0);
+    ImGui::SameLine();
+    ImGui::RadioButton("exact sort", &order, 1);
+    settings_.order = order ? DrawOrder::Sort : DrawOrder::Lists;
+    ImGui::SliderFloat("threshold", &params_.threshold, 0.02f, 0.9f, "%.2f");
+    if (ImGui::IsItemDeactivatedAfterEdit() && !solving_.valid()) regenerate();
+    // Splat orientation: the structure tensor of u (default) or grad u (the paper).
+    int orient = params_.normals == SplatNormals::Tensor ? 0 : 1;
+    const int before = orient;
+    ImGui::RadioButton("tensor normals", &orient, 0);
+    ImGui::SameLine();
+    ImGui::RadioButton("grad u normals", &orient, 1);
+    if (orient != before && !solving_.valid()) {
+      params_.normals = orient == 0 ? SplatNormals::Tensor : SplatNormals::Gradient;
+      regenerate();
+    }
+  }
+
   static void slider(const char* name, double& v, float lo, float hi) {
     float f = float(v);
     if (ImGui::SliderFloat(name, &f, lo, hi, "%.3f", ImGuiSliderFlags_Logarithmic)) v = f;
@@ -300,6 +505,23 @@ class ViewerApp {
   cl::Buffer u_buffer_;
   std::optional<GlContext> gl_;
   std::optional<SplatRenderer> renderer_;
+  ViewRenderer mode_;
+  // Marching Cubes mesh (extracted lazily: when shown and the level or u changed).
+  std::optional<MeshRenderer> mesh_renderer_;
+  float mesh_level_, mesh_extracted_level_ = 0;
+  bool mesh_dirty_ = true;
+  std::size_t mesh_triangles_ = 0;
+  double mesh_ms_ = 0;
+  // Ray casting: the caster, its parameters, the key of the image shown, the quad.
+  std::optional<RayCaster> caster_;
+  bool caster_dirty_ = true;
+  int u_version_ = 0;
+  float ray_cut_ = 0.2f;  // the splats' epsilon, as `render --method raycast`
+  std::vector<float> caster_key_, ray_key_;
+  GLuint quad_program_ = 0, quad_vao_ = 0, ray_texture_ = 0;
+  int ray_w_ = 0, ray_h_ = 0;
+  double ray_ms_ = 0, ray_kernel_ms_ = 0;
+  std::string ray_error_;
   OrbitCamera camera_;
   DrawStats stats_;
   double frame_ms_ = 0, generate_ms_ = 0, solve_seconds_ = 0;

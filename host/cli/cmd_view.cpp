@@ -14,7 +14,7 @@ namespace softshell::cli {
 namespace {
 
 struct ViewOptions {
-  std::string in, device, size = "1200x800", view = "0,0", crop, iso = "auto", screenshot;
+  std::string in, device, size = "1200x800", view = "0,0", crop, iso = "auto", screenshot, renderer;
   bool screenshot_panel = false;
   int frames = 0;
   bool quiet = false;
@@ -28,6 +28,18 @@ int run_view(const ViewOptions& o) {
   v.settings = o.splat.settings();
   v.params = o.splat.params();
   if (!o.crop.empty()) parse_crop(o.crop, v.settings);
+  // --renderer (initial; the panel switches): overrides --method for the splat kinds.
+  if (o.renderer == "splat" || o.renderer == "oriented") {
+    v.settings.method = viewer::SplatMethod::Oriented;
+  } else if (o.renderer == "isosplat" || o.renderer == "isotropic") {
+    v.settings.method = viewer::SplatMethod::Isotropic;
+  } else if (o.renderer == "mc") {
+    v.renderer = viewer::ViewRenderer::Mesh;
+  } else if (o.renderer == "raycast") {
+    v.renderer = viewer::ViewRenderer::Raycast;
+  } else if (!o.renderer.empty()) {
+    throw InputError("--renderer " + o.renderer + ": unknown (renderers: splat, isosplat, mc, raycast)");
+  }
   if (o.frames < 0) throw InputError("--frames must be >= 0");
   if (!o.screenshot.empty() && o.frames == 0) throw InputError("--screenshot needs --frames N");
   if (!o.screenshot.empty()) ensure_distinct_output(o.in, o.screenshot);
@@ -47,7 +59,8 @@ void add_view_command(CLI::App& app, Action& action) {
   auto o = std::make_shared<ViewOptions>();
   auto* sub = app.add_subcommand(
       "view",
-      "Interactive viewer: oriented splats with an orbit camera and a panel (rendering, cut-away, re-classification). "
+      "Interactive viewer: oriented splats (or isotropic splats, the Marching Cubes mesh, ray casting) with an orbit "
+      "camera and a panel (renderer, cut-away, re-classification). "
       "Drag rotates, right-drag pans, the wheel zooms; S saves a screenshot, R resets the view, Esc quits.");
   sub->add_option("IN", o->in, "Opacity volume (float in [0, 1]) or raw ultrasound volume (classified first)")
       ->required();
@@ -57,6 +70,10 @@ void add_view_command(CLI::App& app, Action& action) {
       ->type_name("AZ,EL");
   sub->add_option("--crop", o->crop, "Initial crop box, fractions per axis")->type_name("X0,X1,Y0,Y1,Z0,Z1");
   sub->add_option("--iso", o->iso, "Isovalue for classifying a raw volume (its units, or auto)")->capture_default_str();
+  sub->add_option("--renderer", o->renderer,
+                  "Initial renderer (the panel switches): splat (oriented splats), isosplat (isotropic splats), mc "
+                  "(Marching Cubes mesh at level 0.2) or raycast (the OpenCL ray caster); default: --method")
+      ->type_name("splat|isosplat|mc|raycast");
   sub->add_option("--frames", o->frames, "Draw N frames, then quit (for scripts and tests)");
   sub->add_option("--screenshot", o->screenshot, "With --frames: save the last frame (without the panel) as PNG");
   sub->add_flag("--screenshot-panel", o->screenshot_panel, "Draw the control panel into the --screenshot too");
