@@ -125,4 +125,36 @@ const char* method_name(const viewer::RenderSettings& s) {
   return s.method == viewer::SplatMethod::Isotropic ? "isotropic splats" : "oriented splats";
 }
 
+Volume cropped(const Volume& u, const viewer::RenderSettings& s) {
+  Volume c = u;
+  for (std::size_t z = 0; z < u.dims[2]; ++z)
+    for (std::size_t y = 0; y < u.dims[1]; ++y)
+      for (std::size_t x = 0; x < u.dims[0]; ++x) {
+        const std::size_t i[3] = {x, y, z};
+        bool in = true;
+        for (int a = 0; a < 3; ++a) {
+          const double f = u.dims[a] > 1 ? double(i[a]) / double(u.dims[a] - 1) : 0.5;
+          const double eps = u.dims[a] > 1 ? 0.5 / double(u.dims[a] - 1) : 0.0;
+          in = in && f >= s.crop_lo[a] - eps && f <= s.crop_hi[a] + eps;
+        }
+        if (!in) c.at(x, y, z) = 0.0f;
+      }
+  return c;
+}
+
+void apply_render_settings(RaycastParams& p, const viewer::RenderSettings& s) {
+  for (int a = 0; a < 3; ++a) {
+    p.crop_lo[a] = s.crop_lo[a];
+    p.crop_hi[a] = s.crop_hi[a];
+    p.colour[a] = s.colour[a];
+    p.background[a] = s.background[a];
+  }
+  p.ambient = s.ambient;
+  p.diffuse = s.diffuse;
+  p.specular = s.specular;
+  p.shininess = s.shininess;
+  p.light_azimuth = s.light_azimuth;
+  p.light_elevation = s.light_elevation;
+}
+
 }  // namespace softshell::cli

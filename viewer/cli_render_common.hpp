@@ -9,10 +9,20 @@
 #include <utility>
 
 #include "opacity_input.hpp"
+#include "raycast.hpp"
 #include "splat_renderer.hpp"
 #include "splats.hpp"
 
 namespace softshell::cli {
+
+// u with the voxels outside the crop box set to 0: fractions of the extent
+// with half a voxel of slack, the splat renderer's rule (an axis of one
+// voxel counts as 0.5). For the renderers that take a volume, not a box.
+Volume cropped(const Volume& u, const viewer::RenderSettings& s);
+
+// The ray caster's crop, colours and light from the splat renderer's
+// settings, so every renderer draws the same scene the same way.
+void apply_render_settings(RaycastParams& p, const viewer::RenderSettings& s);
 
 struct SplatViewOptions {
   std::string method = "splat", normals = "three", order = "lists", gaussian = "paper", orientation = "tensor";

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "camera.hpp"
+#include "cli_render_common.hpp"
 #include "error.hpp"
 #include "gl_context.hpp"
 #include "image.hpp"
@@ -259,18 +260,7 @@ class ViewerApp {
   RaycastParams ray_params() const {
     RaycastParams p;  // opacity = u, as `render --method raycast` on an opacity volume
     p.tf_cut = ray_cut_;
-    for (int a = 0; a < 3; ++a) {
-      p.crop_lo[a] = settings_.crop_lo[a];
-      p.crop_hi[a] = settings_.crop_hi[a];
-      p.colour[a] = settings_.colour[a];
-      p.background[a] = settings_.background[a];
-    }
-    p.ambient = settings_.ambient;
-    p.diffuse = settings_.diffuse;
-    p.specular = settings_.specular;
-    p.shininess = settings_.shininess;
-    p.light_azimuth = settings_.light_azimuth;
-    p.light_elevation = settings_.light_elevation;
+    cli::apply_render_settings(p, settings_);
     return p;
   }
 

@@ -94,18 +94,7 @@ RaycastParams raycast_params(const RaycastRenderOptions& o, double iso_unit, con
   p.tf_max = o.tf_max;
   p.step = o.step;
   p.termination = o.no_early_termination ? 2.0f : 0.99f;
-  for (int a = 0; a < 3; ++a) {
-    p.crop_lo[a] = s.crop_lo[a];
-    p.crop_hi[a] = s.crop_hi[a];
-    p.colour[a] = s.colour[a];
-    p.background[a] = s.background[a];
-  }
-  p.ambient = s.ambient;
-  p.diffuse = s.diffuse;
-  p.specular = s.specular;
-  p.shininess = s.shininess;
-  p.light_azimuth = s.light_azimuth;
-  p.light_elevation = s.light_elevation;
+  apply_render_settings(p, s);
   if (!(p.tf_max > 0 && p.tf_max <= 1)) throw InputError("--tf-max must be in (0, 1]");
   if (!(p.step >= 0.05f && p.step <= 4.0f)) throw InputError("--step must be in [0.05, 4] voxels");
   p.validate();
@@ -230,24 +219,6 @@ Panel unavailable_panel(const Scene& s, const std::string& title, const std::str
   return panel;
 }
 
-// u with the voxels outside the crop box set to 0 (the splat shader's rule:
-// fractions of the extent, half a voxel of slack).
-Volume cropped(const Volume& u, const viewer::RenderSettings& s) {
-  Volume c = u;
-  for (std::size_t z = 0; z < u.dims[2]; ++z)
-    for (std::size_t y = 0; y < u.dims[1]; ++y)
-      for (std::size_t x = 0; x < u.dims[0]; ++x) {
-        const std::size_t i[3] = {x, y, z};
-        bool in = true;
-        for (int a = 0; a < 3; ++a) {
-          if (u.dims[a] < 2) continue;
-          const double f = double(i[a]) / double(u.dims[a] - 1), eps = 0.5 / double(u.dims[a] - 1);
-          in = in && f >= s.crop_lo[a] - eps && f <= s.crop_hi[a] + eps;
-        }
-        if (!in) c.at(x, y, z) = 0.0f;
-      }
-  return c;
-}
 
 bool has_crop(const viewer::RenderSettings& s) {
   for (int a = 0; a < 3; ++a)

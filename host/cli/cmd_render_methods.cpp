@@ -42,23 +42,6 @@ Common validate(const RaycastRenderRequest& r, const char* method) {
   return c;
 }
 
-// u with the voxels outside the crop box (fractions, half a voxel of slack) set to 0.
-Volume cropped(const Volume& u, const viewer::RenderSettings& s) {
-  Volume c = u;
-  for (std::size_t z = 0; z < u.dims[2]; ++z)
-    for (std::size_t y = 0; y < u.dims[1]; ++y)
-      for (std::size_t x = 0; x < u.dims[0]; ++x) {
-        const std::size_t i[3] = {x, y, z};
-        bool in = true;
-        for (int a = 0; a < 3; ++a) {
-          const double f = u.dims[a] > 1 ? double(i[a]) / double(u.dims[a] - 1) : 0.5;
-          const double eps = u.dims[a] > 1 ? 0.5 / double(u.dims[a] - 1) : 0.0;
-          in = in && f >= s.crop_lo[a] - eps && f <= s.crop_hi[a] + eps;
-        }
-        if (!in) c.at(x, y, z) = 0.0f;
-      }
-  return c;
-}
 
 double seconds(Clock::time_point t0) { return seconds_since(t0); }
 
