@@ -74,7 +74,7 @@ std::array<double, 3> tensor_orientation_reference(const Volume& u, const std::a
 std::vector<std::array<float, 3>> tensor_orientation_device(Runtime& rt, const Volume& u,
                                                             const std::vector<std::array<float, 3>>& points,
                                                             double sigma) {
-  if (!(sigma > 0) || !std::isfinite(sigma)) throw InputError("tensor sigma must be a finite number > 0");
+  if (!(sigma > 0 && sigma <= 8)) throw InputError("tensor sigma must be in (0, 8] voxels");
   if (points.empty()) return {};
   const GridDesc g = make_grid(u.dims, u.spacing);
   const std::size_t n = u.voxels(), count = points.size();

@@ -22,6 +22,8 @@ constexpr double kDefaultTensorSigma = 1.5;
 std::array<double, 3> tensor_orientation_reference(const Volume& u, const std::array<double, 3>& p, double sigma);
 
 // The same on the device at many points: uploads u, one work-item per point.
+// Throws InputError unless 0 < sigma <= 8 (the kernel's window holds radius
+// ceil(2 sigma) <= 16).
 std::vector<std::array<float, 3>> tensor_orientation_device(Runtime& rt, const Volume& u,
                                                             const std::vector<std::array<float, 3>>& points,
                                                             double sigma);

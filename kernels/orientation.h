@@ -30,6 +30,7 @@
 #define SOFTSHELL_ORIENTATION_H
 
 #define ORIENTATION_POWER_ITERATIONS 32
+#define ORIENTATION_MAX_RADIUS 16 /* ceil(2 sigma) for sigma <= 8 voxels */
 
 inline float orientation_diff(__global const float* restrict u, const size_t idx, const int c, const int n,
                               const size_t stride, const float h) {
@@ -48,14 +49,23 @@ inline float3 tensor_orientation(__global const float* restrict u, const GridDes
   const int cz = clamp((int)floor(p.z + 0.5f), 0, g.nz - 1);
   const float inv2s2 = 1.0f / (2.0f * sigma * sigma);
   const size_t sy = (size_t)g.nx, sz = (size_t)g.nx * (size_t)g.ny;
+  /* The Gaussian is separable: w = wx[x] wy[y] wz[z], 3 (2r + 1) exps
+   * instead of (2r + 1)^3. r <= ORIENTATION_MAX_RADIUS (sigma <= 8). */
+  float wx[2 * ORIENTATION_MAX_RADIUS + 1], wy[2 * ORIENTATION_MAX_RADIUS + 1], wz[2 * ORIENTATION_MAX_RADIUS + 1];
+  for (int k = -r; k <= r; ++k) {
+    const float dx = (float)(cx + k) - p.x, dy = (float)(cy + k) - p.y, dz = (float)(cz + k) - p.z;
+    wx[k + r] = exp(-dx * dx * inv2s2);
+    wy[k + r] = exp(-dy * dy * inv2s2);
+    wz[k + r] = exp(-dz * dz * inv2s2);
+  }
   float j00 = 0.0f, j01 = 0.0f, j02 = 0.0f, j11 = 0.0f, j12 = 0.0f, j22 = 0.0f;
   float3 mean = (float3)(0.0f);
   float wsum = 0.0f;
   for (int z = max(cz - r, 0); z <= min(cz + r, g.nz - 1); ++z) {
     for (int y = max(cy - r, 0); y <= min(cy + r, g.ny - 1); ++y) {
+      const float wyz = wy[y - cy + r] * wz[z - cz + r];
       for (int x = max(cx - r, 0); x <= min(cx + r, g.nx - 1); ++x) {
-        const float3 d = (float3)((float)x, (float)y, (float)z) - p;
-        const float w = exp(-dot(d, d) * inv2s2);
+        const float w = wx[x - cx + r] * wyz;
         const size_t idx = grid_index(g, x, y, z);
         const float3 gk = (float3)(orientation_diff(u, idx, x, g.nx, 1, g.hx),
                                    orientation_diff(u, idx, y, g.ny, sy, g.hy),

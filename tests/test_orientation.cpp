@@ -5,6 +5,7 @@
 #include <cmath>
 #include <random>
 
+#include "error.hpp"
 #include "orientation.hpp"
 #include "test_support.hpp"
 
@@ -51,7 +52,7 @@ TEST(Orientation, DeviceMatchesTheFloat64Reference) {
   }
   points.push_back({0, 0, 0});
   points.push_back({22, 16, 18});
-  for (double sigma : {0.8, 1.5}) {
+  for (double sigma : {0.8, 1.5, 8.0}) {  // 8: the largest window the kernel holds
     const auto dev = tensor_orientation_device(test::runtime(), u, points, sigma);
     ASSERT_EQ(dev.size(), points.size());
     int compared = 0;
@@ -104,6 +105,12 @@ TEST(Orientation, FindsTheNormalOfAShellOnItsRidge) {
   EXPECT_LT(tensor_sum / ridge, 3.0);
   EXPECT_GT(gradient_sum, 5 * tensor_sum) << "mean angle, grad u " << gradient_sum / ridge << " vs tensor "
                                           << tensor_sum / ridge;
+}
+
+TEST(Orientation, SigmaOutsideTheKernelsWindowIsAnInputError) {
+  const Volume u = test::random_volume({9, 9, 9}, {1, 1, 1}, test::seed());
+  EXPECT_THROW(tensor_orientation_device(test::runtime(), u, {{4, 4, 4}}, 8.5), InputError);
+  EXPECT_THROW(tensor_orientation_device(test::runtime(), u, {{4, 4, 4}}, 0.0), InputError);
 }
 
 TEST(Orientation, FlatOpacityHasNoOrientation) {
