@@ -16,6 +16,10 @@
 
 #include "io.hpp"
 
+namespace softshell {
+class Runtime;
+}  // namespace softshell
+
 namespace softshell::cli {
 
 using Action = std::function<int()>;
@@ -38,6 +42,12 @@ void add_view_command(CLI::App& app, Action& action);
 // cmd_figures.cpp: the paper's Figures 5 and 6, and `render --method raycast`.
 void add_figure5_command(CLI::App& app, Action& action);
 void add_figure6_command(CLI::App& app, Action& action);
+// For `softshell bench` (Table 1's render columns, host/bench.hpp RenderTimer):
+// the median seconds per frame of `method` ("splat": oriented splats, the
+// figure's splat panel; "shearwarp": VolPack) on u, viewed down the beam;
+// nullopt when the renderer is unavailable (no display, no VolPack).
+std::optional<double> bench_render_seconds(Runtime& rt, const Volume& u, const std::string& method, int width,
+                                           int height);
 struct RaycastRenderOptions;  // the ray caster's own options on `render`
 std::shared_ptr<RaycastRenderOptions> add_raycast_render_options(CLI::App* sub);
 struct RaycastRenderRequest {  // `render`'s common options

@@ -58,6 +58,9 @@ int run_bench_command(const BenchCliOptions& o) {
   bo.devices = device_requests(o.devices);
   bo.reps = o.reps;
   bo.progress = &std::cerr;
+#ifdef SOFTSHELL_HAVE_VIEWER
+  bo.render_timer = bench_render_seconds;  // Table 1's render columns (cmd_figures.cpp)
+#endif
   const BenchReport report = run_bench(bo);
   if (o.json)
     std::cout << bench_json(report);

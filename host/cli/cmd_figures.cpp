@@ -512,4 +512,20 @@ void add_figure6_command(CLI::App& app, Action& action) {
   sub->callback([&action, o] { action = [o] { return run_figure6(*o); }; });
 }
 
+std::optional<double> bench_render_seconds(Runtime& rt, const Volume& u, const std::string& method, int width,
+                                           int height) {
+  try {
+    const viewer::RenderSettings settings;  // the renderers' defaults, no crop
+    RaycastParams p;
+    apply_render_settings(p, settings);
+    const auto box = visible_box(u, p);
+    const Scene scene{rt, u, framed_camera(box, 0.0f, 0.0f), settings, width, height, 5};
+    if (method == "splat") return splat_panel(scene).seconds;
+    if (method == "shearwarp" && shearwarp_available()) return shear_warp_panel(scene, box, 0.0f, 0.0f).seconds;
+  } catch (const InputError&) {
+    // no display for the splats, or nothing to draw: the column says n/a
+  }
+  return std::nullopt;
+}
+
 }  // namespace softshell::cli
