@@ -22,6 +22,7 @@
 #include <thread>
 
 #include "error.hpp"
+#include "grid.h"
 #include "orientation.hpp"
 #include "text.hpp"
 
@@ -114,22 +115,15 @@ void edt_line(const float* f, std::size_t stride, float* d, std::size_t dstride,
   }
 }
 
-// Central difference per mm along one axis; one-sided at the borders, 0 on a
-// single-voxel axis.
-inline double diff(const float* f, std::size_t i, std::size_t c, std::size_t n, std::size_t stride, double h) {
-  if (n < 2) return 0.0;
-  if (c == 0) return (double(f[i + stride]) - double(f[i])) / h;
-  if (c + 1 == n) return (double(f[i]) - double(f[i - stride])) / h;
-  return (double(f[i + stride]) - double(f[i - stride])) / (2.0 * h);
-}
 
 struct Grid {
   std::size_t nx, ny, nz, sy, sz;
   Vec3d h;
   void gradient(const float* f, std::size_t i, std::size_t x, std::size_t y, std::size_t z, double g[3]) const {
-    g[0] = diff(f, i, x, nx, 1, h[0]);
-    g[1] = diff(f, i, y, ny, sy, h[1]);
-    g[2] = diff(f, i, z, nz, sz, h[2]);
+    // Central differences per mm, one-sided at the borders (grid.h).
+    g[0] = grid_diff(f, i, x, nx, 1, h[0]);
+    g[1] = grid_diff(f, i, y, ny, sy, h[1]);
+    g[2] = grid_diff(f, i, z, nz, sz, h[2]);
   }
 };
 

@@ -7,21 +7,9 @@
 #include <stdexcept>
 
 #include "error.hpp"
+#include "grid.h"
 
 namespace softshell {
-namespace {
-
-// Central difference per mm, one-sided on the first and last sample, 0 on a
-// single-sample axis (gradient.cl's rule).
-double diff(const float* f, std::size_t i, std::size_t c, std::size_t n, std::size_t stride, double h) {
-  if (n < 2) return 0.0;
-  if (c == 0) return (double(f[i + stride]) - double(f[i])) / h;
-  if (c + 1 == n) return (double(f[i]) - double(f[i - stride])) / h;
-  return (double(f[i + stride]) - double(f[i - stride])) / (2.0 * h);
-}
-
-}  // namespace
-
 std::array<double, 3> tensor_orientation_reference(const Volume& u, const std::array<double, 3>& p, double sigma) {
   if (!(sigma > 0)) throw std::invalid_argument("tensor sigma must be > 0");
   if (u.voxels() == 0) throw std::invalid_argument("empty volume");
@@ -38,9 +26,9 @@ std::array<double, 3> tensor_orientation_reference(const Volume& u, const std::a
         const double dx = double(x) - p[0], dy = double(y) - p[1], dz = double(z) - p[2];
         const double w = std::exp(-(dx * dx + dy * dy + dz * dz) / (2.0 * sigma * sigma));
         const std::size_t i = std::size_t(x) + std::size_t(y) * sy + std::size_t(z) * sz;
-        const double g[3] = {diff(f, i, std::size_t(x), u.dims[0], 1, u.spacing[0]),
-                             diff(f, i, std::size_t(y), u.dims[1], sy, u.spacing[1]),
-                             diff(f, i, std::size_t(z), u.dims[2], sz, u.spacing[2])};
+        const double g[3] = {grid_diff(f, i, std::size_t(x), u.dims[0], 1, u.spacing[0]),
+                             grid_diff(f, i, std::size_t(y), u.dims[1], sy, u.spacing[1]),
+                             grid_diff(f, i, std::size_t(z), u.dims[2], sz, u.spacing[2])};
         J[0] += w * g[0] * g[0], J[1] += w * g[0] * g[1], J[2] += w * g[0] * g[2];
         J[3] += w * g[1] * g[1], J[4] += w * g[1] * g[2], J[5] += w * g[2] * g[2];
         for (int a = 0; a < 3; ++a) mean[a] += w * g[a];

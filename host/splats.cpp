@@ -63,7 +63,7 @@ SplatGenerator::SplatGenerator(Runtime& rt, const GridDesc& grid, const SplatPar
     throw InputError("tensor sigma must be in (0, 8] voxels");
   std::string options = "-D SPLAT_NORMALS=" + std::to_string(static_cast<int>(params.normals));
   if (params.normals == SplatNormals::Tensor) {
-    char sigma[32];
+    char sigma[64];
     std::snprintf(sigma, sizeof sigma, " -D TENSOR_SIGMA=%.9gf", params.tensor_sigma);
     options += sigma;
   }

@@ -7,14 +7,6 @@
  */
 #include "grid.h"
 
-inline float gradient_axis(__global const float* restrict f, const size_t idx, const int c,
-                           const int n, const size_t stride, const float h) {
-  if (n < 2) return 0.0f;
-  if (c == 0) return (f[idx + stride] - f[idx]) / h;
-  if (c == n - 1) return (f[idx] - f[idx - stride]) / h;
-  return (f[idx + stride] - f[idx - stride]) / (2.0f * h);
-}
-
 __kernel void gradient_central(__global const float* restrict f, __global float* restrict gx,
                                __global float* restrict gy, __global float* restrict gz,
                                const GridDesc g) {
@@ -22,9 +14,9 @@ __kernel void gradient_central(__global const float* restrict f, __global float*
   if (!grid_contains(g, x, y, z)) return;
   const size_t idx = grid_index(g, x, y, z);
   const size_t sy = (size_t)g.nx, sz = (size_t)g.nx * (size_t)g.ny;
-  gx[idx] = gradient_axis(f, idx, x, g.nx, 1, g.hx);
-  gy[idx] = gradient_axis(f, idx, y, g.ny, sy, g.hy);
-  gz[idx] = gradient_axis(f, idx, z, g.nz, sz, g.hz);
+  gx[idx] = grid_diff(f, idx, x, g.nx, 1, g.hx);
+  gy[idx] = grid_diff(f, idx, y, g.ny, sy, g.hy);
+  gz[idx] = grid_diff(f, idx, z, g.nz, sz, g.hz);
 }
 
 /* |grad f| from the three component buffers. */

@@ -35,6 +35,19 @@ inline bool grid_contains(const GridDesc g, int x, int y, int z) {
   return x < g.nx && y < g.ny && z < g.nz;
 }
 
+/* Derivative of f per unit length along one axis at the sample idx, whose
+ * coordinate on that axis is c of n (stride between neighbours, spacing h):
+ * central inside, one-sided on the first and last sample, 0 along an axis of
+ * one sample. The one rule for every gradient in the kernels (gradient.cl,
+ * splats, splat orientation, ray casting) and the host references. */
+inline float grid_diff(__global const float* restrict f, const size_t idx, const int c, const int n,
+                       const size_t stride, const float h) {
+  if (n < 2) return 0.0f;
+  if (c == 0) return (f[idx + stride] - f[idx]) / h;
+  if (c == n - 1) return (f[idx] - f[idx - stride]) / h;
+  return (f[idx + stride] - f[idx - stride]) / (2.0f * h);
+}
+
 #else  /* host */
 
 #include <array>
@@ -54,6 +67,14 @@ inline GridDesc make_grid(const std::array<std::size_t, 3>& dims, const std::arr
   g.hy = static_cast<grid_float>(spacing[1]);
   g.hz = static_cast<grid_float>(spacing[2]);
   return g;
+}
+
+// grid_diff's rule on the host, in double precision (metrics, references).
+inline double grid_diff(const float* f, std::size_t idx, std::size_t c, std::size_t n, std::size_t stride, double h) {
+  if (n < 2) return 0.0;
+  if (c == 0) return (double(f[idx + stride]) - double(f[idx])) / h;
+  if (c + 1 == n) return (double(f[idx]) - double(f[idx - stride])) / h;
+  return (double(f[idx + stride]) - double(f[idx - stride])) / (2.0 * h);
 }
 
 inline std::size_t grid_voxels(const GridDesc& g) {

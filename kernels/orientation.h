@@ -32,14 +32,6 @@
 #define ORIENTATION_POWER_ITERATIONS 32
 #define ORIENTATION_MAX_RADIUS 16 /* ceil(2 sigma) for sigma <= 8 voxels */
 
-inline float orientation_diff(__global const float* restrict u, const size_t idx, const int c, const int n,
-                              const size_t stride, const float h) {
-  if (n < 2) return 0.0f;
-  if (c == 0) return (u[idx + stride] - u[idx]) / h;
-  if (c == n - 1) return (u[idx] - u[idx - stride]) / h;
-  return (u[idx + stride] - u[idx - stride]) / (2.0f * h);
-}
-
 /* p in voxel coordinates (voxel centres at integers), sigma in voxels (> 0). */
 inline float3 tensor_orientation(__global const float* restrict u, const GridDesc g, const float3 p,
                                  const float sigma) {
@@ -67,9 +59,9 @@ inline float3 tensor_orientation(__global const float* restrict u, const GridDes
       for (int x = max(cx - r, 0); x <= min(cx + r, g.nx - 1); ++x) {
         const float w = wx[x - cx + r] * wyz;
         const size_t idx = grid_index(g, x, y, z);
-        const float3 gk = (float3)(orientation_diff(u, idx, x, g.nx, 1, g.hx),
-                                   orientation_diff(u, idx, y, g.ny, sy, g.hy),
-                                   orientation_diff(u, idx, z, g.nz, sz, g.hz));
+        const float3 gk = (float3)(grid_diff(u, idx, x, g.nx, 1, g.hx),
+                                   grid_diff(u, idx, y, g.ny, sy, g.hy),
+                                   grid_diff(u, idx, z, g.nz, sz, g.hz));
         j00 += w * gk.x * gk.x;
         j01 += w * gk.x * gk.y;
         j02 += w * gk.x * gk.z;

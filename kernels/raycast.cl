@@ -52,20 +52,11 @@ inline float raycast_sample(__global const float* restrict v, const GridDesc g, 
   return mix(mix(c00, c10, wy), mix(c01, c11, wy), wz);
 }
 
-/* Central difference per mm along one axis; one-sided on the border. */
-inline float raycast_diff(__global const float* restrict v, const size_t idx, const int c, const int n,
-                          const size_t stride, const float h) {
-  if (n < 2) return 0.0f;
-  if (c == 0) return (v[idx + stride] - v[idx]) / h;
-  if (c == n - 1) return (v[idx] - v[idx - stride]) / h;
-  return (v[idx + stride] - v[idx - stride]) / (2.0f * h);
-}
-
 inline float3 raycast_gradient_at(__global const float* restrict v, const GridDesc g, const int x, const int y,
                                   const int z) {
   const size_t idx = grid_index(g, x, y, z), sy = (size_t)g.nx, sz = (size_t)g.nx * (size_t)g.ny;
-  return (float3)(raycast_diff(v, idx, x, g.nx, 1, g.hx), raycast_diff(v, idx, y, g.ny, sy, g.hy),
-                  raycast_diff(v, idx, z, g.nz, sz, g.hz));
+  return (float3)(grid_diff(v, idx, x, g.nx, 1, g.hx), grid_diff(v, idx, y, g.ny, sy, g.hy),
+                  grid_diff(v, idx, z, g.nz, sz, g.hz));
 }
 
 /* Per-voxel gradient, computed once per volume: shading then costs one

@@ -43,22 +43,12 @@
 #endif
 #endif
 
-/* The gradient rule of gradient.cl: central inside, one-sided on the first
- * and last sample of an axis, 0 along an axis of one sample; per mm. */
-inline float splat_diff(__global const float* restrict u, const size_t idx, const int c, const int n,
-                        const size_t stride, const float h) {
-  if (n < 2) return 0.0f;
-  if (c == 0) return (u[idx + stride] - u[idx]) / h;
-  if (c == n - 1) return (u[idx] - u[idx - stride]) / h;
-  return (u[idx + stride] - u[idx - stride]) / (2.0f * h);
-}
-
 inline float3 splat_gradient_at(__global const float* restrict u, const GridDesc g, const int x, const int y,
                                 const int z) {
   const size_t idx = grid_index(g, x, y, z);
   const size_t sy = (size_t)g.nx, sz = (size_t)g.nx * (size_t)g.ny;
-  return (float3)(splat_diff(u, idx, x, g.nx, 1, g.hx), splat_diff(u, idx, y, g.ny, sy, g.hy),
-                  splat_diff(u, idx, z, g.nz, sz, g.hz));
+  return (float3)(grid_diff(u, idx, x, g.nx, 1, g.hx), grid_diff(u, idx, y, g.ny, sy, g.hy),
+                  grid_diff(u, idx, z, g.nz, sz, g.hz));
 }
 
 /* The splat normal field at a point p in voxel coordinates (p = index at
