@@ -1,4 +1,6 @@
 // Test entry point and shared fixtures (see test_support.hpp).
+#include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <iostream>
 #include <memory>
@@ -35,6 +37,18 @@ std::string shared_data_dir() {
 bool in_ci() {
   const char* ci = std::getenv("CI");
   return ci && std::string(ci) == "true";
+}
+
+Volume shell_volume(int n) {
+  Volume u({std::size_t(n), std::size_t(n), std::size_t(n)}, {0.8, 0.8, 0.8});
+  const double c = 0.5 * (n - 1), r = 0.3 * n;
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        const double d = std::sqrt((x - c) * (x - c) + (y - c) * (y - c) + (z - c) * (z - c));
+        u.at(x, y, z) = float(std::max(0.0, 1.0 - std::abs(d - r) / 1.5));
+      }
+  return u;
 }
 
 Volume random_volume(Dims3 dims, Vec3d spacing, std::uint64_t s, float lo, float hi) {

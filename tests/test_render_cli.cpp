@@ -10,22 +10,10 @@
 #include "cli_fixture.hpp"
 #include "image.hpp"
 #include "io.hpp"
+#include "test_support.hpp"
 
 namespace softshell::test {
 namespace {
-
-// A soft spherical shell as a float opacity volume.
-Volume shell(int n) {
-  Volume u({std::size_t(n), std::size_t(n), std::size_t(n)}, {0.8, 0.8, 0.8});
-  const double c = 0.5 * (n - 1), r = 0.3 * n;
-  for (int z = 0; z < n; ++z)
-    for (int y = 0; y < n; ++y)
-      for (int x = 0; x < n; ++x) {
-        const double d = std::sqrt((x - c) * (x - c) + (y - c) * (y - c) + (z - c) * (z - c));
-        u.at(x, y, z) = float(std::max(0.0, 1.0 - std::abs(d - r) / 1.5));
-      }
-  return u;
-}
 
 // Share of pixels that differ from the corner (background) pixel.
 double covered(const Image& img) {
@@ -43,7 +31,7 @@ class RenderCli : public CliTest {};
 
 TEST_F(RenderCli, RendersAnOpacityVolumeToPng) {
   const std::string in = file("u.nrrd");
-  write_volume(in, shell(32));
+  write_volume(in, shell_volume(32));
   for (const std::string method : {"splat", "isosplat"}) {
     const std::string out = file(method + ".png");
     const RunResult r = run({"render", in, "--method", method, "-o", out, "--size", "160x120", "--view", "30,20"});
@@ -61,7 +49,7 @@ TEST_F(RenderCli, RendersAnOpacityVolumeToPng) {
 
 TEST_F(RenderCli, TurntableWritesFrames) {
   const std::string in = file("u.nrrd");
-  write_volume(in, shell(24));
+  write_volume(in, shell_volume(24));
   const RunResult r = run({"render", in, "-o", file("turn.png"), "--size", "64x64", "--turntable", "3", "--order", "sort",
                            "--normals", "one", "-q"});
   ASSERT_EQ(r.status, 0) << r.err;
@@ -72,7 +60,7 @@ TEST_F(RenderCli, TurntableWritesFrames) {
 
 TEST_F(RenderCli, ViewerDrawsScriptedFramesAndSavesAScreenshot) {
   const std::string in = file("u.nrrd");
-  write_volume(in, shell(24));
+  write_volume(in, shell_volume(24));
   const std::string shot = file("shot.png");
   const RunResult r = run({"view", in, "--frames", "3", "--screenshot", shot, "--size", "320x240", "-q"});
   ASSERT_EQ(r.status, 0) << r.err;
@@ -97,7 +85,7 @@ std::array<int, 4> covered_box(const Image& img) {
 
 TEST_F(RenderCli, ViewerStartsInEachRendererAndTheyLineUp) {
   const std::string in = file("u.nrrd");
-  write_volume(in, shell(24));
+  write_volume(in, shell_volume(24));
   auto shot = [&](const std::string& renderer) {
     const std::string out = file("view-" + renderer + ".png");
     const RunResult r = run({"view", in, "--frames", "3", "--screenshot", out, "--size", "320x240", "--view", "30,20",
@@ -130,7 +118,7 @@ TEST_F(RenderCli, BadInputIsOneLineExit2) {
   expect_one_line_error(run({"render", zero, "-o", file("a.png")}), {"zero.nrrd", "no voxel has opacity above"});
 
   const std::string in = file("u.nrrd");
-  write_volume(in, shell(16));
+  write_volume(in, shell_volume(16));
   expect_one_line_error(run({"render", in, "-o", file("a.png")}, {"DISPLAY=", "WAYLAND_DISPLAY="}),
                         {"no display", "xvfb-run"});
   expect_one_line_error(run({"view", in}, {"DISPLAY=", "WAYLAND_DISPLAY="}), {"no display"});

@@ -26,6 +26,11 @@ std::uint64_t seed();
 // A volume of uniform random samples in [lo, hi).
 Volume random_volume(Dims3 dims, Vec3d spacing, std::uint64_t seed, float lo = 0.0f, float hi = 1.0f);
 
+// A soft spherical shell as a float opacity volume: n^3 voxels of 0.8 mm,
+// u = max(0, 1 - |d - 0.3 n| / 1.5) with d the distance in voxels from the
+// centre (renderer tests).
+Volume shell_volume(int n);
+
 // Directory of the shared test data: $SOFTSHELL_SHARED_DATA, else the path
 // baked in at build time (../shared/data beside the source tree).
 std::string shared_data_dir();
