@@ -24,8 +24,7 @@ class Multigrid {
       : sp_(sp),
         rt_(fine.runtime()),
         restrict_(rt_.kernel("multigrid.cl", "mg_restrict_residual")),
-        prolong_(rt_.kernel("multigrid.cl", "mg_prolong_add")),
-        b_norm_(fine.norm(fine.b())) {
+        prolong_(rt_.kernel("multigrid.cl", "mg_prolong_add")) {
     add_level(nullptr, &fine);
     while (int(levels_.size()) < std::max(1, sp.max_levels)) {
       const GridDesc& g = levels_.back().sys->grid();
@@ -37,7 +36,17 @@ class Multigrid {
   }
 
   int levels() const { return int(levels_.size()); }
+  const SolverParams& params() const { return sp_; }
+  // ||b|| of the fine level: set at the start of every solve (b changes with
+  // the pointwise parameters).
   double b_norm() const { return b_norm_; }
+  void measure_b() { b_norm_ = fine().sys->norm(fine().sys->b()); }
+  bool has_solution = false;  // fine().u holds the last solve's solution
+
+  // After the fine level's update_point(): mu and rho down every level.
+  void update_point() {
+    for (int l = 1; l < levels(); ++l) levels_[l].sys->restrict_point(*levels_[l - 1].sys);
+  }
   Level& fine() { return levels_.front(); }
 
   void smooth(int l, int sweeps, bool reverse) {
@@ -138,27 +147,44 @@ class Multigrid {
   SolverParams sp_;
   Runtime& rt_;
   cl::Kernel restrict_, prolong_;  // created once: the V-cycle launches them every level
-  double b_norm_;                   // ||b|| of the fine level, fixed for the solve
+  double b_norm_ = 0;               // ||b|| of the fine level, fixed for the solve
   std::vector<Level> levels_;
 };
 
 }  // namespace
 
-std::vector<float> solve(DeviceSystem& fine, const SolverParams& sp, SolveReport* report,
-                         const std::vector<float>* init) {
+struct MultigridSolver::Impl : Multigrid {
+  Impl(DeviceSystem& fine, const SolverParams& sp) : Multigrid(fine, sp), sys(fine) {}
+  DeviceSystem& sys;
+};
+
+MultigridSolver::MultigridSolver(DeviceSystem& fine, const SolverParams& sp)
+    : impl_(std::make_unique<Impl>(fine, sp)) {}
+MultigridSolver::~MultigridSolver() = default;
+int MultigridSolver::levels() const { return impl_->levels(); }
+const SolverParams& MultigridSolver::params() const { return impl_->params(); }
+void MultigridSolver::update_point() { impl_->update_point(); }
+
+std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector<float>* init, bool warm) {
   const auto t0 = std::chrono::steady_clock::now();
+  Multigrid& mg = *impl_;
+  DeviceSystem& fine = impl_->sys;
+  const SolverParams& sp = mg.params();
   Runtime& rt = fine.runtime();
-  Multigrid mg(fine, sp);
   Level& F = mg.fine();
   const std::size_t n = fine.voxels();
   SolveReport rep;
   rep.levels = mg.levels();
+  mg.measure_b();
   rt.queue().enqueueCopyBuffer(fine.b(), F.rhs, 0, 0, n * sizeof(float));
   if (init) {
     if (init->size() != n) throw std::invalid_argument("initial u has the wrong size");
     rt.queue().enqueueWriteBuffer(F.u, CL_FALSE, 0, n * sizeof(float), init->data());
     fine.zero_fixed(F.u);
     rep.residuals.push_back(mg.relative_residual());
+    rt.queue().finish();  // `init` may go out of scope after the call
+  } else if (warm && mg.has_solution) {
+    rep.residuals.push_back(mg.relative_residual());  // F.u: the previous solution, fixed voxels at 0
   } else if (sp.full_multigrid) {
     rep.residuals.push_back(1.0);  // u = 0
     mg.full_multigrid();
@@ -168,6 +194,7 @@ std::vector<float> solve(DeviceSystem& fine, const SolverParams& sp, SolveReport
     rt.queue().enqueueFillBuffer(F.u, 0.0f, 0, n * sizeof(float));
     rep.residuals.push_back(mg.relative_residual());
   }
+  mg.has_solution = false;  // F.u is scratch until the solve ends
   if (!sp.krylov) {
     while (rep.residuals.back() > sp.tol && rep.cycles < sp.max_cycles) {
       mg.vcycle(0);
@@ -211,8 +238,19 @@ std::vector<float> solve(DeviceSystem& fine, const SolverParams& sp, SolveReport
   rep.converged = rep.residuals.back() <= sp.tol;
   std::vector<float> u(n);
   rt.queue().enqueueReadBuffer(F.u, CL_TRUE, 0, n * sizeof(float), u.data());
+  mg.has_solution = true;
   rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (report) *report = rep;
+  return u;
+}
+
+std::vector<float> solve(DeviceSystem& fine, const SolverParams& sp, SolveReport* report,
+                         const std::vector<float>* init) {
+  const auto t0 = std::chrono::steady_clock::now();
+  MultigridSolver mg(fine, sp);
+  std::vector<float> u = mg.solve(report, init);
+  // This one-shot form counts building the hierarchy as part of the solve.
+  if (report) report->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return u;
 }
 
@@ -222,24 +260,59 @@ std::vector<float> solve(Runtime& rt, const Densities& d, const SolverParams& sp
   return solve(fine, sp, report, init);
 }
 
+VariationalClassifier::VariationalClassifier(Runtime& rt, const Volume& v, const VariationalParams& params,
+                                             const SolverParams& sp, const std::vector<std::uint8_t>* mask)
+    : rt_(rt), params_(params), map_(v.intensity_map()) {
+  const auto t0 = std::chrono::steady_clock::now();
+  Volume vn = v;
+  for (float& f : vn.data) f = static_cast<float>(map_.to_unit(f));
+  sys_ = std::make_unique<DeviceSystem>(rt, vn, params, mask);
+  mg_ = std::make_unique<MultigridSolver>(*sys_, sp);
+  rt.queue().finish();  // vn is uploaded without waiting
+  vn.data.clear();
+  vn.data.shrink_to_fit();
+  geometry_ = std::move(vn);
+  setup_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+VariationalClassifier::~VariationalClassifier() = default;
+
+bool VariationalClassifier::can_update(const VariationalParams& p) const {
+  return p.beta == params_.beta && p.kappa == params_.kappa && p.sigma_mm == params_.sigma_mm &&
+         p.grad_sigma_mm == params_.grad_sigma_mm;
+}
+
+void VariationalClassifier::update(const VariationalParams& p) {
+  if (!can_update(p))
+    throw std::invalid_argument("VariationalClassifier::update: beta, kappa and the lowpass sigmas need a new setup");
+  const auto t0 = std::chrono::steady_clock::now();
+  sys_->update_point(p);
+  mg_->update_point();
+  rt_.queue().finish();
+  params_ = p;
+  update_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, bool warm) {
+  if (init && init->dims != geometry_.dims)
+    throw std::invalid_argument("initial opacity has other dims than the volume");
+  std::vector<float> u = mg_->solve(report, init ? &init->data : nullptr, warm);
+  for (float& f : u) f = std::clamp(f, 0.0f, 1.0f);
+  return geometry_.with_data(std::move(u), ScalarType::Float32);
+}
+
 Volume classify_variational(Runtime& rt, const Volume& v, const VariationalParams& params, const SolverParams& sp,
                             SolveReport* report, const Volume* init, const std::vector<std::uint8_t>* mask,
                             ClassifyTiming* timing) {
-  const auto t0 = std::chrono::steady_clock::now();
   if (init && init->dims != v.dims) throw std::invalid_argument("initial opacity has other dims than the volume");
-  Volume vn = v;
-  const IntensityMap map = v.intensity_map();
-  for (float& f : vn.data) f = static_cast<float>(map.to_unit(f));
-  DeviceSystem sys(rt, vn, params, mask);
-  rt.queue().finish();
+  VariationalClassifier c(rt, v, params, sp, mask);
   const auto t1 = std::chrono::steady_clock::now();
-  std::vector<float> u = solve(sys, sp, report, init ? &init->data : nullptr);
-  for (float& f : u) f = std::clamp(f, 0.0f, 1.0f);
+  Volume u = c.solve(report, init);
   if (timing) {
-    timing->setup = std::chrono::duration<double>(t1 - t0).count();
+    timing->setup = c.setup_seconds();
     timing->solve = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
   }
-  return v.with_data(std::move(u), ScalarType::Float32);
+  return u;
 }
 
 }  // namespace softshell

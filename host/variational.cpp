@@ -52,6 +52,7 @@ DeviceSystem::DeviceSystem(Runtime& rt, const GridDesc& g) : rt_(rt), grid_(g) {
   fixed_ = rt.buffer(n);
   coef_ = rt.buffer(n * STENCIL_COEFS * sizeof(float));
   b_ = rt.buffer(n * sizeof(float));
+  dT_ = rt.buffer(n * sizeof(float));
   partial_ = rt.buffer(kReduceGroups * sizeof(float));
   apply_ = rt.kernel(kSystem, "system_apply");
   residual_ = rt.kernel(kSystem, "system_residual");
@@ -94,6 +95,7 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
   cl::Buffer dv = upload(rt, v.data);
   cl::Buffer dvs = rt.buffer(bytes);
   Lowpass(rt, grid_, {p.sigma_mm, 3.0}).apply(dv, dvs);
+  cl::Buffer grad2 = rt.buffer(bytes);
   std::array<cl::Buffer, 3> gv, gs;
   for (auto& b : gv) b = rt.buffer(bytes);
   for (auto& b : gs) b = rt.buffer(bytes);
@@ -109,9 +111,24 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
   cl::Buffer dmask = mask ? upload(rt, *mask) : upload(rt, std::vector<std::uint8_t>(n, 1));
   cl::Kernel k = rt.kernel(kSystem, "system_densities");
   Runtime::set_args(k, dv, dvs, gv[0], gv[1], gv[2], gs[0], gs[1], gs[2], dmask, mu_, rho_, T_[0], T_[1], T_[2],
-                    T_[3], T_[4], T_[5], fixed_, p.coeffs(), grid_);
+                    T_[3], T_[4], T_[5], fixed_, grad2, p.coeffs(), grid_);
   rt.enqueue_3d(k, grid_);
   assemble();
+  sources_ = {dv, dvs, grad2};
+}
+
+void DeviceSystem::update_point(const VariationalParams& p) {
+  if (!updatable())
+    throw std::logic_error("DeviceSystem::update_point: the system was not built from a volume");
+  cl::Kernel k = rt_.kernel(kSystem, "system_update_point");
+  Runtime::set_args(k, sources_[0], sources_[1], sources_[2], fixed_, dT_, mu_, rho_, coef_, b_, p.coeffs(), grid_);
+  rt_.enqueue_3d(k, grid_);
+}
+
+void DeviceSystem::restrict_point(const DeviceSystem& fine) {
+  cl::Kernel k = rt_.kernel(kMultigrid, "mg_restrict_point");
+  Runtime::set_args(k, fine.mu_, fine.rho_, fixed_, dT_, mu_, rho_, coef_, b_, fine.grid_, grid_);
+  rt_.enqueue_3d(k, grid_);
 }
 
 std::unique_ptr<DeviceSystem> DeviceSystem::coarsen(const DeviceSystem& fine) {
@@ -131,7 +148,7 @@ std::unique_ptr<DeviceSystem> DeviceSystem::coarsen(const DeviceSystem& fine) {
 
 void DeviceSystem::assemble() {
   cl::Kernel k = rt_.kernel(kSystem, "system_assemble");
-  Runtime::set_args(k, mu_, rho_, T_[0], T_[1], T_[2], T_[3], T_[4], T_[5], fixed_, coef_, b_, grid_);
+  Runtime::set_args(k, mu_, rho_, T_[0], T_[1], T_[2], T_[3], T_[4], T_[5], fixed_, coef_, b_, dT_, grid_);
   rt_.enqueue_3d(k, grid_);
 }
 
@@ -209,6 +226,9 @@ std::vector<float> DeviceSystem::download_coefficients() const {
 
 std::vector<float> DeviceSystem::download_b() const { return download<float>(rt_, b_, voxels()); }
 
-std::size_t DeviceSystem::memory_bytes() const { return voxels() * ((3 + 6 + STENCIL_COEFS) * sizeof(float) + 1); }
+std::size_t DeviceSystem::memory_bytes() const {
+  // mu, rho, b, dT, T (6), the stencil, fixed; v, v~, |grad v|^2 when updatable
+  return voxels() * ((4 + 6 + STENCIL_COEFS + (updatable() ? 3 : 0)) * sizeof(float) + 1);
+}
 
 }  // namespace softshell

@@ -63,6 +63,18 @@ class DeviceSystem {
   // voxels per axis, spacing 2h, re-assembled (docs/numerics.md).
   static std::unique_ptr<DeviceSystem> coarsen(const DeviceSystem& fine);
 
+  // Re-targets a system built from a volume to new pointwise parameters
+  // (alpha, gamma, omega, delta, epsilon, u_ind, v_iso: they change only mu,
+  // rho, the diagonal and b); beta, kappa and the lowpass sigmas must be
+  // those it was built with (VariationalClassifier checks). The result equals
+  // a fresh build with `p`. Throws std::logic_error unless updatable().
+  void update_point(const VariationalParams& p);
+  bool updatable() const { return bool(sources_[0]()); }
+  // On a coarse level made by coarsen(fine): re-restricts mu and rho after
+  // fine.update_point() (or the fine level's own restrict_point) and updates
+  // the diagonal and b to match.
+  void restrict_point(const DeviceSystem& fine);
+
   const GridDesc& grid() const { return grid_; }
   std::size_t voxels() const { return grid_voxels(grid_); }
   Runtime& runtime() const { return rt_; }
@@ -92,8 +104,9 @@ class DeviceSystem {
 
   Runtime& rt_;
   GridDesc grid_;
-  cl::Buffer mu_, rho_, fixed_, coef_, b_, partial_;
+  cl::Buffer mu_, rho_, fixed_, coef_, b_, dT_, partial_;
   std::array<cl::Buffer, 6> T_;
+  std::array<cl::Buffer, 3> sources_;  // v, v~, |grad v|^2 of a volume-built level (for update_point)
   double reduce(cl::Kernel& k) const;
   mutable cl::Kernel apply_, residual_, gs_, jacobi_, zero_fixed_, dot_, axpby_;
 };
@@ -120,13 +133,78 @@ struct SolveReport {
   double seconds = 0;
 };
 
+// The multigrid hierarchy of a fine level (coarse levels by rediscretisation,
+// docs/numerics.md) and the solver on it. Built once; every solve and every
+// pointwise update re-uses it.
+class MultigridSolver {
+ public:
+  MultigridSolver(DeviceSystem& fine, const SolverParams& sp);  // `fine` must outlive the solver
+  ~MultigridSolver();
+  MultigridSolver(const MultigridSolver&) = delete;
+  MultigridSolver& operator=(const MultigridSolver&) = delete;
+
+  // Solves A u = b of the fine level: from `init` when given, else from the
+  // previous solve's solution (kept on the device) when `warm` and there is
+  // one, else from FMG (or 0, per SolverParams). Never throws for
+  // non-convergence: the report says so and the caller decides.
+  std::vector<float> solve(SolveReport* report = nullptr, const std::vector<float>* init = nullptr,
+                           bool warm = false);
+  // After fine.update_point(): carries the new mu and rho down every level.
+  void update_point();
+  int levels() const;
+  const SolverParams& params() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 // Solves A u = b for the densities' system on the device. `init` (optional)
 // warm-starts from a previous u. Never throws for non-convergence: the report
-// says so and the caller decides.
+// says so and the caller decides. Builds the hierarchy for this one solve
+// (and counts it in the report's seconds).
 std::vector<float> solve(Runtime& rt, const Densities& d, const SolverParams& sp, SolveReport* report = nullptr,
                          const std::vector<float>* init = nullptr);
 std::vector<float> solve(DeviceSystem& fine, const SolverParams& sp, SolveReport* report = nullptr,
                          const std::vector<float>* init = nullptr);
+
+// The classifier on one volume, ready to re-solve: it keeps on the device
+// everything that does not depend on the pointwise parameters (the lowpasses,
+// gradients, the tangential tensor and couplings of every level, the
+// multigrid hierarchy) so a change of v_iso, alpha, gamma, omega, delta,
+// epsilon or u_ind costs one pointwise pass per level and a warm solve
+// (docs/numerics.md, "Re-solving"). `v` is in its own intensity units;
+// params.v_iso is normalised (IntensityMap::to_unit). With a `mask`, pass the
+// volume through fill_unscanned first (see classify_variational).
+class VariationalClassifier {
+ public:
+  VariationalClassifier(Runtime& rt, const Volume& v, const VariationalParams& params, const SolverParams& sp = {},
+                        const std::vector<std::uint8_t>* mask = nullptr);
+  ~VariationalClassifier();
+
+  const VariationalParams& params() const { return params_; }
+  const IntensityMap& intensity_map() const { return map_; }
+  // True when `p` keeps beta, kappa and both lowpass sigmas: update() can
+  // then re-target this classifier; otherwise build a new one.
+  bool can_update(const VariationalParams& p) const;
+  // Throws std::invalid_argument unless can_update(p).
+  void update(const VariationalParams& p);
+  // The opacity u, clamped to [0, 1], with the volume's geometry: from
+  // `init` when given, else from the previous solution when `warm`, else cold.
+  Volume solve(SolveReport* report = nullptr, const Volume* init = nullptr, bool warm = false);
+  double setup_seconds() const { return setup_seconds_; }    // the constructor, hierarchy included
+  double update_seconds() const { return update_seconds_; }  // the last update()
+  int levels() const { return mg_->levels(); }
+
+ private:
+  Runtime& rt_;
+  VariationalParams params_;
+  IntensityMap map_;
+  Volume geometry_;  // the volume's header, no samples
+  std::unique_ptr<DeviceSystem> sys_;
+  std::unique_ptr<MultigridSolver> mg_;
+  double setup_seconds_ = 0, update_seconds_ = 0;
+};
 
 // The whole classifier on a volume in its own intensity units: normalise
 // (IntensityMap), densities and system on the device, solve, and return the
@@ -136,7 +214,7 @@ std::vector<float> solve(DeviceSystem& fine, const SolverParams& sp, SolveReport
 // the volume through fill_unscanned (host/mask.hpp) first, as the CLI does,
 // so the lowpass and gradients see no step at the edge of the sweep.
 struct ClassifyTiming {
-  double setup = 0, solve = 0;  // seconds: densities + assembly; multigrid
+  double setup = 0, solve = 0;  // seconds: densities, assembly, hierarchy; multigrid iterations
 };
 Volume classify_variational(Runtime& rt, const Volume& v, const VariationalParams& params, const SolverParams& sp,
                             SolveReport* report = nullptr, const Volume* init = nullptr,

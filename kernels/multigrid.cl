@@ -5,8 +5,25 @@
  * R = P^T. Densities are restricted by P^T-weighted averages.
  */
 #include "grid.h"
+#include "stencil.h"
 
 inline float hat_weight(const int d) { return d == 0 ? 1.0f : 0.5f; }
+
+/* The P^T-weighted average of a fine density around fine voxel 2I. */
+inline float restricted_average(__global const float* restrict f, const GridDesc gf, const int X, const int Y,
+                                const int Z) {
+  float acc = 0.0f, wsum = 0.0f;
+  for (int dz = -1; dz <= 1; ++dz)
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx) {
+        const int x = 2 * X + dx, y = 2 * Y + dy, z = 2 * Z + dz;
+        if (x < 0 || y < 0 || z < 0 || x >= gf.nx || y >= gf.ny || z >= gf.nz) continue;
+        const float w = hat_weight(abs(dx)) * hat_weight(abs(dy)) * hat_weight(abs(dz));
+        acc += w * f[grid_index(gf, x, y, z)];
+        wsum += w;
+      }
+  return acc * (1.0f / wsum);
+}
 
 /* Weighted averages of the densities over the fine voxels around 2I; a coarse
  * voxel is fixed on the coarse boundary or where its fine voxel is fixed. */
@@ -22,37 +39,32 @@ __kernel void mg_restrict_densities(__global const float* restrict mu_f, __globa
                                     const GridDesc gf, const GridDesc gc) {
   const int X = get_global_id(0), Y = get_global_id(1), Z = get_global_id(2);
   if (!grid_contains(gc, X, Y, Z)) return;
-  float acc[8] = {0, 0, 0, 0, 0, 0, 0, 0}, wsum = 0.0f;
-  for (int dz = -1; dz <= 1; ++dz)
-    for (int dy = -1; dy <= 1; ++dy)
-      for (int dx = -1; dx <= 1; ++dx) {
-        const int x = 2 * X + dx, y = 2 * Y + dy, z = 2 * Z + dz;
-        if (x < 0 || y < 0 || z < 0 || x >= gf.nx || y >= gf.ny || z >= gf.nz) continue;
-        const float w = hat_weight(abs(dx)) * hat_weight(abs(dy)) * hat_weight(abs(dz));
-        const size_t j = grid_index(gf, x, y, z);
-        acc[0] += w * mu_f[j];
-        acc[1] += w * rho_f[j];
-        acc[2] += w * txx_f[j];
-        acc[3] += w * tyy_f[j];
-        acc[4] += w * tzz_f[j];
-        acc[5] += w * txy_f[j];
-        acc[6] += w * txz_f[j];
-        acc[7] += w * tyz_f[j];
-        wsum += w;
-      }
   const size_t I = grid_index(gc, X, Y, Z);
-  const float inv = 1.0f / wsum;
-  mu_c[I] = acc[0] * inv;
-  rho_c[I] = acc[1] * inv;
-  txx_c[I] = acc[2] * inv;
-  tyy_c[I] = acc[3] * inv;
-  tzz_c[I] = acc[4] * inv;
-  txy_c[I] = acc[5] * inv;
-  txz_c[I] = acc[6] * inv;
-  tyz_c[I] = acc[7] * inv;
+  mu_c[I] = restricted_average(mu_f, gf, X, Y, Z);
+  rho_c[I] = restricted_average(rho_f, gf, X, Y, Z);
+  txx_c[I] = restricted_average(txx_f, gf, X, Y, Z);
+  tyy_c[I] = restricted_average(tyy_f, gf, X, Y, Z);
+  tzz_c[I] = restricted_average(tzz_f, gf, X, Y, Z);
+  txy_c[I] = restricted_average(txy_f, gf, X, Y, Z);
+  txz_c[I] = restricted_average(txz_f, gf, X, Y, Z);
+  tyz_c[I] = restricted_average(tyz_f, gf, X, Y, Z);
   const bool boundary = X == 0 || Y == 0 || Z == 0 || X == gc.nx - 1 || Y == gc.ny - 1 || Z == gc.nz - 1;
   const bool fine_inside = 2 * X < gf.nx && 2 * Y < gf.ny && 2 * Z < gf.nz;
   fixed_c[I] = (boundary || !fine_inside || fixed_f[grid_index(gf, 2 * X, 2 * Y, 2 * Z)]) ? 1 : 0;
+}
+
+/* After a pointwise update of the finer level (system_update_point): the
+ * coarse mu and rho re-restricted, and the diagonal and b of every free
+ * coarse voxel, as mg_restrict_densities + system_assemble would give them. */
+__kernel void mg_restrict_point(__global const float* restrict mu_f, __global const float* restrict rho_f,
+                                __global const uchar* restrict fixed_c, __global const float* restrict dT_c,
+                                __global float* restrict mu_c, __global float* restrict rho_c,
+                                __global float* restrict coef_c, __global float* restrict b_c, const GridDesc gf,
+                                const GridDesc gc) {
+  const int X = get_global_id(0), Y = get_global_id(1), Z = get_global_id(2);
+  if (!grid_contains(gc, X, Y, Z)) return;
+  store_point(mu_c, rho_c, coef_c, b_c, fixed_c, dT_c, grid_index(gc, X, Y, Z), gc.hx * gc.hy * gc.hz,
+              restricted_average(mu_f, gf, X, Y, Z), restricted_average(rho_f, gf, X, Y, Z));
 }
 
 /* r_c = P^T r_f (zero at fixed coarse voxels). */

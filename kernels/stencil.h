@@ -23,4 +23,24 @@ typedef struct ClassifyCoeffs {
   float kappa, pad0, pad1, pad2; /* kappa: isotropic smoothness (0: the paper's functional) */
 } ClassifyCoeffs;
 
+#ifdef __OPENCL_VERSION__
+/* The diagonal of a free voxel's row: its mass V mu plus the tangential part
+ * dT (0.125 V times the sum of its octant terms, stored per voxel by the
+ * assembly). One function for the assembly and for the in-place updates
+ * (system_update_point, mg_restrict_point), so they give the same bits. */
+inline float diagonal_coef(const float V, const float mu, const float dT) { return V * mu + dT; }
+
+/* Stores new pointwise densities m, r of voxel p and, when it is free, its
+ * diagonal and right-hand side (V: the level's voxel volume). */
+inline void store_point(__global float* mu, __global float* rho, __global float* coef, __global float* b,
+                        __global const uchar* fixed, __global const float* dT, const size_t p, const float V,
+                        const float m, const float r) {
+  mu[p] = m;
+  rho[p] = r;
+  if (fixed[p]) return;
+  coef[p] = diagonal_coef(V, m, dT[p]);
+  b[p] = V * r;
+}
+#endif
+
 #endif /* SOFTSHELL_STENCIL_H */

@@ -18,9 +18,23 @@ inline bool on_boundary(const GridDesc g, int x, int y, int z) {
 
 /* ------------------------------------------------------------ densities */
 
-/* mu = alpha W + gamma c, rho = gamma c u_ind, T = beta (|g|^2 I - g g^T) + kappa I
- * with g = grad v~ (kappa: the optional isotropic smoothness term, 0 in the
- * paper's functional); fixed = boundary or unscanned (mask == 0). */
+/* The pointwise densities, from v, v~ and |grad v|^2 (of the --grad-sigma
+ * lowpass): mu = alpha W + gamma c and rho = gamma c u_ind. They are all
+ * that depends on v_iso, alpha, gamma, omega, delta, epsilon and u_ind, so
+ * a change of those re-targets a system in place (system_update_point). */
+inline float density_c(const ClassifyCoeffs k, const float grad2) {
+  return k.delta + (1.0f - k.delta) * sqrt(grad2);
+}
+inline float density_mu(const ClassifyCoeffs k, const float v, const float vs, const float grad2) {
+  const float dv = v - k.v_iso, dvs = vs - k.v_iso;
+  const float W = (k.omega * dv * dv + (1.0f - k.omega) * dvs * dvs) / (grad2 + k.epsilon);
+  return k.alpha * W + k.gamma * density_c(k, grad2);
+}
+inline float density_rho(const ClassifyCoeffs k, const float grad2) { return k.gamma * density_c(k, grad2) * k.u_ind; }
+
+/* mu, rho, T = beta (|g|^2 I - g g^T) + kappa I with g = grad v~ (kappa: the
+ * optional isotropic smoothness term, 0 in the paper's functional); fixed =
+ * boundary or unscanned (mask == 0); grad2 = |grad v|^2, kept for updates. */
 __kernel void system_densities(__global const float* restrict v, __global const float* restrict vs,
                                __global const float* restrict gvx, __global const float* restrict gvy,
                                __global const float* restrict gvz, __global const float* restrict gsx,
@@ -30,16 +44,14 @@ __kernel void system_densities(__global const float* restrict v, __global const 
                                __global float* restrict tyy, __global float* restrict tzz,
                                __global float* restrict txy, __global float* restrict txz,
                                __global float* restrict tyz, __global uchar* restrict fixed,
-                               const ClassifyCoeffs k, const GridDesc g) {
+                               __global float* restrict grad2_out, const ClassifyCoeffs k, const GridDesc g) {
   const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
   if (!grid_contains(g, x, y, z)) return;
   const size_t p = grid_index(g, x, y, z);
   const float grad2 = gvx[p] * gvx[p] + gvy[p] * gvy[p] + gvz[p] * gvz[p];
-  const float dv = v[p] - k.v_iso, dvs = vs[p] - k.v_iso;
-  const float W = (k.omega * dv * dv + (1.0f - k.omega) * dvs * dvs) / (grad2 + k.epsilon);
-  const float c = k.delta + (1.0f - k.delta) * sqrt(grad2);
-  mu[p] = k.alpha * W + k.gamma * c;
-  rho[p] = k.gamma * c * k.u_ind;
+  grad2_out[p] = grad2;
+  mu[p] = density_mu(k, v[p], vs[p], grad2);
+  rho[p] = density_rho(k, grad2);
   const float ax = gsx[p], ay = gsy[p], az = gsz[p];
   const float s2 = ax * ax + ay * ay + az * az;
   txx[p] = k.beta * (s2 - ax * ax) + k.kappa;
@@ -49,6 +61,21 @@ __kernel void system_densities(__global const float* restrict v, __global const 
   txz[p] = -k.beta * ax * az;
   tyz[p] = -k.beta * ay * az;
   fixed[p] = (on_boundary(g, x, y, z) || mask[p] == 0) ? 1 : 0;
+}
+
+/* New pointwise parameters (k) on an assembled fine level: mu, rho, the
+ * diagonal and b of every free voxel; T, the couplings and the fixed rows
+ * stay. The same result as densities + assembly with k, bit for bit. */
+__kernel void system_update_point(__global const float* restrict v, __global const float* restrict vs,
+                                  __global const float* restrict grad2, __global const uchar* restrict fixed,
+                                  __global const float* restrict dT, __global float* restrict mu,
+                                  __global float* restrict rho, __global float* restrict coef,
+                                  __global float* restrict b, const ClassifyCoeffs k, const GridDesc g) {
+  const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
+  if (!grid_contains(g, x, y, z)) return;
+  const size_t p = grid_index(g, x, y, z);
+  store_point(mu, rho, coef, b, fixed, dT, p, g.hx * g.hy * g.hz, density_mu(k, v[p], vs[p], grad2[p]),
+              density_rho(k, grad2[p]));
 }
 
 /* ------------------------------------------------------------- assembly */
@@ -78,7 +105,7 @@ __kernel void system_assemble(__global const float* restrict mu, __global const 
                               __global const float* restrict tzz, __global const float* restrict txy,
                               __global const float* restrict txz, __global const float* restrict tyz,
                               __global const uchar* restrict fixed, __global float* restrict coef,
-                              __global float* restrict b, const GridDesc g) {
+                              __global float* restrict b, __global float* restrict dT, const GridDesc g) {
   const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
   if (!grid_contains(g, x, y, z)) return;
   const size_t N = grid_voxels(g);
@@ -91,6 +118,7 @@ __kernel void system_assemble(__global const float* restrict mu, __global const 
     coef[p] = 1.0f;
     for (int k = 1; k < STENCIL_COEFS; ++k) coef[k * N + p] = 0.0f;
     b[p] = 0.0f;
+    dT[p] = 0.0f;
     return;
   }
   float diag = 0.0f;
@@ -119,7 +147,8 @@ __kernel void system_assemble(__global const float* restrict mu, __global const 
         if (cell_exists(g, q[0], q[1], q[2], s[0], s[1], s[2])) diag += taa;
       }
     }
-  coef[p] = V * mu[p] + 0.125f * V * diag;
+  dT[p] = 0.125f * V * diag;
+  coef[p] = diagonal_coef(V, mu[p], dT[p]);
   b[p] = V * rho[p];
 
   /* Upper offsets. */

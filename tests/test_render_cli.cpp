@@ -10,6 +10,7 @@
 #include "cli_fixture.hpp"
 #include "image.hpp"
 #include "io.hpp"
+#include "opacity_input.hpp"
 #include "test_support.hpp"
 
 namespace softshell::test {
@@ -145,6 +146,35 @@ TEST_F(RenderCli, RawVolumeIsClassifiedFirst) {
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_NE(r.out.find("classified"), std::string::npos) << r.out;
   EXPECT_GT(covered(read_png(file("raw.png"))), 0.05);
+}
+
+TEST_F(RenderCli, ViewerReSolveUpdatesTheClassifierInPlaceForAnIsoChange) {
+  // The viewer's "re-solve" (viewer::reclassify): a new v_iso re-uses the
+  // classifier (same object, no new setup) and gives the cold
+  // classification's u; a new beta builds a new classifier.
+  const std::string in = file("raw.nrrd");
+  ASSERT_EQ(run({"synthetic", "--size", "32", "-o", in, "-q"}).status, 0);
+  viewer::OpacityInput input = viewer::load_opacity(runtime(), in, viewer::InputKind::Auto, "auto");
+  ASSERT_TRUE(input.classified);
+  ASSERT_TRUE(input.classifier);
+  const VariationalClassifier* first = input.classifier.get();
+  VariationalParams p = input.params;
+  p.v_iso *= 1.05;
+  SolveReport warm, cold;
+  const Volume init = input.u;
+  const Volume uw = viewer::reclassify(runtime(), input, p, &init, &warm);
+  EXPECT_EQ(input.classifier.get(), first);
+  const Volume uc = classify_variational(runtime(), input.data, p, SolverParams{}, &cold, nullptr,
+                                         input.mask.empty() ? nullptr : &input.mask);
+  ASSERT_TRUE(warm.converged && cold.converged);
+  double worst = 0;
+  for (std::size_t i = 0; i < uw.data.size(); ++i) worst = std::max(worst, double(std::abs(uw.data[i] - uc.data[i])));
+  EXPECT_LT(worst, 2e-3);
+  p.beta *= 2;
+  viewer::reclassify(runtime(), input, p, &init, &warm);
+  EXPECT_TRUE(warm.converged);
+  EXPECT_NE(input.classifier.get(), nullptr);
+  EXPECT_TRUE(input.classifier->params().beta == p.beta);
 }
 
 }  // namespace

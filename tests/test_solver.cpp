@@ -314,6 +314,80 @@ TEST(SolverFace, WarmStartAfterAFivePercentIsoChangeIsCheap) {
   EXPECT_LE(warm.cycles, cold.cycles);
 }
 
+// Relative max difference of two coefficient (or b) arrays.
+double max_rel_diff(const std::vector<float>& a, const std::vector<float>& b) {
+  double dev = 0, scale = 0;
+  for (std::size_t i = 0; i < a.size(); ++i)
+    dev = std::max(dev, double(std::abs(a[i] - b[i]))), scale = std::max(scale, double(std::abs(b[i])));
+  return scale > 0 ? dev / scale : dev;
+}
+
+TEST(SolverUpdate, PointwiseUpdateEqualsAFreshBuildOnEveryLevel) {
+  // New v_iso, alpha, gamma, omega, delta, epsilon, u_ind: the updated fine
+  // level and a coarse level re-restricted from it equal fresh builds.
+  const Volume v = noisy_sphere({33, 28, 25}, {0.8, 1.0, 1.3}, 11);
+  VariationalParams p0 = sphere_params(), p1 = p0;
+  p1.v_iso = 0.52, p1.alpha = 0.7, p1.gamma = 2.0, p1.omega = 0.4, p1.delta = 0.05, p1.epsilon = 0.02, p1.u_ind = 0.9;
+  DeviceSystem sys(runtime(), v, p0);
+  auto coarse = DeviceSystem::coarsen(sys);
+  auto coarser = DeviceSystem::coarsen(*coarse);
+  const std::vector<float> before = sys.download_coefficients();
+  sys.update_point(p1);
+  coarse->restrict_point(sys);
+  coarser->restrict_point(*coarse);
+  DeviceSystem fresh(runtime(), v, p1);
+  auto fresh_coarse = DeviceSystem::coarsen(fresh);
+  auto fresh_coarser = DeviceSystem::coarsen(*fresh_coarse);
+  runtime().queue().finish();
+  EXPECT_GT(max_rel_diff(before, fresh.download_coefficients()), 1e-3) << "the update must change something";
+  EXPECT_EQ(max_rel_diff(sys.download_coefficients(), fresh.download_coefficients()), 0.0);
+  EXPECT_EQ(max_rel_diff(sys.download_b(), fresh.download_b()), 0.0);
+  EXPECT_EQ(max_rel_diff(coarse->download_coefficients(), fresh_coarse->download_coefficients()), 0.0);
+  EXPECT_EQ(max_rel_diff(coarse->download_b(), fresh_coarse->download_b()), 0.0);
+  EXPECT_EQ(max_rel_diff(coarser->download_coefficients(), fresh_coarser->download_coefficients()), 0.0);
+  // mu and rho too (the next restriction starts from them).
+  const Densities a = coarser->download_densities(), b = fresh_coarser->download_densities();
+  EXPECT_EQ(max_rel_diff(a.mu, b.mu), 0.0);
+  EXPECT_EQ(max_rel_diff(a.rho, b.rho), 0.0);
+}
+
+TEST(SolverUpdate, OnlyVolumeBuiltSystemsAreUpdatable) {
+  const Volume v = noisy_sphere({17, 17, 17}, {1, 1, 1}, 3);
+  DeviceSystem sys(runtime(), v, sphere_params());
+  EXPECT_TRUE(sys.updatable());
+  DeviceSystem copy(runtime(), sys.download_densities());
+  EXPECT_FALSE(copy.updatable());
+  EXPECT_THROW(copy.update_point(sphere_params()), std::logic_error);
+}
+
+TEST(SolverUpdate, ClassifierReSolvesAfterAnIsoChangeAsAColdClassificationWould) {
+  const FaceCase& f = face64();
+  VariationalParams p;
+  p.v_iso = f.iso;
+  VariationalClassifier c(runtime(), f.ph.volume, p);
+  SolveReport first, warm, cold;
+  c.solve(&first);
+  ASSERT_TRUE(first.converged);
+  VariationalParams p1 = p;
+  p1.v_iso *= 1.05;
+  ASSERT_TRUE(c.can_update(p1));
+  c.update(p1);
+  const Volume uw = c.solve(&warm, nullptr, true);
+  const Volume uc = classify_variational(runtime(), f.ph.volume, p1, SolverParams{}, &cold);
+  ASSERT_TRUE(warm.converged && cold.converged);
+  EXPECT_LT(warm.residuals.front(), 0.2) << "the previous u is a good start";
+  // The cold solve's FMG start is worth about one iteration, not counted.
+  EXPECT_LE(warm.cycles, cold.cycles + 1);
+  double worst = 0;
+  for (std::size_t i = 0; i < uw.data.size(); ++i) worst = std::max(worst, double(std::abs(uw.data[i] - uc.data[i])));
+  EXPECT_LT(worst, 2e-3) << "same system, both to a relative residual of 1e-4";
+  // A changed beta needs a new setup.
+  VariationalParams p2 = p1;
+  p2.beta *= 2;
+  EXPECT_FALSE(c.can_update(p2));
+  EXPECT_THROW(c.update(p2), std::invalid_argument);
+}
+
 TEST(SolverFace, BitIdenticalBetweenRuns) {
   const FaceCase& f = face64();
   VariationalParams p;

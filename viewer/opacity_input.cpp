@@ -48,7 +48,7 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   in.data = mask ? fill_unscanned(v, in.mask) : std::move(v);
   in.params.v_iso = in.data.intensity_map().to_unit(in.iso);
   in.params.sigma_mm = 1.0;
-  in.u = reclassify(rt, in, in.params, nullptr, &in.report);
+  in.u = reclassify(rt, in, in.params, nullptr, &in.report);  // keeps in.classifier
   in.classified = true;
   std::ostringstream note;
   note << "classified " << path << " (" << scalar_type_name(in.data.source_type) << ") with the defaults: iso "
@@ -60,10 +60,16 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   return in;
 }
 
-Volume reclassify(Runtime& rt, const OpacityInput& in, const VariationalParams& p, const Volume* init,
+Volume reclassify(Runtime& rt, OpacityInput& in, const VariationalParams& p, const Volume* init,
                   SolveReport* report) {
-  const SolverParams sp;
-  return classify_variational(rt, in.data, p, sp, report, init, in.mask.empty() ? nullptr : &in.mask);
+  if (in.classifier && in.classifier->can_update(p)) {
+    in.classifier->update(p);
+  } else {
+    in.classifier.reset();  // free its device memory before the new one is built
+    in.classifier = std::make_shared<VariationalClassifier>(rt, in.data, p, SolverParams{},
+                                                            in.mask.empty() ? nullptr : &in.mask);
+  }
+  return in.classifier->solve(report, init);
 }
 
 }  // namespace softshell::viewer

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -32,6 +33,10 @@ struct OpacityInput {
   double iso = 0;                    // in the file's units
   SolveReport report;
   std::string note;                  // one line for the user
+  // The classifier behind u, kept for re-solves: a change of the pointwise
+  // parameters (v_iso, alpha, gamma, omega, delta, epsilon) updates it in
+  // place; beta or the lowpasses rebuild it.
+  std::shared_ptr<VariationalClassifier> classifier;
 };
 
 // Reads `path` and returns its opacity (see above). `iso` is "auto" or a
@@ -41,8 +46,11 @@ struct OpacityInput {
 OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, const std::string& iso = "auto");
 
 // Re-solves with new parameters (normalised v_iso), warm-starting from
-// `init` when given. Non-convergence is in `report`.
-Volume reclassify(Runtime& rt, const OpacityInput& in, const VariationalParams& p, const Volume* init,
+// `init` when given. Re-uses in.classifier when only pointwise parameters
+// changed (docs/numerics.md, "Re-solving"), else builds a new one and keeps
+// it there. Non-convergence is in `report`. Not thread-safe: one re-solve at
+// a time.
+Volume reclassify(Runtime& rt, OpacityInput& in, const VariationalParams& p, const Volume* init,
                   SolveReport* report);
 
 }  // namespace softshell::viewer
