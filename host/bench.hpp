@@ -22,6 +22,7 @@
 
 #include "cl_runtime.hpp"
 #include "image.hpp"
+#include "stencil.h"
 #include "volume.hpp"
 
 namespace softshell {
@@ -152,8 +153,8 @@ struct BenchReport {
 
 // Bytes per voxel the byte models assume (docs/benchmarks.md, "Byte model").
 struct ByteModel {
-  static constexpr double sweep = 14 * 4 + 4 + 4 + 4;  // coefficients, b, u read, u write = 68
-  static constexpr double apply = 14 * 4 + 4 + 4;      // coefficients, x read, y write = 64
+  static constexpr double sweep = STENCIL_COEFS * 4 + 4 + 4 + 4;  // coefficients, b, u read, u write = 52
+  static constexpr double apply = STENCIL_COEFS * 4 + 4 + 4;      // coefficients, x read, y write = 48
 };
 
 // Runs the benchmark. Throws DeviceError only when a requested device does
@@ -168,11 +169,12 @@ Image bench_plot(const BenchReport& report);
 
 // ---- The peers' pieces, exposed for tests --------------------------------
 
-// A 27-point system as the device stores it (kernels/stencil.h): 14
-// coefficients per voxel, structure of arrays, identity rows at fixed voxels.
+// The 19-point system as the device stores it (kernels/stencil.h):
+// STENCIL_COEFS coefficients per voxel, structure of arrays, identity rows at
+// fixed voxels.
 struct HostStencil {
   GridDesc grid{};
-  std::vector<float> coef;  // 14 * N
+  std::vector<float> coef;  // STENCIL_COEFS * N
   std::vector<float> b;     // N
   std::vector<std::uint8_t> fixed;  // N (1: u held at 0)
   std::size_t voxels() const { return grid_voxels(grid); }

@@ -45,7 +45,7 @@ ClassifyCoeffs VariationalParams::coeffs() const {
 
 DeviceSystem::DeviceSystem(Runtime& rt, const GridDesc& g) : rt_(rt), grid_(g) {
   const std::size_t n = voxels();
-  rt.check_allocation(n * STENCIL_COEFS * sizeof(float), "the classifier's 27-point system");
+  rt.check_allocation(n * STENCIL_COEFS * sizeof(float), "the classifier's 19-point system");
   mu_ = rt.buffer(n * sizeof(float));
   rho_ = rt.buffer(n * sizeof(float));
   for (auto& t : T_) t = rt.buffer(n * sizeof(float));

@@ -1,5 +1,5 @@
 // The variational opacity classifier (paper Section 3; docs/numerics.md): the
-// per-voxel densities, the assembled 27-point system on the device, and the
+// per-voxel densities, the assembled 19-point system on the device, and the
 // multigrid solver.
 #pragma once
 
@@ -48,7 +48,7 @@ struct Densities {
 };
 
 // One level of the system on the device: densities, the assembled stencil
-// (14 coefficients per voxel, kernels/stencil.h), b, and the operations the
+// (10 coefficients per voxel, kernels/stencil.h), b, and the operations the
 // solver needs on it.
 class DeviceSystem {
  public:
@@ -92,7 +92,7 @@ class DeviceSystem {
   void axpby(float a, const cl::Buffer& x, float b, const cl::Buffer& y) const;  // y = a x + b y
 
   Densities download_densities() const;
-  std::vector<float> download_coefficients() const;  // 14 * N, SoA
+  std::vector<float> download_coefficients() const;  // STENCIL_COEFS * N, SoA
   std::vector<float> download_b() const;
   const cl::Buffer& b() const { return b_; }
   const cl::Buffer& fixed() const { return fixed_; }

@@ -1,21 +1,23 @@
-/* Storage of a symmetric 27-point stencil, shared by host and kernels
- * (docs/numerics.md, "Storage").
+/* Storage of the classifier's symmetric 19-point stencil, shared by host and
+ * kernels (docs/numerics.md, "Storage").
  *
- * Per voxel 14 coefficients, structure of arrays (coef[k * N + p]): k = 0 is
- * the diagonal, k = 1..13 the offsets with a positive linear index, x fastest.
- * The entry for the opposite offset lives at the neighbour:
+ * The operator couples a voxel to its 6 face and 12 edge neighbours only
+ * (never to the 8 corners of its 3x3x3 neighbourhood), on every multigrid
+ * level. Per voxel 10 coefficients, structure of arrays (coef[k * N + p]):
+ * k = 0 is the diagonal, k = 1..9 the face and edge offsets with a positive
+ * linear index, in increasing order (x fastest). The entry for the opposite
+ * offset lives at the neighbour:
  *   A[p][p - off_k] = coef[k * N + (p - off_k)].
- * STENCIL_OFFSETS(X) expands X(k, dx, dy, dz) for k = 0..13.
+ * STENCIL_OFFSETS(X) expands X(k, dx, dy, dz) for k = 0..9.
  */
 #ifndef SOFTSHELL_STENCIL_H
 #define SOFTSHELL_STENCIL_H
 
-#define STENCIL_COEFS 14
+#define STENCIL_COEFS 10
 
-#define STENCIL_OFFSETS(X)                                                              \
-  X(0, 0, 0, 0) X(1, 1, 0, 0) X(2, -1, 1, 0) X(3, 0, 1, 0) X(4, 1, 1, 0)              \
-  X(5, -1, -1, 1) X(6, 0, -1, 1) X(7, 1, -1, 1) X(8, -1, 0, 1) X(9, 0, 0, 1)          \
-  X(10, 1, 0, 1) X(11, -1, 1, 1) X(12, 0, 1, 1) X(13, 1, 1, 1)
+#define STENCIL_OFFSETS(X)                                                    \
+  X(0, 0, 0, 0) X(1, 1, 0, 0) X(2, -1, 1, 0) X(3, 0, 1, 0) X(4, 1, 1, 0)    \
+  X(5, 0, -1, 1) X(6, -1, 0, 1) X(7, 0, 0, 1) X(8, 1, 0, 1) X(9, 0, 1, 1)
 
 /* Parameters of the functional, as the kernels take them (normalised data). */
 typedef struct ClassifyCoeffs {

@@ -1,10 +1,10 @@
 /* The linear system of the variational classifier (docs/numerics.md):
- * per-voxel densities, assembly of the 27-point stencil, operator apply and
+ * per-voxel densities, assembly of the 19-point stencil, operator apply and
  * residual, the two smoothers (8-colour Gauss-Seidel, weighted Jacobi), and a
  * deterministic dot-product reduction.
  *
  * Stencil storage (kernels/stencil.h): coef[k * N + p], k = 0 diagonal,
- * k = 1..13 the offsets with a positive linear index; A[p][p - off_k] is
+ * k = 1..9 the face and edge offsets with a positive linear index; A[p][p - off_k] is
  * coef[k * N + (p - off_k)]. Fixed voxels have identity rows and no couplings,
  * and every voxel on the volume boundary is fixed, so interior voxels never
  * look outside the volume.
@@ -80,7 +80,7 @@ __kernel void system_update_point(__global const float* restrict v, __global con
 
 /* ------------------------------------------------------------- assembly */
 
-/* T component (a, b) of voxel q. */
+/* T component (a, b) of voxel q (T[0..5] = xx, yy, zz, xy, xz, yz). */
 inline float tensor_ab(__global const float* txx, __global const float* tyy, __global const float* tzz,
                        __global const float* txy, __global const float* txz, __global const float* tyz,
                        size_t q, int a, int b) {
@@ -89,17 +89,18 @@ inline float tensor_ab(__global const float* txx, __global const float* tyy, __g
   return s == 1 ? txy[q] : (s == 2 ? txz[q] : tyz[q]);
 }
 
-/* Does the cell from voxel q = (qx, qy, qz) in direction s lie in the volume? */
-inline bool cell_exists(const GridDesc g, int qx, int qy, int qz, int sx, int sy, int sz) {
-  return qx >= 0 && qy >= 0 && qz >= 0 && qx < g.nx && qy < g.ny && qz < g.nz && qx + sx >= 0 && qy + sy >= 0 &&
-         qz + sz >= 0 && qx + sx < g.nx && qy + sy < g.ny && qz + sz < g.nz;
-}
-
-/* Row p of A (docs/numerics.md, "Stencil"): the diagonal from p's own octants
- * and from the octants of its face neighbours that point back at p; face
- * couplings from the 8 cells sharing the grid edge; edge couplings from the
- * two corners of each of the 2 cells sharing the face diagonal. All times
- * V/8, plus V mu on the diagonal. Couplings to or from fixed voxels are 0. */
+/* Row p of A (docs/numerics.md, "Stencil"), all times V/8, plus V mu on the
+ * diagonal. A free voxel is interior and so are its free neighbours, so every
+ * cell the sums below visit exists, and the octant sums reduce to closed forms
+ * (the cross terms T_ab s_a s_b cancel over the octants):
+ *   diagonal    8 sum_a T_aa(p) / h_a^2 + 4 sum_a (T_aa(p - e_a) + T_aa(p + e_a)) / h_a^2
+ *               (p's own 8 octants; the 4 octants of each face neighbour that point back at p)
+ *   face +e_b   -4 (T_bb(p) + T_bb(p + e_b)) / h_b^2
+ *               (the 4 octants of p with s_b = +1 and of p + e_b with s_b = -1)
+ *   edge k_a e_a + k_b e_b
+ *               -2 k_a k_b (T_ab(p + k_a e_a) + T_ab(p + k_b e_b)) / (h_a h_b)
+ *               (the two cells sharing the face diagonal, at its two other corners).
+ * Couplings to or from fixed voxels are 0; fixed rows are the identity. */
 __kernel void system_assemble(__global const float* restrict mu, __global const float* restrict rho,
                               __global const float* restrict txx, __global const float* restrict tyy,
                               __global const float* restrict tzz, __global const float* restrict txy,
@@ -111,9 +112,6 @@ __kernel void system_assemble(__global const float* restrict mu, __global const 
   const size_t N = grid_voxels(g);
   const size_t p = grid_index(g, x, y, z);
   const float V = g.hx * g.hy * g.hz;
-  const float h[3] = {g.hx, g.hy, g.hz};
-  const int n[3] = {g.nx, g.ny, g.nz};
-  const int P[3] = {x, y, z};
   if (fixed[p]) {
     coef[p] = 1.0f;
     for (int k = 1; k < STENCIL_COEFS; ++k) coef[k * N + p] = 0.0f;
@@ -121,104 +119,39 @@ __kernel void system_assemble(__global const float* restrict mu, __global const 
     dT[p] = 0.0f;
     return;
   }
-  float diag = 0.0f;
-  /* p's own octants: sum_{a,b} T_ab s_a s_b / (h_a h_b). */
-  for (int o = 0; o < 8; ++o) {
-    const int s[3] = {(o & 1) ? 1 : -1, (o & 2) ? 1 : -1, (o & 4) ? 1 : -1};
-    if (!cell_exists(g, x, y, z, s[0], s[1], s[2])) continue;
-    for (int a = 0; a < 3; ++a)
-      for (int c = 0; c < 3; ++c)
-        diag += tensor_ab(txx, tyy, tzz, txy, txz, tyz, p, a, c) * (float)(s[a] * s[c]) / (h[a] * h[c]);
-  }
-  /* Octants of q = p - sigma e_a pointing back at p (s_a = sigma): T_aa / h_a^2. */
-  for (int a = 0; a < 3; ++a)
-    for (int sigma = -1; sigma <= 1; sigma += 2) {
-      int q[3] = {P[0], P[1], P[2]};
-      q[a] -= sigma;
-      if (q[a] < 0 || q[a] >= n[a]) continue;
-      const size_t qi = grid_index(g, q[0], q[1], q[2]);
-      const float taa = tensor_ab(txx, tyy, tzz, txy, txz, tyz, qi, a, a) / (h[a] * h[a]);
-      for (int o = 0; o < 4; ++o) {
-        int s[3];
-        const int b1 = (a + 1) % 3, b2 = (a + 2) % 3;
-        s[a] = sigma;
-        s[b1] = (o & 1) ? 1 : -1;
-        s[b2] = (o & 2) ? 1 : -1;
-        if (cell_exists(g, q[0], q[1], q[2], s[0], s[1], s[2])) diag += taa;
-      }
-    }
+  const long sy = g.nx, sz = (long)g.nx * g.ny;
+  const float ihx2 = 1.0f / (g.hx * g.hx), ihy2 = 1.0f / (g.hy * g.hy), ihz2 = 1.0f / (g.hz * g.hz);
+  const float diag = 8.0f * (txx[p] * ihx2 + tyy[p] * ihy2 + tzz[p] * ihz2) +
+                     4.0f * ((txx[p - 1] + txx[p + 1]) * ihx2 + (tyy[p - sy] + tyy[p + sy]) * ihy2 +
+                             (tzz[p - sz] + tzz[p + sz]) * ihz2);
   dT[p] = 0.125f * V * diag;
-  coef[p] = diagonal_coef(V, mu[p], dT[p]);
+  coef[p] = diagonal_coef(V, mu[p], 0.125f * V * diag);
   b[p] = V * rho[p];
-
-  /* Upper offsets. */
-  {
-    const int offs[STENCIL_COEFS][3] = {
-#define OFF(K, DX, DY, DZ) {DX, DY, DZ},
-        STENCIL_OFFSETS(OFF)
-#undef OFF
-    };
-    for (int k = 1; k < STENCIL_COEFS; ++k) {
-      const int kx = offs[k][0], ky = offs[k][1], kz = offs[k][2];
-      const int nb[3] = {x + kx, y + ky, z + kz};
-      float value = 0.0f;
-      const int nz_axes = (kx != 0) + (ky != 0) + (kz != 0);
-      if (nb[0] >= 0 && nb[1] >= 0 && nb[2] >= 0 && nb[0] < g.nx && nb[1] < g.ny && nb[2] < g.nz &&
-          !fixed[grid_index(g, nb[0], nb[1], nb[2])] && nz_axes < 3) {
-        const int K[3] = {kx, ky, kz};
-        if (nz_axes == 1) {
-          /* Face +e_b: -sum_a T_ab s_a s_b/(h_a h_b) over the octants of p with
-           * s_b = +1 and of p + e_b with s_b = -1. */
-          const int bax = kx ? 0 : (ky ? 1 : 2);
-          const int ends[2][3] = {{x, y, z}, {nb[0], nb[1], nb[2]}};
-          for (int e = 0; e < 2; ++e) {
-            const size_t qi = grid_index(g, ends[e][0], ends[e][1], ends[e][2]);
-            const int sb = e == 0 ? 1 : -1;
-            for (int o = 0; o < 4; ++o) {
-              int s[3];
-              const int b1 = (bax + 1) % 3, b2 = (bax + 2) % 3;
-              s[bax] = sb;
-              s[b1] = (o & 1) ? 1 : -1;
-              s[b2] = (o & 2) ? 1 : -1;
-              if (!cell_exists(g, ends[e][0], ends[e][1], ends[e][2], s[0], s[1], s[2])) continue;
-              float sum = 0.0f;
-              for (int a = 0; a < 3; ++a)
-                sum += tensor_ab(txx, tyy, tzz, txy, txz, tyz, qi, a, bax) * (float)(s[a] * s[bax]) / (h[a] * h[bax]);
-              value -= sum;
-            }
-          }
-        } else {
-          /* Edge k = k_a e_a + k_b e_b: -(k_a k_b / (h_a h_b)) T_ab at the two
-           * corners q1 = p + k_a e_a, q2 = p + k_b e_b, each over the (up to)
-           * two cells sharing the face. */
-          const int a = K[0] ? 0 : 1;
-          const int bb = K[2] ? 2 : 1;
-          const int third = 3 - a - bb;
-          const float scale = -(float)(K[a] * K[bb]) / (h[a] * h[bb]);
-          for (int e = 0; e < 2; ++e) {
-            int q[3] = {x, y, z};
-            int s[3];
-            if (e == 0) {
-              q[a] += K[a];
-              s[a] = -K[a];
-              s[bb] = K[bb];
-            } else {
-              q[bb] += K[bb];
-              s[a] = K[a];
-              s[bb] = -K[bb];
-            }
-            const size_t qi = grid_index(g, q[0], q[1], q[2]);
-            const float tab = tensor_ab(txx, tyy, tzz, txy, txz, tyz, qi, a, bb);
-            for (int t = -1; t <= 1; t += 2) {
-              s[third] = t;
-              if (cell_exists(g, q[0], q[1], q[2], s[0], s[1], s[2])) value += scale * tab;
-            }
-          }
-        }
-      }
-      coef[k * N + p] = 0.125f * V * value;
-    }
+  const float h[3] = {g.hx, g.hy, g.hz};
+  const long stride[3] = {1, sy, sz};
+#define COUPLING(K, DX, DY, DZ)                                                                            \
+  if (K > 0) {                                                                                            \
+    const long off = (long)(DX) + (long)(DY) * sy + (long)(DZ) * sz;                                      \
+    float value = 0.0f;                                                                                   \
+    if (!fixed[p + off]) {                                                                                \
+      const int d[3] = {DX, DY, DZ};                                                                      \
+      const int nz_axes = (DX != 0) + (DY != 0) + (DZ != 0);                                              \
+      if (nz_axes == 1) {                                                                                 \
+        const int bax = DX ? 0 : (DY ? 1 : 2);                                                            \
+        value = -4.0f * (tensor_ab(txx, tyy, tzz, txy, txz, tyz, p, bax, bax) +                           \
+                         tensor_ab(txx, tyy, tzz, txy, txz, tyz, p + off, bax, bax)) / (h[bax] * h[bax]); \
+      } else {                                                                                            \
+        const int a = DX ? 0 : 1, bb = DZ ? 2 : 1;                                                        \
+        value = -2.0f * (float)(d[a] * d[bb]) *                                                           \
+                (tensor_ab(txx, tyy, tzz, txy, txz, tyz, p + d[a] * stride[a], a, bb) +                   \
+                 tensor_ab(txx, tyy, tzz, txy, txz, tyz, p + d[bb] * stride[bb], a, bb)) /                \
+                (h[a] * h[bb]);                                                                           \
+      }                                                                                                   \
+    }                                                                                                     \
+    coef[K * N + p] = 0.125f * V * value;                                                                 \
   }
+  STENCIL_OFFSETS(COUPLING)
+#undef COUPLING
 }
 
 /* ------------------------------------------------------ apply, residual */
