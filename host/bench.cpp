@@ -1057,8 +1057,8 @@ std::string bench_table(const BenchReport& rep) {
     bw("copy (" + m + " floats, 8 B)", d.copy, d.copy_gbps);
     bw("triad (" + m + " floats, 12 B)", d.triad, d.triad_gbps);
     const std::string v = std::to_string(d.bw_size) + "^3";
-    bw("GS sweep, 8 colours (" + v + ", 68 B)", d.sweep, d.sweep_gbps);
-    bw("operator apply (" + v + ", 64 B)", d.apply, d.apply_gbps);
+    bw("GS sweep, 8 colours (" + v + ", " + fmt("%g", ByteModel::sweep) + " B)", d.sweep, d.sweep_gbps);
+    bw("operator apply (" + v + ", " + fmt("%g", ByteModel::apply) + " B)", d.apply, d.apply_gbps);
     s << "  checks: sweep vs host " << fmt("%.1e", d.sweep_check) << ", apply vs host " << fmt("%.1e", d.apply_check)
       << " (relative)\n";
 

@@ -3,6 +3,7 @@
 // 8-colour Gauss-Seidel or weighted Jacobi, full multigrid for the initial
 // guess, stopping on the relative residual.
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
@@ -156,6 +157,7 @@ class Multigrid {
 struct MultigridSolver::Impl : Multigrid {
   Impl(DeviceSystem& fine, const SolverParams& sp) : Multigrid(fine, sp), sys(fine) {}
   DeviceSystem& sys;
+  std::array<cl::Buffer, 5> pcg;  // x, r, z, p, q of the conjugate gradients, allocated on first use
 };
 
 MultigridSolver::MultigridSolver(DeviceSystem& fine, const SolverParams& sp)
@@ -206,10 +208,11 @@ std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector
     // multigrid's fine-level buffers serve the V-cycle, so x, r, z, p, q are
     // separate.
     const std::size_t bytes = n * sizeof(float);
-    cl::Buffer x = rt.buffer(bytes), r = rt.buffer(bytes), z = rt.buffer(bytes), p = rt.buffer(bytes),
-               q = rt.buffer(bytes);
+    auto& pcg = impl_->pcg;
+    if (!pcg[0]()) for (auto& buf : pcg) buf = rt.buffer(bytes);  // kept for the next solve
+    const cl::Buffer &x = pcg[0], &r = pcg[1], &z = pcg[2], &p = pcg[3], &q = pcg[4];
     rt.queue().enqueueCopyBuffer(F.u, x, 0, 0, bytes);
-    fine.residual(x, r);
+    rt.queue().enqueueCopyBuffer(F.r, r, 0, 0, bytes);  // b - A u, from the residual just reported
     const double nb = mg.b_norm();
     mg.precondition(r, z);
     rt.queue().enqueueCopyBuffer(z, p, 0, 0, bytes);
