@@ -338,28 +338,19 @@ void bench_sweep_apply(Runtime& rt, DeviceBench& db, int size, int reps) {
   const DeviceSystem sys(rt, vn, vp);
   rt.queue().finish();
   const HostStencil hs = host_stencil(sys);
-  const GridDesc g = hs.grid;
   const std::size_t N = hs.voxels(), bytes = N * sizeof(float);
   db.bw_size = size;
   db.bw_voxels = N;
-  // Own copies of the coefficients so every kernel launch yields an event.
-  cl::Buffer coef = rt.buffer(hs.coef.size() * sizeof(float)), b = rt.buffer(bytes), x = rt.buffer(bytes),
-             y = rt.buffer(bytes);
-  rt.queue().enqueueWriteBuffer(coef, CL_FALSE, 0, hs.coef.size() * sizeof(float), hs.coef.data());
-  rt.queue().enqueueWriteBuffer(b, CL_FALSE, 0, bytes, hs.b.data());
+  cl::Buffer x = rt.buffer(bytes), y = rt.buffer(bytes);
   rt.queue().enqueueFillBuffer(x, 0.0f, 0, bytes);
-  cl::Kernel gs = rt.kernel("system.cl", "relax_gs_colour"), ap = rt.kernel("system.cl", "system_apply");
-  GridDesc half = g;
-  half.nx = (g.nx + 1) / 2, half.ny = (g.ny + 1) / 2, half.nz = (g.nz + 1) / 2;
+  // One forward sweep in the order the solver uses on this device (DeviceSystem::gs_order()).
+  const bool slabs = sys.gs_order() == GsOrder::Slabs;
+  db.sweep_order =
+      !slabs ? "8 colours" : sys.gs_slab() == 1 ? "row order" : "slabs of " + std::to_string(sys.gs_slab());
   auto sweep = [&] {
-    cl::Event first, last;
-    for (int c = 0; c < 8; ++c) {
-      Runtime::set_args(gs, coef, b, x, cl_int(c), g);
-      last = rt.enqueue_3d(gs, half);
-      if (c == 0) first = last;
-    }
-    last.wait();
-    return event_span_seconds(first, last);
+    const auto span = sys.relax_gs(sys.b(), x, 1, false);
+    span.second.wait();
+    return event_span_seconds(span.first, span.second);
   };
   sweep();  // warm-up (and a non-trivial u for the checks)
   std::vector<float> before(N), after(N);
@@ -369,18 +360,20 @@ void bench_sweep_apply(Runtime& rt, DeviceBench& db, int size, int reps) {
     ts.push_back(sweep());
     if (r == 0) rt.queue().enqueueReadBuffer(x, CL_TRUE, 0, bytes, after.data());
   }
-  host_gs_colour_sweep(hs, before);
+  if (slabs)
+    host_gs_slab_sweep(hs, before, sys.gs_slab(), false);
+  else
+    host_gs_colour_sweep(hs, before);
   double dev = 0, scale = 0;
   for (std::size_t i = 0; i < N; ++i) dev = std::max(dev, double(std::abs(before[i] - after[i]))), scale = std::max(scale, double(std::abs(before[i])));
   db.sweep_check = scale > 0 ? dev / scale : dev;
-  check(db, scale > 0 && db.sweep_check <= 1e-4, "sweep: device differs from the host 8-colour Gauss-Seidel by " +
-                                                      std::to_string(db.sweep_check) + " (relative)");
+  check(db, scale > 0 && db.sweep_check <= 1e-4,
+        std::string("sweep: device differs from the host ") + (slabs ? "row/slab" : "8-colour") +
+            " Gauss-Seidel by " + std::to_string(db.sweep_check) + " (relative)");
   rt.queue().enqueueReadBuffer(x, CL_TRUE, 0, bytes, after.data());
-  Runtime::set_args(ap, coef, x, y, g);
-  rt.enqueue_3d(ap, g).wait();  // warm-up
+  sys.apply(x, y).wait();  // warm-up
   for (int r = 0; r < reps; ++r) {
-    Runtime::set_args(ap, coef, x, y, g);
-    cl::Event e = rt.enqueue_3d(ap, g);
+    cl::Event e = sys.apply(x, y);
     e.wait();
     ta.push_back(event_seconds(e));
   }
@@ -786,6 +779,39 @@ std::vector<double> host_apply(const HostStencil& s, const std::vector<float>& x
   return y;
 }
 
+void host_gs_slab_sweep(const HostStencil& s, std::vector<float>& u, int slab, bool reverse) {
+  check_stencil(s);
+  if (slab < 1) throw std::invalid_argument("host_gs_slab_sweep: slab < 1");
+  const GridDesc& g = s.grid;
+  const std::size_t N = s.voxels();
+  const Offsets o(g);
+  auto relax_row = [&](int y, int z) {
+    for (int j = 0; j < g.nx; ++j) {
+      const int x = reverse ? g.nx - 1 - j : j;
+      const std::size_t p = std::size_t(x) + std::size_t(g.nx) * (std::size_t(y) + std::size_t(g.ny) * z);
+      if (boundary(g, x, y, z))
+        u[p] = s.b[p] / s.coef[p];
+      else  // u_p = (b_p - sum_{q != p} A_pq u_q) / A_pp, with the latest u
+        u[p] = float((double(s.b[p]) - (row<double>(s, o, N, p, u.data()) - double(s.coef[p]) * u[p])) / s.coef[p]);
+    }
+  };
+  // Colour c: the slabs [k slab, (k + 1) slab) with k = c mod 2; every voxel
+  // in order, forward: plane, row parity, row, x ascending; reverse: all of it
+  // backwards. Rows of one parity in a plane are not coupled, so their order
+  // is free (the device walks them ascending either way).
+  for (int i = 0; i < 2; ++i) {
+    const int c = reverse ? 1 - i : i;
+    for (int z0 = c * slab; z0 < g.nz; z0 += 2 * slab)
+      for (int j = 0; j < slab && z0 + j < g.nz; ++j) {
+        const int z = reverse ? std::min(z0 + slab, g.nz) - 1 - j : z0 + j;
+        for (int k = 0; k < 2; ++k) {
+          const int py = reverse ? 1 - k : k;
+          for (int y = py; y < g.ny; y += 2) relax_row(y, z);
+        }
+      }
+  }
+}
+
 void host_gs_colour_sweep(const HostStencil& s, std::vector<float>& u) {
   check_stencil(s);
   const GridDesc& g = s.grid;
@@ -1057,7 +1083,7 @@ std::string bench_table(const BenchReport& rep) {
     bw("copy (" + m + " floats, 8 B)", d.copy, d.copy_gbps);
     bw("triad (" + m + " floats, 12 B)", d.triad, d.triad_gbps);
     const std::string v = std::to_string(d.bw_size) + "^3";
-    bw("GS sweep, 8 colours (" + v + ", " + fmt("%g", ByteModel::sweep) + " B)", d.sweep, d.sweep_gbps);
+    bw("GS sweep, " + d.sweep_order + " (" + v + ", " + fmt("%g", ByteModel::sweep) + " B)", d.sweep, d.sweep_gbps);
     bw("operator apply (" + v + ", " + fmt("%g", ByteModel::apply) + " B)", d.apply, d.apply_gbps);
     s << "  checks: sweep vs host " << fmt("%.1e", d.sweep_check) << ", apply vs host " << fmt("%.1e", d.apply_check)
       << " (relative)\n";

@@ -103,13 +103,14 @@ struct DeviceBench {
   std::size_t stream_elements = 0;
   Timing copy, triad;
   double copy_gbps = 0, triad_gbps = 0;
-  // One Gauss-Seidel sweep (8 colours) and one operator apply on the
+  // One Gauss-Seidel sweep (the solver's ordering on the device) and one operator apply on the
   // bandwidth system, with the byte models of bench_byte_model().
   int bw_size = 0;
   std::size_t bw_voxels = 0;
   Timing sweep, apply;
   double sweep_gbps = 0, sweep_fraction = 0, apply_gbps = 0, apply_fraction = 0;
   double sweep_check = 0, apply_check = 0;  // max relative deviation from the host reference
+  std::string sweep_order;                   // the sweep's Gauss-Seidel ordering, in words
 
   // Peers on one system (face phantom of peer_size^3) at the default
   // parameters; the stable keys describe this case.
@@ -186,6 +187,11 @@ double host_relative_residual(const HostStencil& s, const std::vector<float>& u)
 std::vector<double> host_apply(const HostStencil& s, const std::vector<float>& x);
 // One 8-colour Gauss-Seidel sweep, colour by colour as the device does (the sweep reference).
 void host_gs_colour_sweep(const HostStencil& s, std::vector<float>& u);
+// One slab Gauss-Seidel sweep as the device's GsOrder::Slabs does it (the
+// sweep reference there): 2 colours of z-slabs of `slab` planes, each slab
+// plane by plane, even rows then odd rows, x ascending; `reverse`: exactly
+// backwards. slab = 1 is the 4-colour row Gauss-Seidel.
+void host_gs_slab_sweep(const HostStencil& s, std::vector<float>& u, int slab, bool reverse);
 
 struct PeerSolve {
   double seconds = 0;

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "cl_runtime.hpp"
@@ -47,6 +48,9 @@ struct Densities {
   std::size_t voxels() const { return dims[0] * dims[1] * dims[2]; }
 };
 
+// Orderings of the Gauss-Seidel smoother (DeviceSystem::set_gs_order).
+enum class GsOrder { Points, Slabs };
+
 // One level of the system on the device: densities, the assembled stencil
 // (10 coefficients per voxel, kernels/stencil.h), b, and the operations the
 // solver needs on it.
@@ -82,8 +86,23 @@ class DeviceSystem {
   cl::Event apply(const cl::Buffer& x, const cl::Buffer& y) const;                      // y = A x
   cl::Event residual(const cl::Buffer& rhs, const cl::Buffer& x, const cl::Buffer& r) const;  // r = rhs - A x
   cl::Event residual(const cl::Buffer& x, const cl::Buffer& r) const { return residual(b_, x, r); }
-  // Gauss-Seidel sweeps over the 8 colours (reverse order when `reverse`).
-  void relax_gs(const cl::Buffer& rhs, const cl::Buffer& x, int sweeps, bool reverse) const;
+  // Gauss-Seidel sweeps in the system's ordering (gs_order()); `reverse`
+  // runs a sweep exactly backwards (colours and rows in reverse order), so a
+  // forward and a reverse sweep together are symmetric. Returns the first and
+  // the last kernel launched (profiling events).
+  std::pair<cl::Event, cl::Event> relax_gs(const cl::Buffer& rhs, const cl::Buffer& x, int sweeps,
+                                           bool reverse) const;
+  // Gauss-Seidel ordering: GsOrder::Points, 8 colours by the parity of
+  // (x, y, z), a work-item per voxel (coalesced: GPUs); GsOrder::Slabs, 2
+  // colours of z-slabs of gs_slab() planes, a work-item per slab relaxing its
+  // planes, rows and x in order (kernels/system.cl, relax_gs_slabs: whole
+  // cache lines: CPUs; a stronger, line-ordered smoother). Default: Points on
+  // GPUs, Slabs of 1 plane otherwise (the 4-colour row Gauss-Seidel); coarsen()
+  // passes both on.
+  GsOrder gs_order() const { return gs_order_; }
+  int gs_slab() const;  // planes per slab (GsOrder::Slabs)
+  void set_gs_order(GsOrder o) { gs_order_ = o; }
+  void set_gs_slab(int planes) { gs_slab_ = planes; }  // 0: the default (1)
   // Weighted Jacobi sweeps; `tmp` is scratch of the same size.
   void relax_jacobi(const cl::Buffer& rhs, const cl::Buffer& x, const cl::Buffer& tmp, double w, int sweeps) const;
   void zero_fixed(const cl::Buffer& x) const;
@@ -108,7 +127,9 @@ class DeviceSystem {
   std::array<cl::Buffer, 6> T_;
   std::array<cl::Buffer, 3> sources_;  // v, v~, |grad v|^2 of a volume-built level (for update_point)
   double reduce(cl::Kernel& k) const;
-  mutable cl::Kernel apply_, residual_, gs_, jacobi_, zero_fixed_, dot_, axpby_;
+  GsOrder gs_order_ = GsOrder::Points;
+  int gs_slab_ = 0;
+  mutable cl::Kernel apply_, residual_, gs_, gs_slabs_, jacobi_, zero_fixed_, dot_, axpby_;
 };
 
 // Multigrid solver settings and report (docs/numerics.md, "Multigrid").
@@ -116,7 +137,7 @@ struct SolverParams {
   double tol = 1e-4;        // stop at ||b - A u|| / ||b|| <= tol
   int max_cycles = 30;      // V-cycles; more means "not converged"
   int pre_sweeps = 2, post_sweeps = 2;
-  bool jacobi = false;      // smoother: weighted Jacobi instead of 8-colour Gauss-Seidel
+  bool jacobi = false;      // smoother: weighted Jacobi instead of Gauss-Seidel
   double jacobi_weight = 0.8;
   bool full_multigrid = true;  // FMG initial guess (ignored with an initial u)
   int max_levels = 8;          // 2 reproduces the paper's two-level scheme

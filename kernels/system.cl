@@ -1,13 +1,17 @@
 /* The linear system of the variational classifier (docs/numerics.md):
  * per-voxel densities, assembly of the 19-point stencil, operator apply and
- * residual, the two smoothers (8-colour Gauss-Seidel, weighted Jacobi), and a
- * deterministic dot-product reduction.
+ * residual, the smoothers (Gauss-Seidel by 8 point colours or by 2 colours of
+ * z-slabs, weighted Jacobi), and a deterministic dot-product reduction.
  *
  * Stencil storage (kernels/stencil.h): coef[k * N + p], k = 0 diagonal,
  * k = 1..9 the face and edge offsets with a positive linear index; A[p][p - off_k] is
  * coef[k * N + (p - off_k)]. Fixed voxels have identity rows and no couplings,
  * and every voxel on the volume boundary is fixed, so interior voxels never
  * look outside the volume.
+ *
+ * The row helpers are always_inline: left to itself clang keeps stencil_row a
+ * call, and a call in the work-item loop stops PoCL's loop vectoriser (the
+ * apply ran scalar at ~1/3 of its vector speed on the CPU device).
  */
 #include "grid.h"
 #include "stencil.h"
@@ -157,8 +161,9 @@ __kernel void system_assemble(__global const float* restrict mu, __global const 
 /* ------------------------------------------------------ apply, residual */
 
 /* (A x)_p for an interior voxel p. */
-inline float stencil_row(__global const float* restrict coef, __global const float* restrict xv, const size_t N,
-                         const size_t p, const long sy, const long sz) {
+__attribute__((always_inline)) inline float stencil_row(__global const float* restrict coef,
+                                                       __global const float* restrict xv, const size_t N, const size_t p,
+                                                       const long sy, const long sz) {
   float acc = coef[p] * xv[p];
 #define TERM(K, DX, DY, DZ)                                          \
   if (K > 0) {                                                       \
@@ -172,8 +177,9 @@ inline float stencil_row(__global const float* restrict coef, __global const flo
 }
 
 /* (A x)_p for any voxel: boundary voxels are fixed, their row is the diagonal. */
-inline float apply_row(__global const float* restrict coef, __global const float* restrict xv, const GridDesc g,
-                       const int x, const int y, const int z, const size_t p) {
+__attribute__((always_inline)) inline float apply_row(__global const float* restrict coef,
+                                                     __global const float* restrict xv, const GridDesc g, const int x,
+                                                     const int y, const int z, const size_t p) {
   return on_boundary(g, x, y, z) ? coef[p] * xv[p]
                                  : stencil_row(coef, xv, grid_voxels(g), p, g.nx, (long)g.nx * g.ny);
 }
@@ -197,7 +203,7 @@ __kernel void system_residual(__global const float* restrict coef, __global cons
 /* ------------------------------------------------------------ smoothers */
 
 /* One Gauss-Seidel update of the voxels of one colour (parity of x, y, z):
- * same-colour voxels differ by even offsets, so no 27-point stencil couples
+ * same-colour voxels differ by even offsets, so no 19-point stencil couples
  * them and the sweep is race-free. Global size: ceil(n / 2) per axis. */
 __kernel void relax_gs_colour(__global const float* restrict coef, __global const float* restrict bv,
                               __global float* xv, const int colour, const GridDesc g) {
@@ -213,6 +219,107 @@ __kernel void relax_gs_colour(__global const float* restrict coef, __global cons
   const size_t N = grid_voxels(g);
   const float ax = stencil_row(coef, xv, N, p, g.nx, (long)g.nx * g.ny);
   xv[p] += (bv[p] - ax) / coef[p];
+}
+
+/* Slab Gauss-Seidel (the CPU ordering). Two colours of slabs of `slab`
+ * consecutive z-planes (colour: the parity of z / slab); slabs of one colour
+ * are a slab apart, so no 19-point stencil couples them and a colour is
+ * race-free. One work-item relaxes one slab: plane by plane, in each plane the
+ * even rows, then the odd rows (rows 2 apart are not coupled: their order is
+ * free, and they are walked in ascending memory order), each x-row in order.
+ * `reverse` runs all of it backwards (with the colours in reverse order this is
+ * exactly the forward sweep backwards, so forward + reverse is a symmetric
+ * smoother), rows still in ascending memory order. slab = 1 (the host's
+ * default) is the 4-colour row Gauss-Seidel: colours by the parity of (y, z),
+ * in the order (0,0), (1,0), (0,1), (1,1). Every coefficient cache line is
+ * used in full, which suits CPUs; on GPUs a work-item per slab is too little
+ * parallelism and uncoalesced (relax_gs_colour there).
+ * Global size: ceil(nz / (2 slab)).
+ *
+ * Within a row only the coupling to the previous voxel in walking order sees a
+ * value updated in this pass; the rest of each row sum is formed for a chunk
+ * of the row at once (a plain loop the compiler vectorises), then the chunk is
+ * finished serially: u_p = r_p - l_p u_prev, with r_p = (b_p - the other
+ * off-diagonal terms) / A[p][p] and l_p = A[p][prev] / A[p][p]. */
+#define GS_ROW_CHUNK 128
+
+/* x = 1 .. nx - 2 of an interior row (y, z interior). */
+__attribute__((always_inline)) inline void gs_row(__global const float* restrict coef,
+                                                  __global const float* restrict bv, __global float* xv,
+                                                  const GridDesc g, const size_t row, const int reverse) {
+  const size_t N = grid_voxels(g);
+  const long sy = g.nx, sz = (long)g.nx * g.ny;
+  const int n = g.nx - 2;
+  for (int done = 0; done < n; done += GS_ROW_CHUNK) {
+    const int m = min(GS_ROW_CHUNK, n - done);
+    const size_t p0 = row + (size_t)(reverse ? g.nx - 1 - done - m : 1 + done); /* lowest x of the chunk */
+    float r[GS_ROW_CHUNK], l[GS_ROW_CHUNK];
+    for (int i = 0; i < m; ++i) {
+      const size_t p = p0 + i;
+      /* The x-neighbour visited later: still its old value. */
+      float acc = reverse ? -coef[N + p - 1] * xv[p - 1] : -coef[N + p] * xv[p + 1];
+#define TERM(K, DX, DY, DZ)                                          \
+  if (K > 1) {                                                       \
+    const long off = (long)(DX) + (long)(DY) * sy + (long)(DZ) * sz; \
+    acc = fma(-coef[K * N + p], xv[p + off], acc);                   \
+    acc = fma(-coef[K * N + p - off], xv[p - off], acc);             \
+  }
+      STENCIL_OFFSETS(TERM)
+#undef TERM
+      const float inv = 1.0f / coef[p];
+      r[i] = (bv[p] + acc) * inv;
+      l[i] = (reverse ? coef[N + p] : coef[N + p - 1]) * inv;
+    }
+    /* The serial part: one fma per voxel, the previous value in a register. */
+    if (reverse) {
+      float u = xv[p0 + m];
+      for (int i = m - 1; i >= 0; --i) {
+        u = fma(-l[i], u, r[i]);
+        xv[p0 + i] = u;
+      }
+    } else {
+      float u = xv[p0 - 1];
+      for (int i = 0; i < m; ++i) {
+        u = fma(-l[i], u, r[i]);
+        xv[p0 + i] = u;
+      }
+    }
+  }
+}
+
+/* Any x-row: a fixed row (y or z on the boundary) has identity rows and no
+ * couplings; an interior row's two ends are fixed and coupled to nothing. */
+__attribute__((always_inline)) inline void gs_any_row(__global const float* restrict coef,
+                                                      __global const float* restrict bv, __global float* xv,
+                                                      const GridDesc g, const int y, const int z, const int reverse) {
+  const size_t row = (size_t)g.nx * ((size_t)y + (size_t)g.ny * z);
+  if (y == 0 || z == 0 || y == g.ny - 1 || z == g.nz - 1) {
+    for (int x = 0; x < g.nx; ++x) xv[row + x] = bv[row + x] / coef[row + x];
+    return;
+  }
+  xv[row] = bv[row] / coef[row];
+  xv[row + g.nx - 1] = bv[row + g.nx - 1] / coef[row + g.nx - 1];
+  if (reverse)
+    gs_row(coef, bv, xv, g, row, 1);
+  else
+    gs_row(coef, bv, xv, g, row, 0);
+}
+
+__kernel void relax_gs_slabs(__global const float* restrict coef, __global const float* restrict bv,
+                             __global float* xv, const int colour, const int reverse, const int slab,
+                             const GridDesc g) {
+  const int z0 = (2 * (int)get_global_id(0) + colour) * slab;
+  if (z0 >= g.nz) return;
+  const int z1 = min(z0 + slab, g.nz);
+  if (reverse) {
+    for (int z = z1 - 1; z >= z0; --z)
+      for (int py = 1; py >= 0; --py)
+        for (int y = py; y < g.ny; y += 2) gs_any_row(coef, bv, xv, g, y, z, 1);
+  } else {
+    for (int z = z0; z < z1; ++z)
+      for (int py = 0; py <= 1; ++py)
+        for (int y = py; y < g.ny; y += 2) gs_any_row(coef, bv, xv, g, y, z, 0);
+  }
 }
 
 /* Weighted Jacobi: x_new = x + w (b - A x) / diag. */

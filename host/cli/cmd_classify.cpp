@@ -260,7 +260,9 @@ void add_classify_command(CLI::App& app, Action& action) {
   g->add_option("--max-cycles", o->sp.max_cycles, "Iterations before giving up (exit 3)")->capture_default_str();
   g->add_option("--levels", o->sp.max_levels, "Multigrid levels (2: the paper's two-level scheme)")->capture_default_str();
   g->add_option("--cycle", o->cycle, "pcg: V-cycle-preconditioned CG; v: plain V-cycles")->capture_default_str();
-  g->add_option("--smoother", o->smoother, "gs: 8-colour Gauss-Seidel; jacobi: weighted Jacobi")->capture_default_str();
+  g->add_option("--smoother", o->smoother,
+                "gs: Gauss-Seidel (4-colour rows on CPUs, 8 colours on GPUs); jacobi: weighted Jacobi")
+      ->capture_default_str();
   g->add_flag("--no-fmg", o->no_fmg, "Start from u = 0 instead of a full-multigrid guess");
   g->add_option("--init", o->init, "Warm start from this opacity volume (e.g. after a parameter change)");
   g->add_flag("--stats", o->stats, "Print the residual history");
