@@ -15,7 +15,8 @@ namespace {
 
 constexpr const char* kSystem = "system.cl";
 constexpr const char* kMultigrid = "multigrid.cl";
-constexpr std::size_t kReduceGroups = 64, kReduceLocal = 256;
+constexpr std::size_t kReduceGroups = 64, kReduceLocal = 256;  // GPU: strided work-groups
+constexpr std::size_t kReduceChunks = 256;                     // CPU: contiguous chunks
 
 template <class T>
 cl::Buffer upload(Runtime& rt, const std::vector<T>& host) {
@@ -53,7 +54,7 @@ DeviceSystem::DeviceSystem(Runtime& rt, const GridDesc& g) : rt_(rt), grid_(g) {
   coef_ = rt.buffer(n * STENCIL_COEFS * sizeof(float));
   b_ = rt.buffer(n * sizeof(float));
   dT_ = rt.buffer(n * sizeof(float));
-  partial_ = rt.buffer(kReduceGroups * sizeof(float));
+  partial_ = rt.buffer(std::max(kReduceGroups, kReduceChunks) * sizeof(float));
   apply_ = rt.kernel(kSystem, "system_apply");
   residual_ = rt.kernel(kSystem, "system_residual");
   gs_ = rt.kernel(kSystem, "relax_gs_colour");
@@ -61,7 +62,7 @@ DeviceSystem::DeviceSystem(Runtime& rt, const GridDesc& g) : rt_(rt), grid_(g) {
   gs_order_ = rt.info().is_gpu() ? GsOrder::Points : GsOrder::Slabs;
   jacobi_ = rt.kernel(kSystem, "relax_jacobi");
   zero_fixed_ = rt.kernel(kSystem, "system_zero_fixed");
-  dot_ = rt.kernel(kSystem, "reduce_dot");
+  dot_ = rt.kernel(kSystem, rt.info().is_gpu() ? "reduce_dot" : "reduce_dot_chunks");
   axpby_ = rt.kernel(kSystem, "vec_axpby");
 }
 
@@ -217,21 +218,29 @@ void DeviceSystem::zero_fixed(const cl::Buffer& x) const {
   rt_.enqueue_1d(zero_fixed_, voxels());
 }
 
-double DeviceSystem::reduce(cl::Kernel& k) const {
-  const std::size_t local = std::min<std::size_t>(kReduceLocal, rt_.info().max_work_group);
-  rt_.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(kReduceGroups * local), cl::NDRange(local));
-  std::vector<float> partial(kReduceGroups);
-  rt_.queue().enqueueReadBuffer(partial_, CL_TRUE, 0, kReduceGroups * sizeof(float), partial.data());
+double DeviceSystem::norm(const cl::Buffer& x) const { return std::sqrt(dot(x, x)); }
+
+// x . y: per-group (GPU) or per-chunk (CPU) partial sums on the device, added
+// on the host in a fixed order, so the result is deterministic.
+double DeviceSystem::dot(const cl::Buffer& x, const cl::Buffer& y) const {
+  const cl_ulong n = voxels();
+  std::size_t parts = 0;
+  if (rt_.info().is_gpu()) {
+    const std::size_t local = std::min<std::size_t>(kReduceLocal, rt_.info().max_work_group);
+    Runtime::set_args(dot_, x, y, n, partial_, cl::Local(local * sizeof(float)));
+    parts = kReduceGroups;
+    rt_.queue().enqueueNDRangeKernel(dot_, cl::NullRange, cl::NDRange(parts * local), cl::NDRange(local));
+  } else {
+    const cl_ulong chunk = (n + kReduceChunks * 8 - 1) / (kReduceChunks * 8) * 8;
+    Runtime::set_args(dot_, x, y, n, chunk, partial_);
+    parts = kReduceChunks;
+    rt_.queue().enqueueNDRangeKernel(dot_, cl::NullRange, cl::NDRange(parts), cl::NDRange(1));
+  }
+  std::vector<float> partial(parts);
+  rt_.queue().enqueueReadBuffer(partial_, CL_TRUE, 0, parts * sizeof(float), partial.data());
   double sum = 0;
   for (float f : partial) sum += f;  // fixed order: deterministic
   return sum;
-}
-
-double DeviceSystem::norm(const cl::Buffer& x) const { return std::sqrt(dot(x, x)); }
-
-double DeviceSystem::dot(const cl::Buffer& x, const cl::Buffer& y) const {
-  Runtime::set_args(dot_, x, y, static_cast<cl_ulong>(voxels()), partial_, cl::Local(kReduceLocal * sizeof(float)));
-  return reduce(dot_);
 }
 
 void DeviceSystem::axpby(float a, const cl::Buffer& x, float b, const cl::Buffer& y) const {

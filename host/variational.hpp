@@ -126,7 +126,6 @@ class DeviceSystem {
   cl::Buffer mu_, rho_, fixed_, coef_, b_, dT_, partial_;
   std::array<cl::Buffer, 6> T_;
   std::array<cl::Buffer, 3> sources_;  // v, v~, |grad v|^2 of a volume-built level (for update_point)
-  double reduce(cl::Kernel& k) const;
   GsOrder gs_order_ = GsOrder::Points;
   int gs_slab_ = 0;
   mutable cl::Kernel apply_, residual_, gs_, gs_slabs_, jacobi_, zero_fixed_, dot_, axpby_;

@@ -362,3 +362,19 @@ __kernel void reduce_dot(__global const float* restrict xv, __global const float
   }
   if (l == 0) partial[get_group_id(0)] = scratch[0];
 }
+
+/* The same partial sums for CPUs: work-item i sums the contiguous chunk
+ * [i c, (i + 1) c) (c a multiple of 8) with 8 lanes of vector loads, lanes
+ * added in a fixed order. A work-item walking its own stretch of memory suits
+ * a CPU core; the strided kernel above suits a GPU. Deterministic. */
+__kernel void reduce_dot_chunks(__global const float* restrict xv, __global const float* restrict yv, const ulong n,
+                                const ulong chunk, __global float* restrict partial) {
+  const size_t i = get_global_id(0);
+  const size_t lo = min((size_t)n, i * (size_t)chunk), hi = min((size_t)n, lo + (size_t)chunk);
+  float8 acc8 = (float8)(0.0f);
+  size_t j = lo;
+  for (; j + 8 <= hi; j += 8) acc8 = fma(vload8(0, xv + j), vload8(0, yv + j), acc8);
+  float acc = ((acc8.s0 + acc8.s1) + (acc8.s2 + acc8.s3)) + ((acc8.s4 + acc8.s5) + (acc8.s6 + acc8.s7));
+  for (; j < hi; ++j) acc = fma(xv[j], yv[j], acc);
+  partial[i] = acc;
+}

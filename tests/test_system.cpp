@@ -469,6 +469,31 @@ TEST(System, SymmetricPositiveOnDevice) {
 namespace softshell {
 namespace {
 
+TEST(System, DotAndNormMatchAHostFloat64SumAndAreDeterministic) {
+  // Sizes around the CPU kernel's chunking (8-float blocks, 256 chunks) and
+  // the GPU kernel's 64 x 256 work-items: fewer voxels than chunks, a tail
+  // that is not a multiple of 8, and many voxels per chunk.
+  for (const Dims3 dims : {Dims3{5, 5, 5}, Dims3{13, 11, 7}, Dims3{37, 41, 29}, Dims3{64, 64, 65}}) {
+    SCOPED_TRACE(std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]));
+    const Densities d = test::random_densities(dims, {1, 1, 1}, test::seed() + 181, 0.7, 0.01);
+    const DeviceSystem sys(runtime(), d);
+    const std::size_t n = d.voxels();
+    const Volume xv = test::random_volume(dims, {1, 1, 1}, test::seed() + 182, -1.0f, 1.0f);
+    const Volume yv = test::random_volume(dims, {1, 1, 1}, test::seed() + 183, 0.0f, 2.0f);
+    const cl::Buffer x = test::upload(runtime(), xv.data), y = test::upload(runtime(), yv.data);
+    double want = 0, want_xx = 0, scale = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      want += double(xv.data[i]) * yv.data[i];
+      want_xx += double(xv.data[i]) * xv.data[i];
+      scale += std::abs(double(xv.data[i]) * yv.data[i]);
+    }
+    const double got = sys.dot(x, y);
+    EXPECT_NEAR(got, want, 1e-6 * scale);
+    EXPECT_NEAR(sys.norm(x), std::sqrt(want_xx), 1e-6 * std::sqrt(want_xx));
+    EXPECT_EQ(got, sys.dot(x, y)) << "deterministic";
+  }
+}
+
 TEST(System, RejectsAFreeBoundaryVoxel) {
   // The kernels skip the stencil on the boundary; a free boundary voxel would
   // silently give a non-symmetric operator, so it is refused.
