@@ -62,7 +62,7 @@ DeviceSystem::DeviceSystem(Runtime& rt, const GridDesc& g) : rt_(rt), grid_(g) {
   gs_order_ = rt.info().is_gpu() ? GsOrder::Points : GsOrder::Slabs;
   jacobi_ = rt.kernel(kSystem, "relax_jacobi");
   zero_fixed_ = rt.kernel(kSystem, "system_zero_fixed");
-  dot_ = rt.kernel(kSystem, rt.info().is_gpu() ? "reduce_dot" : "reduce_dot_chunks");
+  set_strided_dot(rt.info().is_gpu());
   axpby_ = rt.kernel(kSystem, "vec_axpby");
 }
 
@@ -220,12 +220,17 @@ void DeviceSystem::zero_fixed(const cl::Buffer& x) const {
 
 double DeviceSystem::norm(const cl::Buffer& x) const { return std::sqrt(dot(x, x)); }
 
+void DeviceSystem::set_strided_dot(bool strided) {
+  strided_dot_ = strided;
+  dot_ = rt_.kernel(kSystem, strided ? "reduce_dot" : "reduce_dot_chunks");
+}
+
 // x . y: per-group (GPU) or per-chunk (CPU) partial sums on the device, added
 // on the host in a fixed order, so the result is deterministic.
 double DeviceSystem::dot(const cl::Buffer& x, const cl::Buffer& y) const {
   const cl_ulong n = voxels();
   std::size_t parts = 0;
-  if (rt_.info().is_gpu()) {
+  if (strided_dot_) {
     const std::size_t local = std::min<std::size_t>(kReduceLocal, rt_.info().max_work_group);
     Runtime::set_args(dot_, x, y, n, partial_, cl::Local(local * sizeof(float)));
     parts = kReduceGroups;

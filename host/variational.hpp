@@ -108,6 +108,9 @@ class DeviceSystem {
   void zero_fixed(const cl::Buffer& x) const;
   double norm(const cl::Buffer& x) const;  // Euclidean, deterministic
   double dot(const cl::Buffer& x, const cl::Buffer& y) const;  // deterministic
+  // The dot product's kernel: work-groups striding over the vector (GPUs,
+  // the default there) or a contiguous chunk per work-item (CPUs).
+  void set_strided_dot(bool strided);
   void axpby(float a, const cl::Buffer& x, float b, const cl::Buffer& y) const;  // y = a x + b y
 
   Densities download_densities() const;
@@ -127,6 +130,7 @@ class DeviceSystem {
   std::array<cl::Buffer, 6> T_;
   std::array<cl::Buffer, 3> sources_;  // v, v~, |grad v|^2 of a volume-built level (for update_point)
   GsOrder gs_order_ = GsOrder::Points;
+  bool strided_dot_ = false;
   int gs_slab_ = 0;
   mutable cl::Kernel apply_, residual_, gs_, gs_slabs_, jacobi_, zero_fixed_, dot_, axpby_;
 };

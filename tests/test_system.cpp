@@ -476,7 +476,7 @@ TEST(System, DotAndNormMatchAHostFloat64SumAndAreDeterministic) {
   for (const Dims3 dims : {Dims3{5, 5, 5}, Dims3{13, 11, 7}, Dims3{37, 41, 29}, Dims3{64, 64, 65}}) {
     SCOPED_TRACE(std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]));
     const Densities d = test::random_densities(dims, {1, 1, 1}, test::seed() + 181, 0.7, 0.01);
-    const DeviceSystem sys(runtime(), d);
+    DeviceSystem sys(runtime(), d);
     const std::size_t n = d.voxels();
     const Volume xv = test::random_volume(dims, {1, 1, 1}, test::seed() + 182, -1.0f, 1.0f);
     const Volume yv = test::random_volume(dims, {1, 1, 1}, test::seed() + 183, 0.0f, 2.0f);
@@ -487,10 +487,14 @@ TEST(System, DotAndNormMatchAHostFloat64SumAndAreDeterministic) {
       want_xx += double(xv.data[i]) * xv.data[i];
       scale += std::abs(double(xv.data[i]) * yv.data[i]);
     }
-    const double got = sys.dot(x, y);
-    EXPECT_NEAR(got, want, 1e-6 * scale);
-    EXPECT_NEAR(sys.norm(x), std::sqrt(want_xx), 1e-6 * std::sqrt(want_xx));
-    EXPECT_EQ(got, sys.dot(x, y)) << "deterministic";
+    for (bool strided : {false, true}) {  // the CPU and the GPU kernel, both on this device
+      SCOPED_TRACE(strided ? "strided (GPU) kernel" : "chunked (CPU) kernel");
+      sys.set_strided_dot(strided);
+      const double got = sys.dot(x, y);
+      EXPECT_NEAR(got, want, 1e-6 * scale);
+      EXPECT_NEAR(sys.norm(x), std::sqrt(want_xx), 1e-6 * std::sqrt(want_xx));
+      EXPECT_EQ(got, sys.dot(x, y)) << "deterministic";
+    }
   }
 }
 
