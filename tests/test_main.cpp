@@ -91,6 +91,13 @@ std::vector<float> download(Runtime& rt, const cl::Buffer& buf, std::size_t n) {
                                        << "; worst abs error " << worst;
 }
 
+double max_relative_deviation(const std::vector<float>& a, const std::vector<float>& b) {
+  double dev = 0, scale = 0;
+  for (std::size_t i = 0; i < a.size() && i < b.size(); ++i)
+    dev = std::max(dev, double(std::abs(a[i] - b[i]))), scale = std::max(scale, double(std::abs(b[i])));
+  return scale > 0 ? dev / scale : dev;
+}
+
 }  // namespace softshell::test
 
 int main(int argc, char** argv) {

@@ -319,14 +319,6 @@ TEST(SolverFace, WarmStartAfterAFivePercentIsoChangeIsCheap) {
   EXPECT_LE(warm.cycles, cold.cycles);
 }
 
-// Relative max difference of two coefficient (or b) arrays.
-double max_rel_diff(const std::vector<float>& a, const std::vector<float>& b) {
-  double dev = 0, scale = 0;
-  for (std::size_t i = 0; i < a.size(); ++i)
-    dev = std::max(dev, double(std::abs(a[i] - b[i]))), scale = std::max(scale, double(std::abs(b[i])));
-  return scale > 0 ? dev / scale : dev;
-}
-
 TEST(SolverUpdate, PointwiseUpdateEqualsAFreshBuildOnEveryLevel) {
   // New v_iso, alpha, gamma, omega, delta, epsilon, u_ind: the updated fine
   // level and a coarse level re-restricted from it equal fresh builds.
@@ -344,16 +336,16 @@ TEST(SolverUpdate, PointwiseUpdateEqualsAFreshBuildOnEveryLevel) {
   auto fresh_coarse = DeviceSystem::coarsen(fresh);
   auto fresh_coarser = DeviceSystem::coarsen(*fresh_coarse);
   runtime().queue().finish();
-  EXPECT_GT(max_rel_diff(before, fresh.download_coefficients()), 1e-3) << "the update must change something";
-  EXPECT_EQ(max_rel_diff(sys.download_coefficients(), fresh.download_coefficients()), 0.0);
-  EXPECT_EQ(max_rel_diff(sys.download_b(), fresh.download_b()), 0.0);
-  EXPECT_EQ(max_rel_diff(coarse->download_coefficients(), fresh_coarse->download_coefficients()), 0.0);
-  EXPECT_EQ(max_rel_diff(coarse->download_b(), fresh_coarse->download_b()), 0.0);
-  EXPECT_EQ(max_rel_diff(coarser->download_coefficients(), fresh_coarser->download_coefficients()), 0.0);
+  EXPECT_GT(test::max_relative_deviation(before, fresh.download_coefficients()), 1e-3) << "the update must change something";
+  EXPECT_EQ(test::max_relative_deviation(sys.download_coefficients(), fresh.download_coefficients()), 0.0);
+  EXPECT_EQ(test::max_relative_deviation(sys.download_b(), fresh.download_b()), 0.0);
+  EXPECT_EQ(test::max_relative_deviation(coarse->download_coefficients(), fresh_coarse->download_coefficients()), 0.0);
+  EXPECT_EQ(test::max_relative_deviation(coarse->download_b(), fresh_coarse->download_b()), 0.0);
+  EXPECT_EQ(test::max_relative_deviation(coarser->download_coefficients(), fresh_coarser->download_coefficients()), 0.0);
   // mu and rho too (the next restriction starts from them).
   const Densities a = coarser->download_densities(), b = fresh_coarser->download_densities();
-  EXPECT_EQ(max_rel_diff(a.mu, b.mu), 0.0);
-  EXPECT_EQ(max_rel_diff(a.rho, b.rho), 0.0);
+  EXPECT_EQ(test::max_relative_deviation(a.mu, b.mu), 0.0);
+  EXPECT_EQ(test::max_relative_deviation(a.rho, b.rho), 0.0);
 }
 
 TEST(SolverUpdate, OnlyVolumeBuiltSystemsAreUpdatable) {

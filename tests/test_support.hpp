@@ -49,6 +49,9 @@ bool in_ci();  // $CI == "true"
 cl::Buffer upload(Runtime& rt, const std::vector<float>& host);
 std::vector<float> download(Runtime& rt, const cl::Buffer& buf, std::size_t n);
 
+// max |a - b| / max |b| (max |a - b| when b is all 0).
+double max_relative_deviation(const std::vector<float>& a, const std::vector<float>& b);
+
 // Asserts |got - want| <= abs_tol + rel_tol * |want| everywhere; on failure,
 // reports the first failing index as (x, y, z) and the worst error.
 ::testing::AssertionResult all_near(const std::vector<float>& got, const std::vector<double>& want, Dims3 dims,
