@@ -97,14 +97,17 @@ class Multigrid {
     }
   }
 
-  // z = M r: one V-cycle from zero with right-hand side r.
+  // z = M r: one V-cycle from zero with right-hand side r. The fine level
+  // works on r and z themselves (the V-cycle only reads its right-hand side).
   void precondition(const cl::Buffer& r, const cl::Buffer& z) {
     Level& F = fine();
-    const std::size_t bytes = F.sys->voxels() * sizeof(float);
-    rt_.queue().enqueueCopyBuffer(r, F.rhs, 0, 0, bytes);
-    rt_.queue().enqueueFillBuffer(F.u, 0.0f, 0, bytes);
+    const cl::Buffer rhs = F.rhs, u = F.u;
+    F.rhs = r;
+    F.u = z;
+    rt_.queue().enqueueFillBuffer(z, 0.0f, 0, F.sys->voxels() * sizeof(float));
     vcycle(0);
-    rt_.queue().enqueueCopyBuffer(F.u, z, 0, 0, bytes);
+    F.rhs = rhs;
+    F.u = u;
   }
 
   // ||b - A u|| / ||b|| of the fine level's u, against the system's own b
