@@ -2,8 +2,11 @@
 #include "gl_context.hpp"
 
 #include <algorithm>
+#include <chrono>
+#include <cstdlib>
 #include <cstring>
 #include <stdexcept>
+#include <thread>
 
 #include "error.hpp"
 
@@ -18,11 +21,27 @@ void glfw_error_callback(int code, const char* text) {
 
 int g_contexts = 0;  // glfwTerminate when the last context goes
 
+// glfwInit, with more tries when a display is named: an X server that is
+// still coming up (xvfb-run on a loaded machine) refuses connections for a
+// moment, and a first refusal then was the whole error. Without a display
+// the first failure stands.
+bool init_glfw() {
+  if (glfwInit()) return true;
+  const char* x = std::getenv("DISPLAY");
+  const char* wayland = std::getenv("WAYLAND_DISPLAY");
+  if (!(x && *x) && !(wayland && *wayland)) return false;
+  for (int attempt = 0; attempt < 10; ++attempt) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    if (glfwInit()) return true;
+  }
+  return false;
+}
+
 }  // namespace
 
 GlContext::GlContext(int width, int height, const std::string& title, bool visible) {
   glfwSetErrorCallback(glfw_error_callback);
-  if (g_contexts == 0 && !glfwInit())
+  if (g_contexts == 0 && !init_glfw())
     throw InputError("no display: run under xvfb-run -a or set DISPLAY (" + g_glfw_error + ")");
   ++g_contexts;
   glfwDefaultWindowHints();
