@@ -8,7 +8,6 @@
 #include <stdexcept>
 
 #include "filter.hpp"
-#include "gradient.hpp"
 
 namespace softshell {
 namespace {
@@ -99,21 +98,14 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
   cl::Buffer dvs = rt.buffer(bytes);
   Lowpass(rt, grid_, {p.sigma_mm, 3.0}).apply(dv, dvs);
   cl::Buffer grad2 = rt.buffer(bytes);
-  std::array<cl::Buffer, 3> gv, gs;
-  for (auto& b : gv) b = rt.buffer(bytes);
-  for (auto& b : gs) b = rt.buffer(bytes);
-  const Gradient grad(rt, grid_);
+  cl::Buffer dvg = dv;  // |grad v| from v, or from its --grad-sigma lowpass
   if (p.grad_sigma_mm > 0) {
-    cl::Buffer dvg = rt.buffer(bytes);
+    dvg = rt.buffer(bytes);
     Lowpass(rt, grid_, {p.grad_sigma_mm, 3.0}).apply(dv, dvg);
-    grad.apply(dvg, gv[0], gv[1], gv[2]);
-  } else {
-    grad.apply(dv, gv[0], gv[1], gv[2]);
   }
-  grad.apply(dvs, gs[0], gs[1], gs[2]);
   cl::Buffer dmask = mask ? upload(rt, *mask) : upload(rt, std::vector<std::uint8_t>(n, 1));
   cl::Kernel k = rt.kernel(kSystem, "system_densities");
-  Runtime::set_args(k, dv, dvs, gv[0], gv[1], gv[2], gs[0], gs[1], gs[2], dmask, mu_, rho_, T_[0], T_[1], T_[2],
+  Runtime::set_args(k, dv, dvs, dvg, dmask, mu_, rho_, T_[0], T_[1], T_[2],
                     T_[3], T_[4], T_[5], fixed_, grad2, p.coeffs(), grid_);
   rt.enqueue_3d(k, grid_);
   assemble();
