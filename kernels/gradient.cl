@@ -13,10 +13,10 @@ __kernel void gradient_central(__global const float* restrict f, __global float*
   const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
   if (!grid_contains(g, x, y, z)) return;
   const size_t idx = grid_index(g, x, y, z);
-  const size_t sy = (size_t)g.nx, sz = (size_t)g.nx * (size_t)g.ny;
-  gx[idx] = grid_diff(f, idx, x, g.nx, 1, g.hx);
-  gy[idx] = grid_diff(f, idx, y, g.ny, sy, g.hy);
-  gz[idx] = grid_diff(f, idx, z, g.nz, sz, g.hz);
+  const float3 d = grid_gradient(f, g, idx, x, y, z);
+  gx[idx] = d.x;
+  gy[idx] = d.y;
+  gz[idx] = d.z;
 }
 
 /* |grad f| from the three component buffers. */

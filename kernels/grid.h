@@ -39,13 +39,22 @@ inline bool grid_contains(const GridDesc g, int x, int y, int z) {
  * coordinate on that axis is c of n (stride between neighbours, spacing h):
  * central inside, one-sided on the first and last sample, 0 along an axis of
  * one sample. The one rule for every gradient in the kernels (gradient.cl,
- * splats, splat orientation, ray casting) and the host references. */
+ * the classifier's densities, splats, splat orientation, ray casting, Marching
+ * Cubes) and the host references. */
 inline float grid_diff(__global const float* restrict f, const size_t idx, const int c, const int n,
                        const size_t stride, const float h) {
   if (n < 2) return 0.0f;
   if (c == 0) return (f[idx + stride] - f[idx]) / h;
   if (c == n - 1) return (f[idx] - f[idx - stride]) / h;
   return (f[idx + stride] - f[idx - stride]) / (2.0f * h);
+}
+
+/* grad f at voxel (x, y, z) = idx, per mm, by grid_diff along each axis. */
+inline float3 grid_gradient(__global const float* restrict f, const GridDesc g, const size_t idx, const int x,
+                            const int y, const int z) {
+  const size_t sy = (size_t)g.nx, sz = (size_t)g.nx * (size_t)g.ny;
+  return (float3)(grid_diff(f, idx, x, g.nx, 1, g.hx), grid_diff(f, idx, y, g.ny, sy, g.hy),
+                  grid_diff(f, idx, z, g.nz, sz, g.hz));
 }
 
 #else  /* host */

@@ -21,21 +21,9 @@
 
 inline bool mc_solid(const float v, const float level) { return v > level; }
 
-/* Per-mm derivative along one axis: central inside, one-sided on the border (as gradient.cl). */
-inline float mc_derivative(__global const float* restrict f, const size_t idx, const int c, const int n,
-                           const size_t stride, const float h) {
-  if (n < 2) return 0.0f;
-  if (c == 0) return (f[idx + stride] - f[idx]) / h;
-  if (c == n - 1) return (f[idx] - f[idx - stride]) / h;
-  return (f[idx + stride] - f[idx - stride]) / (2.0f * h);
-}
-
 inline float3 mc_gradient(__global const float* restrict f, const GridDesc g, const int x, const int y,
                           const int z) {
-  const size_t idx = grid_index(g, x, y, z);
-  const size_t sy = (size_t)g.nx, sz = (size_t)g.nx * (size_t)g.ny;
-  return (float3)(mc_derivative(f, idx, x, g.nx, 1, g.hx), mc_derivative(f, idx, y, g.ny, sy, g.hy),
-                  mc_derivative(f, idx, z, g.nz, sz, g.hz));
+  return grid_gradient(f, g, grid_index(g, x, y, z), x, y, z);
 }
 
 __kernel void mc_classify(__global const float* restrict f, __global uchar* restrict edge_mask,

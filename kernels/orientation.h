@@ -40,7 +40,6 @@ inline float3 tensor_orientation(__global const float* restrict u, const GridDes
   const int cy = clamp((int)floor(p.y + 0.5f), 0, g.ny - 1);
   const int cz = clamp((int)floor(p.z + 0.5f), 0, g.nz - 1);
   const float inv2s2 = 1.0f / (2.0f * sigma * sigma);
-  const size_t sy = (size_t)g.nx, sz = (size_t)g.nx * (size_t)g.ny;
   /* The Gaussian is separable: w = wx[x] wy[y] wz[z], 3 (2r + 1) exps
    * instead of (2r + 1)^3. r <= ORIENTATION_MAX_RADIUS (sigma <= 8). */
   float wx[2 * ORIENTATION_MAX_RADIUS + 1], wy[2 * ORIENTATION_MAX_RADIUS + 1], wz[2 * ORIENTATION_MAX_RADIUS + 1];
@@ -59,9 +58,7 @@ inline float3 tensor_orientation(__global const float* restrict u, const GridDes
       for (int x = max(cx - r, 0); x <= min(cx + r, g.nx - 1); ++x) {
         const float w = wx[x - cx + r] * wyz;
         const size_t idx = grid_index(g, x, y, z);
-        const float3 gk = (float3)(grid_diff(u, idx, x, g.nx, 1, g.hx),
-                                   grid_diff(u, idx, y, g.ny, sy, g.hy),
-                                   grid_diff(u, idx, z, g.nz, sz, g.hz));
+        const float3 gk = grid_gradient(u, g, idx, x, y, z);
         j00 += w * gk.x * gk.x;
         j01 += w * gk.x * gk.y;
         j02 += w * gk.x * gk.z;

@@ -52,19 +52,13 @@ inline float raycast_sample(__global const float* restrict v, const GridDesc g, 
   return mix(mix(c00, c10, wy), mix(c01, c11, wy), wz);
 }
 
-inline float3 raycast_gradient_at(__global const float* restrict v, const GridDesc g, const int x, const int y,
-                                  const int z) {
-  const size_t idx = grid_index(g, x, y, z), sy = (size_t)g.nx, sz = (size_t)g.nx * (size_t)g.ny;
-  return (float3)(grid_diff(v, idx, x, g.nx, 1, g.hx), grid_diff(v, idx, y, g.ny, sy, g.hy),
-                  grid_diff(v, idx, z, g.nz, sz, g.hz));
-}
-
 /* Per-voxel gradient, computed once per volume: shading then costs one
  * trilinear lookup of float4s instead of 8 x 6 volume reads per sample. */
 __kernel void raycast_gradients(__global const float* restrict v, const GridDesc g, __global float4* restrict out) {
   const int x = (int)get_global_id(0), y = (int)get_global_id(1), z = (int)get_global_id(2);
   if (!grid_contains(g, x, y, z)) return;
-  out[grid_index(g, x, y, z)] = (float4)(raycast_gradient_at(v, g, x, y, z), 0.0f);
+  const size_t idx = grid_index(g, x, y, z);
+  out[idx] = (float4)(grid_gradient(v, g, idx, x, y, z), 0.0f);
 }
 
 /* The voxels' gradients interpolated trilinearly at p (index coordinates). */

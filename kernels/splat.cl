@@ -45,10 +45,7 @@
 
 inline float3 splat_gradient_at(__global const float* restrict u, const GridDesc g, const int x, const int y,
                                 const int z) {
-  const size_t idx = grid_index(g, x, y, z);
-  const size_t sy = (size_t)g.nx, sz = (size_t)g.nx * (size_t)g.ny;
-  return (float3)(grid_diff(u, idx, x, g.nx, 1, g.hx), grid_diff(u, idx, y, g.ny, sy, g.hy),
-                  grid_diff(u, idx, z, g.nz, sz, g.hz));
+  return grid_gradient(u, g, grid_index(g, x, y, z), x, y, z);
 }
 
 /* The splat normal field at a point p in voxel coordinates (p = index at

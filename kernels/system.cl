@@ -40,7 +40,7 @@ inline float density_rho(const ClassifyCoeffs k, const float grad2) { return k.g
  * optional isotropic smoothness term, 0 in the paper's functional); fixed =
  * boundary or unscanned (mask == 0); grad2 = |grad v|^2 with v taken from vg
  * (v itself, or its --grad-sigma lowpass), kept for updates. The gradients
- * are grid_diff's central differences (gradient.cl's rule), computed here
+ * are grid_gradient's central differences (gradient.cl's rule), computed here
  * rather than stored: six fewer volumes to write, read and allocate. */
 __kernel void system_densities(__global const float* restrict v, __global const float* restrict vs,
                                __global const float* restrict vg, __global const uchar* restrict mask,
@@ -53,15 +53,13 @@ __kernel void system_densities(__global const float* restrict v, __global const 
   const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
   if (!grid_contains(g, x, y, z)) return;
   const size_t p = grid_index(g, x, y, z);
-  const size_t sy = (size_t)g.nx, sz = (size_t)g.nx * (size_t)g.ny;
-  const float gx = grid_diff(vg, p, x, g.nx, 1, g.hx), gy = grid_diff(vg, p, y, g.ny, sy, g.hy),
-              gz = grid_diff(vg, p, z, g.nz, sz, g.hz);
-  const float grad2 = gx * gx + gy * gy + gz * gz;
+  const float3 gv = grid_gradient(vg, g, p, x, y, z);
+  const float grad2 = gv.x * gv.x + gv.y * gv.y + gv.z * gv.z;
   grad2_out[p] = grad2;
   mu[p] = density_mu(k, v[p], vs[p], grad2);
   rho[p] = density_rho(k, grad2);
-  const float ax = grid_diff(vs, p, x, g.nx, 1, g.hx), ay = grid_diff(vs, p, y, g.ny, sy, g.hy),
-              az = grid_diff(vs, p, z, g.nz, sz, g.hz);
+  const float3 gs = grid_gradient(vs, g, p, x, y, z);
+  const float ax = gs.x, ay = gs.y, az = gs.z;
   const float s2 = ax * ax + ay * ay + az * az;
   txx[p] = k.beta * (s2 - ax * ax) + k.kappa;
   tyy[p] = k.beta * (s2 - ay * ay) + k.kappa;
