@@ -140,34 +140,78 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   const std::size_t kth = std::min(gmag.size() - 1, std::size_t(double(gmag.size()) * (1.0 - params.edge_share)));
   std::nth_element(gmag.begin(), gmag.begin() + long(kth), gmag.end());
   const float edge_threshold = gmag[kth];
-  std::vector<float> crests;
+  std::vector<float> crests, locals;
+  std::vector<std::size_t> local_at;
+  // Climbs v~ from voxel (x, y, z) through the 26 neighbours, up (sign 1) or
+  // down (sign -1), at most climb_steps; returns the voxel reached.
+  auto climb = [&](std::size_t x, std::size_t y, std::size_t z, float sign) {
+    std::size_t i = v.index(x, y, z);
+    long cx = long(x), cy = long(y), cz = long(z);
+    for (int step = 0; step < params.climb_steps; ++step) {
+      std::size_t best_i = i;
+      long bx = cx, by = cy, bz = cz;
+      for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const long nx = cx + dx, ny = cy + dy, nz = cz + dz;
+            if (nx < 1 || ny < 1 || nz < 1 || nx + 1 >= long(d[0]) || ny + 1 >= long(d[1]) || nz + 1 >= long(d[2]))
+              continue;
+            const std::size_t j = v.index(std::size_t(nx), std::size_t(ny), std::size_t(nz));
+            if (gfield[j] < 0) continue;  // not usable
+            if (sign * num[j] > sign * num[best_i]) best_i = j, bx = nx, by = ny, bz = nz;
+          }
+      if (best_i == i) break;
+      i = best_i, cx = bx, cy = by, cz = bz;
+    }
+    return i;
+  };
   for (std::size_t z = 1; z + 1 < d[2]; ++z)
     for (std::size_t y = 1; y + 1 < d[1]; ++y)
       for (std::size_t x = 1; x + 1 < d[0]; ++x) {
-        std::size_t i = v.index(x, y, z);
+        const std::size_t i = v.index(x, y, z);
         if (!(gfield[i] >= edge_threshold) || gfield[i] <= 0) continue;
-        long cx = long(x), cy = long(y), cz = long(z);
-        for (int step = 0; step < params.climb_steps; ++step) {
-          std::size_t best_i = i;
-          long bx = cx, by = cy, bz = cz;
-          for (int dz = -1; dz <= 1; ++dz)
-            for (int dy = -1; dy <= 1; ++dy)
-              for (int dx = -1; dx <= 1; ++dx) {
-                const long nx = cx + dx, ny = cy + dy, nz = cz + dz;
-                if (nx < 1 || ny < 1 || nz < 1 || nx + 1 >= long(d[0]) || ny + 1 >= long(d[1]) || nz + 1 >= long(d[2]))
-                  continue;
-                const std::size_t j = v.index(std::size_t(nx), std::size_t(ny), std::size_t(nz));
-                if (gfield[j] < 0) continue;  // not usable
-                if (num[j] > num[best_i]) best_i = j, bx = nx, by = ny, bz = nz;
-              }
-          if (best_i == i) break;
-          i = best_i, cx = bx, cy = by, cz = bz;
+        const float crest = num[climb(x, y, z, 1.0f)];
+        crests.push_back(crest);
+        if (params.rule == AutoIsoRule::Local) {
+          const float trough = num[climb(x, y, z, -1.0f)];
+          locals.push_back(float(trough + params.local_fraction * (crest - trough)));
+          local_at.push_back(i);
         }
-        crests.push_back(num[i]);
       }
-  std::nth_element(crests.begin(), crests.begin() + long(crests.size() / 2), crests.end());
-  const double ridge_iso = crests[crests.size() / 2];
-  const double iso = params.rule == AutoIsoRule::EchoRidge ? ridge_iso : edge_iso;
+  if (crests.empty()) throw InputError("--iso auto: no boundary found to take the isovalue from");
+  std::vector<float> sorted = crests;
+  std::nth_element(sorted.begin(), sorted.begin() + long(sorted.size() / 2), sorted.end());
+  const double ridge_iso = sorted[sorted.size() / 2];
+  double local_iso = ridge_iso;
+  std::vector<float> field;
+  if (!locals.empty()) {
+    sorted = locals;
+    std::nth_element(sorted.begin(), sorted.begin() + long(sorted.size() / 2), sorted.end());
+    local_iso = sorted[sorted.size() / 2];
+    if (params.want_field) {
+      // Normalised convolution of the edges' isovalues, with the global
+      // median as a prior of field_prior edges' weight per Gaussian volume.
+      std::vector<float> fn(n, 0.0f), fd(n, 0.0f);
+      for (std::size_t k = 0; k < locals.size(); ++k) fn[local_at[k]] += locals[k], fd[local_at[k]] += 1.0f;
+      for (int axis = 0; axis < 3; ++axis) {
+        const double sigma_vox = std::max(1.0, params.field_sigma_mm / v.spacing[axis]);
+        // Unnormalised Gaussian: the density of edges per voxel stays comparable to the prior.
+        blur_axis(fn, &fd, d, axis, gaussian_weights(sigma_vox, 3.0));
+      }
+      // fd is now the Gaussian-weighted edge density (weights sum to 1 per
+      // axis); field_prior edges per Gaussian volume of (sqrt(2 pi) sigma)^3.
+      double gauss_volume = 1;
+      for (int axis = 0; axis < 3; ++axis)
+        gauss_volume *= std::sqrt(2 * M_PI) * std::max(1.0, params.field_sigma_mm / v.spacing[axis]);
+      const double prior = params.field_prior / gauss_volume;
+      field.resize(n);
+      for (std::size_t i = 0; i < n; ++i)
+        field[i] = float((double(fn[i]) + prior * local_iso) / (double(fd[i]) + prior));
+    }
+  }
+  const double iso = params.rule == AutoIsoRule::EchoRidge ? ridge_iso
+                     : params.rule == AutoIsoRule::Local   ? local_iso
+                                                           : edge_iso;
   if (report) {
     report->iso = iso;
     report->edge_iso = edge_iso;
@@ -178,8 +222,29 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     report->mean_gradient = std::move(mean);
     report->count = std::move(count);
     report->voxels = used;
+    report->local_iso = local_iso;
+    report->field = std::move(field);
   }
   return iso;
+}
+
+Volume level_isovalue(const Volume& v, const std::vector<float>& field, double iso) {
+  if (field.size() != v.voxels()) throw std::invalid_argument("level_isovalue: field size differs from the volume");
+  std::vector<float> out(v.voxels());
+  for (std::size_t i = 0; i < out.size(); ++i) out[i] = float(double(v.data[i]) - double(field[i]) + iso);
+  return v.with_data(std::move(out), v.source_type);
+}
+
+LevelledVolume auto_iso_levelled(const Volume& v, const std::vector<std::uint8_t>* mask, const Volume* target,
+                                 AutoIsoParams params, AutoIsoReport* report) {
+  params.rule = AutoIsoRule::Local;
+  params.want_field = true;
+  AutoIsoReport local;
+  AutoIsoReport& r = report ? *report : local;
+  LevelledVolume out;
+  out.iso = auto_iso(v, mask, params, &r);
+  out.data = level_isovalue(target ? *target : v, r.field, out.iso);
+  return out;
 }
 
 }  // namespace softshell

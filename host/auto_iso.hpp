@@ -8,6 +8,17 @@
 //    best on its crest (docs/parameters.md). From every strong-edge voxel
 //    (|grad v~| in the top 5 %) climb v~ through the 26 neighbours, at most 6
 //    steps, to the crest of the echo; the median crest value is v_iso.
+//  - Local (the default for the variational classifier since the shell
+//    functional): from every strong-edge voxel climb v~ up to the bright
+//    side's crest B and down to the dark side's trough D (26 neighbours, at
+//    most climb_steps each); the edge's isovalue is D + local_fraction
+//    (B - D), near the bright side, where a log-compressed, blurred boundary
+//    has its surface (docs/parameters.md, "The automatic isovalue"). Their
+//    median is the global v_iso; spread by a normalised Gaussian of
+//    field_sigma_mm (falling back to the median where no edge is near) they
+//    give an isovalue field that follows depth-dependent gain, attenuation
+//    and a mismatched time-gain compensation (the paper's future work: an
+//    isovalue that varies across the volume).
 //  - Edge (for Levoy's contours): the value at which the boundaries lie,
 //    found the way Kindlmann and Durkin (1998) find boundaries for transfer
 //    functions: across a boundary blurred by the imaging, |grad v| peaks
@@ -23,15 +34,19 @@
 
 namespace softshell {
 
-enum class AutoIsoRule { EchoRidge, Edge };
+enum class AutoIsoRule { EchoRidge, Edge, Local };
 
 struct AutoIsoParams {
-  AutoIsoRule rule = AutoIsoRule::EchoRidge;
+  AutoIsoRule rule = AutoIsoRule::Local;
   double edge_share = 0.05;  // share of usable voxels, by |grad v~|, that seed the climb to the echo crest
   int climb_steps = 6;       // voxels climbed at most from an edge voxel to its crest
   double sigma_mm = 1.0;        // lowpass of v~, at least 1 voxel per axis
   int bins = 64;                // over the range of v~ in the scanned voxels
   double min_bin_share = 0.001; // bins with fewer voxels than this share are ignored
+  double local_fraction = 0.75; // Local: where between trough and crest the surface lies
+  double field_sigma_mm = 4.0;  // Local: spread of the edges' isovalues into a field
+  double field_prior = 0.5;     // Local: weight of the global median in the field (edges per Gaussian volume)
+  bool want_field = false;      // Local: fill AutoIsoReport::field
 };
 
 struct AutoIsoReport {
@@ -42,7 +57,27 @@ struct AutoIsoReport {
   std::vector<double> mean_gradient;  // per bin, per mm (NaN where too few voxels)
   std::vector<std::size_t> count;     // voxels per bin
   std::size_t voxels = 0;             // voxels that entered
+  double local_iso = 0;               // the Local rule's global value (median of the edges' isovalues)
+  std::vector<float> field;           // Local, want_field: the isovalue per voxel, file units
 };
+
+// The volume with its local isovalue field levelled out: v - field + iso
+// (file units, float samples). Log-compressed brightness drifts are additive,
+// so a shift, not a gain, is what undoes them; `field` is smooth (tens of mm),
+// so gradients are left all but unchanged.
+Volume level_isovalue(const Volume& v, const std::vector<float>& field, double iso);
+
+// `classify --iso auto` for the variational classifier in one call: the
+// Local rule's isovalue (file units) taken from `v` (the mask as for
+// auto_iso), and `target` (v itself when null; with a mask, v with its
+// unscanned samples filled, host/mask.hpp) levelled by its field: `data`,
+// what the classifier should see.
+struct LevelledVolume {
+  Volume data;
+  double iso = 0;
+};
+LevelledVolume auto_iso_levelled(const Volume& v, const std::vector<std::uint8_t>* mask, const Volume* target = nullptr,
+                                 AutoIsoParams params = {}, AutoIsoReport* report = nullptr);
 
 // v_iso in the file's units. `mask` (optional, 1 = scanned) limits the
 // statistics to scanned voxels whose six neighbours are scanned too, and the

@@ -2,6 +2,8 @@
 // flood fill of its boundary-touching regions with a size rule, and
 // 6-neighbour growth (host/mask.hpp gives the rule).
 #include "mask.hpp"
+#include <cstdio>
+#include <cstdlib>
 
 #include <algorithm>
 #include <cmath>
@@ -121,6 +123,54 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
       }
   std::vector<std::uint8_t> mask(n);
   for (std::size_t i = 0; i < n; ++i) mask[i] = state[i] == kUnscanned ? 0 : 1;
+  // 2b. Dark fluid at the log-compression floor is exact zeros too. An
+  // unswept region lies beside or beyond the scan; a zero region with data
+  // on both sides of it along the beam lies inside the scan (fluid between
+  // echoes), and a scan reaches the faces of its own bounding box. Unless
+  // both hold, there is no unscanned region.
+  if (rep.unscanned_regions > 0) {
+    const int axis = std::clamp(params.beam_axis, 0, 2);
+    const std::size_t stride = axis == 0 ? 1 : axis == 1 ? d[0] : d[0] * d[1];
+    const std::size_t len = d[axis];
+    // Per beam line: the first and last nonzero sample.
+    std::vector<std::uint32_t> first(n / len, std::uint32_t(len)), last(n / len, 0);
+    auto line_of = [&](std::size_t i) { return (i % stride) + (i / (stride * len)) * stride; };
+    for (std::size_t i = 0; i < n; ++i)
+      if (v.data[i] != 0.0f) {
+        const std::size_t l = line_of(i);
+        const auto pos = std::uint32_t((i / stride) % len);
+        first[l] = std::min(first[l], pos), last[l] = std::max(last[l], pos);
+      }
+    std::size_t enclosed = 0, total = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (state[i] != kUnscanned) continue;
+      ++total;
+      const std::size_t l = line_of(i);
+      const auto pos = std::uint32_t((i / stride) % len);
+      enclosed += first[l] < pos && pos < last[l];
+    }
+    rep.enclosed_share = total ? double(enclosed) / double(total) : 0.0;
+    // Faces of the volume with scanned voxels on at least 2 % of them.
+    int faces = 0;
+    for (int a = 0; a < 3; ++a)
+      for (int side = 0; side < 2; ++side) {
+        const std::size_t u = (a + 1) % 3, w = (a + 2) % 3;
+        std::size_t scanned = 0;
+        for (std::size_t j = 0; j < d[w]; ++j)
+          for (std::size_t k = 0; k < d[u]; ++k) {
+            std::size_t c[3];
+            c[a] = side ? d[a] - 1 : 0, c[u] = k, c[w] = j;
+            scanned += state[v.index(c[0], c[1], c[2])] != kUnscanned;
+          }
+        faces += double(scanned) >= 0.02 * double(d[u] * d[w]);
+      }
+    rep.faces_with_data = faces;
+    if (rep.enclosed_share > params.max_enclosed || faces < params.min_faces) {
+      rep.rejected = true;
+      rep.unscanned_regions = 0;
+      std::fill(mask.begin(), mask.end(), std::uint8_t{1});
+    }
+  }
 
   // 3. The ragged edge of the fill: zeros within `solid` steps through zeros.
   if (rep.unscanned_regions > 0) grow_unscanned(mask, d, params.solid, &zero);

@@ -39,8 +39,38 @@ ClassifyCoeffs VariationalParams::coeffs() const {
   ClassifyCoeffs k;
   k.alpha = float(alpha), k.beta = float(beta), k.gamma = float(gamma), k.omega = float(omega);
   k.delta = float(delta), k.epsilon = float(epsilon), k.u_ind = float(u_ind), k.v_iso = float(v_iso);
-  k.kappa = float(kappa), k.pad0 = k.pad1 = k.pad2 = 0.0f;
+  k.kappa = float(kappa);
+  const double h = 0.5 * thickness_mm;
+  k.shell_h2 = float(h * h), k.profile_power = float(profile_power);
+  k.g_ref = edge_share > 0 ? float(g_ref) : 0.0f, k.edge_power = float(edge_power);
+  k.weight_cap = float(weight_cap);
+  k.pad0 = k.pad1 = 0.0f;
   return k;
+}
+
+VariationalParams VariationalParams::literal_defaults() {
+  VariationalParams p;
+  p.alpha = 0.2, p.beta = 3.0, p.gamma = 3.5, p.omega = 0.6, p.delta = 0.02, p.epsilon = 0.01;
+  p.grad_sigma_mm = 0, p.kappa = 0, p.thickness_mm = 0, p.edge_share = 0;
+  return p;
+}
+
+double VariationalParams::effective_thickness_mm(const Vec3d& spacing) const {
+  if (thickness_mm <= 0) return 0;
+  return std::max(thickness_mm, 2.0 * std::max({spacing[0], spacing[1], spacing[2]}));
+}
+
+double reference_edge_gradient(const std::vector<float>& grad2, double share) {
+  std::vector<float> g;
+  g.reserve(grad2.size());
+  for (float x : grad2)
+    if (x >= 0) g.push_back(x);
+  if (g.empty()) return 0;
+  // The top `share` of the entries, at least one; their median.
+  const std::size_t top = std::max<std::size_t>(1, std::size_t(double(g.size()) * std::clamp(share, 0.0, 1.0)));
+  const std::size_t k = g.size() - top / 2 - 1;
+  std::nth_element(g.begin(), g.begin() + long(k), g.end());
+  return std::sqrt(double(g[k]));
 }
 
 DeviceSystem::DeviceSystem(Runtime& rt, const GridDesc& g) : rt_(rt), grid_(g) {
@@ -104,9 +134,22 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
     Lowpass(rt, grid_, {p.grad_sigma_mm, 3.0}).apply(dv, dvg);
   }
   cl::Buffer dmask = mask ? upload(rt, *mask) : upload(rt, std::vector<std::uint8_t>(n, 1));
+  resolved_ = p;
+  spacing_ = v.spacing;
+  resolved_.thickness_mm = p.effective_thickness_mm(v.spacing);
+  if (p.edge_share > 0 && !(p.g_ref > 0)) {
+    // g_ref from the data: |grad v|^2 of the scanned voxels, to the host.
+    cl::Kernel kg = rt.kernel(kSystem, "system_grad2");
+    Runtime::set_args(kg, dvg, dmask, grad2, grid_);
+    rt.enqueue_3d(kg, grid_);
+    resolved_.g_ref = reference_edge_gradient(download<float>(rt, grad2, n), p.edge_share);
+    // A volume without edges: any positive unit keeps the system defined
+    // (F_ind is then delta everywhere).
+    if (!(resolved_.g_ref > 0)) resolved_.g_ref = 1.0;
+  }
   cl::Kernel k = rt.kernel(kSystem, "system_densities");
   Runtime::set_args(k, dv, dvs, dvg, dmask, mu_, rho_, T_[0], T_[1], T_[2],
-                    T_[3], T_[4], T_[5], fixed_, grad2, p.coeffs(), grid_);
+                    T_[3], T_[4], T_[5], fixed_, grad2, resolved_.coeffs(), grid_);
   rt.enqueue_3d(k, grid_);
   assemble();
   sources_ = {dv, dvs, grad2};
@@ -115,8 +158,13 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
 void DeviceSystem::update_point(const VariationalParams& p) {
   if (!updatable())
     throw std::logic_error("DeviceSystem::update_point: the system was not built from a volume");
+  // The data's resolved quantities stay (g_ref, the thickness floor).
+  VariationalParams r = p;
+  r.g_ref = resolved_.g_ref;
+  r.thickness_mm = p.effective_thickness_mm(spacing_);
   cl::Kernel k = rt_.kernel(kSystem, "system_update_point");
-  Runtime::set_args(k, sources_[0], sources_[1], sources_[2], fixed_, dT_, mu_, rho_, coef_, b_, p.coeffs(), grid_);
+  Runtime::set_args(k, sources_[0], sources_[1], sources_[2], fixed_, dT_, mu_, rho_, coef_, b_, r.coeffs(), grid_);
+  resolved_ = r;
   rt_.enqueue_3d(k, grid_);
 }
 

@@ -19,10 +19,11 @@ namespace softshell {
 // The paper's parameters, named as in the paper, on normalised data
 // (intensities in [0, 1], gradients per mm). v_iso is normalised too.
 struct VariationalParams {
-  // Defaults from the parameter study on the face and spine phantoms
-  // (docs/parameters.md); the paper's beta = 0.03 was for 0-255 intensities
-  // and is ~2000x too small on normalised data.
-  double alpha = 0.2, beta = 3.0, gamma = 3.5, omega = 0.6, delta = 0.02, epsilon = 0.01, u_ind = 1.0;
+  // Defaults: the shell functional (docs/numerics.md, "The shell
+  // functional"; docs/parameters.md has the study behind each value). With
+  // literal_defaults() the paper's functional and the weights the earlier
+  // study chose for it.
+  double alpha = 1.0, beta = 2.0, gamma = 1.0, omega = 0.0, delta = 0.01, epsilon = 0.01, u_ind = 1.0;
   double v_iso = 0.5;
   double sigma_mm = 1.0;  // lowpass giving v~
   // The |grad v| in F_iso's denominator and in F_ind taken from v lowpassed
@@ -30,11 +31,43 @@ struct VariationalParams {
   // reads as edges everywhere in tissue. 0: the paper's literal functional.
   double grad_sigma_mm = 1.5;
   // Weight of an isotropic smoothness term kappa |grad u|^2 added to the
-  // paper's functional (T -> T + kappa I): smooths the shell across its
-  // thickness as well. 0: the paper's literal functional.
-  double kappa = 1.0;
+  // paper's functional (T -> T + kappa I). 0: the paper's literal functional.
+  double kappa = 0.1;
+  // The shell functional (all three 0: the paper's terms):
+  //  - thickness_mm: the shell's full width at half maximum across the
+  //    surface, in mm (at least 2 voxels, resolved_for()); F_iso's weight is
+  //    (W / h^2)^profile_power with h half the thickness, W the paper's
+  //    squared distance to the isosurface, so u falls off as a power
+  //    2 profile_power of the distance instead of as 1 / (1 + d^2);
+  //  - edge_share: the reference edge gradient g_ref is the median |grad v|
+  //    of the top edge_share of the scanned voxels; F_ind's edge weight is
+  //    min(1, |grad v| / g_ref)^edge_power, and T and epsilon are in units of
+  //    g_ref^2, so gain, type and voxel size drop out (beta and kappa are then
+  //    squared lengths in mm^2, times F_ind's scale).
+  double thickness_mm = 2.0, profile_power = 2.0;
+  // Upper bound of the shell F_iso weight (W / h^2)^profile_power: beyond
+  // it u < 1 / (1 + weight_cap) anyway, and the bound keeps the coefficient
+  // contrast, hence the multigrid convergence, in check.
+  double weight_cap = 100.0;
+  double edge_share = 0.03, edge_power = 4.0;
+  // The resolved reference gradient (per mm of normalised intensity): 0
+  // until DeviceSystem takes it from the data (edge_share > 0), or given.
+  double g_ref = 0;
   ClassifyCoeffs coeffs() const;
+  // The paper's functional exactly (no lowpassed |grad v|, no kappa, no
+  // shell terms) with the weights chosen for it by the earlier study.
+  static VariationalParams literal_defaults();
+  bool literal() const { return grad_sigma_mm == 0 && kappa == 0 && thickness_mm == 0 && edge_share == 0; }
+  // The shell thickness in force on a grid of this spacing: thickness_mm,
+  // but at least 2 voxels along the coarsest axis (a thinner shell cannot be
+  // sampled, rendered or oriented).
+  double effective_thickness_mm(const Vec3d& spacing) const;
 };
+
+// The reference edge gradient of a field of |grad v|^2 (negative entries are
+// not scanned): the median |grad v| of its top `share` entries. 0 when no
+// entry is usable.
+double reference_edge_gradient(const std::vector<float>& grad2, double share);
 
 // Per-voxel densities (docs/numerics.md): mu, rho, the tangential tensor T
 // (xx, yy, zz, xy, xz, yz) and the fixed flag, on a grid with spacing h and
@@ -74,6 +107,9 @@ class DeviceSystem {
   // a fresh build with `p`. Throws std::logic_error unless updatable().
   void update_point(const VariationalParams& p);
   bool updatable() const { return bool(sources_[0]()); }
+  // The parameters in force on a volume-built level: g_ref resolved from the
+  // data when it was 0, thickness_mm raised to its voxel floor.
+  const VariationalParams& resolved() const { return resolved_; }
   // On a coarse level made by coarsen(fine): re-restricts mu and rho after
   // fine.update_point() (or the fine level's own restrict_point) and updates
   // the diagonal and b to match.
@@ -129,6 +165,8 @@ class DeviceSystem {
   cl::Buffer mu_, rho_, fixed_, coef_, b_, dT_, partial_;
   std::array<cl::Buffer, 6> T_;
   std::array<cl::Buffer, 3> sources_;  // v, v~, |grad v|^2 of a volume-built level (for update_point)
+  VariationalParams resolved_;
+  Vec3d spacing_{1, 1, 1};  // the volume's spacing, in double (the thickness floor)
   GsOrder gs_order_ = GsOrder::Points;
   bool strided_dot_ = false;
   int gs_slab_ = 0;
@@ -207,6 +245,7 @@ class VariationalClassifier {
   ~VariationalClassifier();
 
   const VariationalParams& params() const { return params_; }
+  const VariationalParams& resolved() const { return sys_->resolved(); }
   const IntensityMap& intensity_map() const { return map_; }
   // True when `p` keeps beta, kappa and both lowpass sigmas: update() can
   // then re-target this classifier; otherwise build a new one.
@@ -239,6 +278,7 @@ class VariationalClassifier {
 // so the lowpass and gradients see no step at the edge of the sweep.
 struct ClassifyTiming {
   double setup = 0, solve = 0;  // seconds: densities, assembly, hierarchy; multigrid iterations
+  VariationalParams resolved;   // the parameters in force (g_ref from the data, the thickness floor)
 };
 Volume classify_variational(Runtime& rt, const Volume& v, const VariationalParams& params, const SolverParams& sp,
                             SolveReport* report = nullptr, const Volume* init = nullptr,

@@ -22,7 +22,16 @@
 /* Parameters of the functional, as the kernels take them (normalised data). */
 typedef struct ClassifyCoeffs {
   float alpha, beta, gamma, omega, delta, epsilon, u_ind, v_iso;
-  float kappa, pad0, pad1, pad2; /* kappa: isotropic smoothness (0: the paper's functional) */
+  float kappa; /* isotropic smoothness (0: the paper's functional) */
+  /* The shell terms (docs/numerics.md, "The shell functional"; all 0 in the
+   * paper's functional): shell_h2, the squared half-width (mm^2) of the shell
+   * F_iso's weight is measured in; profile_power, the power of that
+   * normalised squared distance; g_ref (per mm), the data's reference edge
+   * gradient: F_ind's edge weight min(1, |grad v| / g_ref)^edge_power, and
+   * T and epsilon in units of g_ref^2; weight_cap bounds the shell weight
+   * (far outside the shell u is 0 either way, and a bounded coefficient
+   * contrast keeps multigrid fast). */
+  float shell_h2, profile_power, g_ref, edge_power, weight_cap, pad0, pad1;
 } ClassifyCoeffs;
 
 #ifdef __OPENCL_VERSION__

@@ -26,12 +26,31 @@ inline bool on_boundary(const GridDesc g, int x, int y, int z) {
  * lowpass): mu = alpha W + gamma c and rho = gamma c u_ind. They are all
  * that depends on v_iso, alpha, gamma, omega, delta, epsilon and u_ind, so
  * a change of those re-targets a system in place (system_update_point). */
+/* x^q for x >= 0: the usual integer powers by multiplication (pow() keeps
+ * PoCL's work-group loop from vectorising), others by exp2(q log2 x). */
+inline float shell_power(const float x, const float q) {
+  if (q == 1.0f) return x;
+  if (q == 2.0f) return x * x;
+  if (q == 4.0f) return (x * x) * (x * x);
+  return x > 0.0f ? exp2(q * log2(x)) : 0.0f;
+}
 inline float density_c(const ClassifyCoeffs k, const float grad2) {
+  if (k.g_ref > 0.0f) {
+    /* The shell functional: the edge strength relative to the data's own
+     * strong edges, saturating at 1 (gain and voxel size drop out). */
+    const float e = fmin(1.0f, sqrt(grad2) / k.g_ref);
+    return k.delta + (1.0f - k.delta) * shell_power(e, k.edge_power);
+  }
   return k.delta + (1.0f - k.delta) * sqrt(grad2);
 }
 inline float density_mu(const ClassifyCoeffs k, const float v, const float vs, const float grad2) {
   const float dv = v - k.v_iso, dvs = vs - k.v_iso;
-  const float W = (k.omega * dv * dv + (1.0f - k.omega) * dvs * dvs) / (grad2 + k.epsilon);
+  const float eps = k.g_ref > 0.0f ? k.epsilon * k.g_ref * k.g_ref : k.epsilon;
+  float W = (k.omega * dv * dv + (1.0f - k.omega) * dvs * dvs) / (grad2 + eps);
+  /* The shell functional: W is a squared distance (mm^2) to the isosurface;
+   * measured in shell half-widths and raised to a power, its weight rises
+   * steeply outside the shell instead of as the distance squared. */
+  if (k.shell_h2 > 0.0f) W = fmin(shell_power(W / k.shell_h2, k.profile_power), k.weight_cap);
   return k.alpha * W + k.gamma * density_c(k, grad2);
 }
 inline float density_rho(const ClassifyCoeffs k, const float grad2) { return k.gamma * density_c(k, grad2) * k.u_ind; }
@@ -59,7 +78,10 @@ __kernel void system_densities(__global const float* restrict v, __global const 
   mu[p] = density_mu(k, v[p], vs[p], grad2);
   rho[p] = density_rho(k, grad2);
   const float3 gs = grid_gradient(vs, g, p, x, y, z);
-  const float ax = gs.x, ay = gs.y, az = gs.z;
+  /* The shell functional measures grad v~ in units of g_ref: beta is then a
+   * squared length (mm^2) times F_ind's scale, whatever the gain. */
+  const float gscale = k.g_ref > 0.0f ? 1.0f / k.g_ref : 1.0f;
+  const float ax = gs.x * gscale, ay = gs.y * gscale, az = gs.z * gscale;
   const float s2 = ax * ax + ay * ay + az * az;
   txx[p] = k.beta * (s2 - ax * ax) + k.kappa;
   tyy[p] = k.beta * (s2 - ay * ay) + k.kappa;
@@ -68,6 +90,22 @@ __kernel void system_densities(__global const float* restrict v, __global const 
   txz[p] = -k.beta * ax * az;
   tyz[p] = -k.beta * ay * az;
   fixed[p] = (on_boundary(g, x, y, z) || mask[p] == 0) ? 1 : 0;
+}
+
+/* |grad v|^2 of v (the --grad-sigma lowpass) on the free voxels, -1 on the
+ * fixed ones: the host takes the reference edge gradient g_ref from it before
+ * the densities are computed. */
+__kernel void system_grad2(__global const float* restrict vg, __global const uchar* restrict mask,
+                           __global float* restrict grad2_out, const GridDesc g) {
+  const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
+  if (!grid_contains(g, x, y, z)) return;
+  const size_t p = grid_index(g, x, y, z);
+  if (on_boundary(g, x, y, z) || mask[p] == 0) {
+    grad2_out[p] = -1.0f;
+    return;
+  }
+  const float3 gv = grid_gradient(vg, g, p, x, y, z);
+  grad2_out[p] = gv.x * gv.x + gv.y * gv.y + gv.z * gv.z;
 }
 
 /* New pointwise parameters (k) on an assembled fine level: mu, rho, the

@@ -6,6 +6,7 @@
 #include <Eigen/IterativeLinearSolvers>
 #include <Eigen/SparseCholesky>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -226,26 +227,52 @@ Densities reference_densities(const Volume& v, const VariationalParams& p, const
   d.rho.resize(n);
   for (auto& t : d.T) t.resize(n);
   d.fixed.assign(n, 0);
+  auto boundary_at = [&](std::size_t x, std::size_t y, std::size_t z) {
+    return x == 0 || y == 0 || z == 0 || x + 1 == v.dims[0] || y + 1 == v.dims[1] || z + 1 == v.dims[2];
+  };
+  // The shell functional (docs/numerics.md): the reference edge gradient is
+  // the median |grad v| of the top edge_share of the free voxels (unless
+  // given), the thickness at least 2 voxels of the coarsest axis.
+  double g_ref = p.g_ref;
+  if (p.edge_share > 0 && !(g_ref > 0)) {
+    std::vector<double> mags;
+    for (std::size_t z = 0, i = 0; z < v.dims[2]; ++z)
+      for (std::size_t y = 0; y < v.dims[1]; ++y)
+        for (std::size_t x = 0; x < v.dims[0]; ++x, ++i)
+          if (!boundary_at(x, y, z) && !(mask && (*mask)[i] == 0))
+            mags.push_back(std::sqrt(gv[0][i] * gv[0][i] + gv[1][i] * gv[1][i] + gv[2][i] * gv[2][i]));
+    std::sort(mags.begin(), mags.end());
+    const std::size_t top = std::max<std::size_t>(1, std::size_t(double(mags.size()) * p.edge_share));
+    g_ref = mags.empty() ? 1.0 : mags[mags.size() - top / 2 - 1];
+    if (!(g_ref > 0)) g_ref = 1.0;
+  }
+  const bool shell = p.thickness_mm > 0;
+  const double thickness =
+      shell ? std::max(p.thickness_mm, 2.0 * std::max({v.spacing[0], v.spacing[1], v.spacing[2]})) : 0.0;
+  const double h2 = 0.25 * thickness * thickness;
+  const bool relative = p.edge_share > 0;
+  const double eps = relative ? p.epsilon * g_ref * g_ref : p.epsilon;
+  const double tscale = relative ? 1.0 / (g_ref * g_ref) : 1.0;
   for (std::size_t z = 0, i = 0; z < v.dims[2]; ++z)
     for (std::size_t y = 0; y < v.dims[1]; ++y)
       for (std::size_t x = 0; x < v.dims[0]; ++x, ++i) {
         const double gv2 = gv[0][i] * gv[0][i] + gv[1][i] * gv[1][i] + gv[2][i] * gv[2][i];
         const double a = double(v.data[i]) - p.v_iso, b = smooth[i] - p.v_iso;
-        const double W = (p.omega * a * a + (1.0 - p.omega) * b * b) / (gv2 + p.epsilon);
-        const double c = p.delta + (1.0 - p.delta) * std::sqrt(gv2);
+        double W = (p.omega * a * a + (1.0 - p.omega) * b * b) / (gv2 + eps);
+        if (shell) W = std::min(std::pow(W / h2, p.profile_power), p.weight_cap);
+        const double c = relative ? p.delta + (1.0 - p.delta) * std::pow(std::min(1.0, std::sqrt(gv2) / g_ref), p.edge_power)
+                                  : p.delta + (1.0 - p.delta) * std::sqrt(gv2);
         d.mu[i] = float(p.alpha * W + p.gamma * c);
         d.rho[i] = float(p.gamma * c * p.u_ind);
         const double g[3] = {gs[0][i], gs[1][i], gs[2][i]};
-        const double g2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
-        d.T[0][i] = float(p.beta * (g2 - g[0] * g[0]) + p.kappa);
-        d.T[1][i] = float(p.beta * (g2 - g[1] * g[1]) + p.kappa);
-        d.T[2][i] = float(p.beta * (g2 - g[2] * g[2]) + p.kappa);
-        d.T[3][i] = float(-p.beta * g[0] * g[1]);
-        d.T[4][i] = float(-p.beta * g[0] * g[2]);
-        d.T[5][i] = float(-p.beta * g[1] * g[2]);
-        const bool boundary =
-            x == 0 || y == 0 || z == 0 || x + 1 == v.dims[0] || y + 1 == v.dims[1] || z + 1 == v.dims[2];
-        d.fixed[i] = boundary || (mask && (*mask)[i] == 0);
+        const double g2 = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]) * tscale;
+        d.T[0][i] = float(p.beta * (g2 - g[0] * g[0] * tscale) + p.kappa);
+        d.T[1][i] = float(p.beta * (g2 - g[1] * g[1] * tscale) + p.kappa);
+        d.T[2][i] = float(p.beta * (g2 - g[2] * g[2] * tscale) + p.kappa);
+        d.T[3][i] = float(-p.beta * g[0] * g[1] * tscale);
+        d.T[4][i] = float(-p.beta * g[0] * g[2] * tscale);
+        d.T[5][i] = float(-p.beta * g[1] * g[2] * tscale);
+        d.fixed[i] = boundary_at(x, y, z) || (mask && (*mask)[i] == 0);
       }
   return d;
 }

@@ -45,13 +45,22 @@ Volume noisy_sphere(Dims3 dims, Vec3d spacing, std::uint64_t seed) {
   return v;
 }
 
+// The defaults before the shell functional (the paper's F_iso and F_ind in
+// absolute units, with kappa and the lowpassed |grad v|): the solver tests
+// below were sized for them; SolverShell covers today's defaults.
+VariationalParams earlier_defaults() {
+  VariationalParams p = VariationalParams::literal_defaults();
+  p.kappa = 1.0, p.grad_sigma_mm = 1.5;
+  return p;
+}
+
 VariationalParams sphere_params() {
-  // The defaults, with the tangential term dominating near the surface
+  // The earlier defaults, with the tangential term dominating near the surface
   // (beta |grad v~|^2 / h^2 well above mu there): with beta = 0.3 the mass
   // term makes the system so diagonally dominant that full multigrid alone
   // reaches 1e-6 and the cycles go untested; with 30 the solver needs 3-6
   // cycles.
-  VariationalParams p;
+  VariationalParams p = earlier_defaults();
   p.beta = 30.0;
   p.v_iso = 0.45;
   return p;
@@ -248,7 +257,7 @@ const FaceCase& face64() {
 
 TEST(SolverFace, VCyclesReduceTheResidualFivefoldEach) {
   const FaceCase& f = face64();
-  VariationalParams p;  // defaults
+  VariationalParams p = earlier_defaults();
   p.v_iso = f.iso;
   SolverParams sp;
   sp.krylov = false;
@@ -267,7 +276,7 @@ TEST(SolverFace, VCyclesReduceTheResidualFivefoldEach) {
 
 TEST(SolverFace, MultigridMatchesALongJacobiRun) {
   const FaceCase& f = face64();
-  VariationalParams p;
+  VariationalParams p = earlier_defaults();
   p.v_iso = f.iso;
   SolverParams mg;
   mg.tol = 1e-6;
@@ -292,7 +301,7 @@ TEST(SolverFace, ConjugateGradientsStayRobustWhenTheTangentialTermDominates) {
   // beta = 1000 makes the operator strongly anisotropic: plain V-cycles slow
   // to ~0.65 per cycle, the preconditioned CG must still converge quickly.
   const FaceCase& f = face64();
-  VariationalParams p;
+  VariationalParams p = earlier_defaults();
   p.v_iso = f.iso;
   p.beta = 1000;
   SolverParams sp;
@@ -305,7 +314,7 @@ TEST(SolverFace, ConjugateGradientsStayRobustWhenTheTangentialTermDominates) {
 
 TEST(SolverFace, WarmStartAfterAFivePercentIsoChangeIsCheap) {
   const FaceCase& f = face64();
-  VariationalParams p;
+  VariationalParams p = earlier_defaults();
   p.v_iso = f.iso;
   p.beta = 100;
   SolverParams sp;
@@ -319,11 +328,20 @@ TEST(SolverFace, WarmStartAfterAFivePercentIsoChangeIsCheap) {
   EXPECT_LE(warm.cycles, cold.cycles);
 }
 
-TEST(SolverUpdate, PointwiseUpdateEqualsAFreshBuildOnEveryLevel) {
+class SolverUpdateBoth : public ::testing::TestWithParam<bool> {};
+
+TEST_P(SolverUpdateBoth, PointwiseUpdateEqualsAFreshBuildOnEveryLevel) {
   // New v_iso, alpha, gamma, omega, delta, epsilon, u_ind: the updated fine
-  // level and a coarse level re-restricted from it equal fresh builds.
+  // level and a coarse level re-restricted from it equal fresh builds, for
+  // the earlier functional and for the shell functional (whose reference
+  // gradient and thickness floor the update keeps).
   const Volume v = noisy_sphere({33, 28, 25}, {0.8, 1.0, 1.3}, 11);
-  VariationalParams p0 = sphere_params(), p1 = p0;
+  VariationalParams p0 = sphere_params();
+  if (GetParam()) {
+    p0 = VariationalParams();
+    p0.v_iso = 0.45;
+  }
+  VariationalParams p1 = p0;
   p1.v_iso = 0.52, p1.alpha = 0.7, p1.gamma = 2.0, p1.omega = 0.4, p1.delta = 0.05, p1.epsilon = 0.02, p1.u_ind = 0.9;
   DeviceSystem sys(runtime(), v, p0);
   auto coarse = DeviceSystem::coarsen(sys);
@@ -357,9 +375,46 @@ TEST(SolverUpdate, OnlyVolumeBuiltSystemsAreUpdatable) {
   EXPECT_THROW(copy.update_point(sphere_params()), std::logic_error);
 }
 
+INSTANTIATE_TEST_SUITE_P(SolverUpdate, SolverUpdateBoth, ::testing::Values(false, true),
+                         [](const auto& info) { return info.param ? "ShellFunctional" : "EarlierFunctional"; });
+
+TEST(SolverShell, DefaultsConvergeAndMatchTheOracle) {
+  // Today's defaults (the shell functional, its tangential term in units of
+  // the data's edge gradient: strongly anisotropic at edges) on a 32^3
+  // noisy sphere: PCG converges to 1e-6 and agrees with the float64 oracle;
+  // plain V-cycles still contract every cycle.
+  const Volume v = noisy_sphere({32, 32, 32}, {0.8, 1.0, 1.25}, test::seed() + 700);
+  VariationalParams p;
+  p.v_iso = 0.6;
+  const DeviceSystem sys(runtime(), v, p);
+  EXPECT_GT(sys.resolved().g_ref, 0.0);
+  EXPECT_GT(sys.resolved().thickness_mm, 0.0);
+  const Densities d = sys.download_densities();
+  const std::vector<double> u_ref = test::oracle_solve(test::assemble_oracle(d), test::OracleMethod::Auto);
+  for (const bool krylov : {true, false}) {
+    SCOPED_TRACE(krylov ? "PCG" : "V-cycles");
+    SolverParams sp;
+    sp.tol = 1e-6;
+    sp.krylov = krylov;
+    sp.max_cycles = 60;
+    SolveReport rep;
+    DeviceSystem fine(runtime(), d);
+    const std::vector<float> u = solve(fine, sp, &rep);
+    std::cout << "[ solver   ] shell defaults 32^3 " << (krylov ? "PCG" : "V-cycles") << ": " << rep.cycles
+              << " cycles; residuals" << history(rep.residuals) << "\n";
+    EXPECT_TRUE(rep.converged) << "residuals" << history(rep.residuals);
+    if (!krylov)
+      for (std::size_t i = 1; i < rep.residuals.size(); ++i)
+        EXPECT_LT(rep.residuals[i], rep.residuals[i - 1]) << "cycle " << i << ":" << history(rep.residuals);
+    const Comparison c = compare(u, u_ref);
+    EXPECT_LT(c.rel_l2, 1e-4) << "||u_dev - u_ref|| / ||u_ref||";
+    EXPECT_LT(c.max_abs, 1e-4 * c.ref_max) << "at " << xyz(d.dims, c.worst);
+  }
+}
+
 TEST(SolverUpdate, ClassifierReSolvesAfterAnIsoChangeAsAColdClassificationWould) {
   const FaceCase& f = face64();
-  VariationalParams p;
+  VariationalParams p = earlier_defaults();
   p.v_iso = f.iso;
   VariationalClassifier c(runtime(), f.ph.volume, p);
   SolveReport first, warm, cold;
@@ -387,7 +442,7 @@ TEST(SolverUpdate, ClassifierReSolvesAfterAnIsoChangeAsAColdClassificationWould)
 
 TEST(SolverFace, BitIdenticalBetweenRuns) {
   const FaceCase& f = face64();
-  VariationalParams p;
+  VariationalParams p = earlier_defaults();
   p.v_iso = f.iso;
   p.beta = 100;
   for (bool jacobi : {false, true}) {

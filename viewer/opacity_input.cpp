@@ -37,15 +37,19 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   in.mask = scanned_mask(v, MaskParams{}, &mr);
   if (mr.unscanned == 0) in.mask.clear();
   const std::vector<std::uint8_t>* mask = in.mask.empty() ? nullptr : &in.mask;
+  Volume filled = mask ? fill_unscanned(v, in.mask) : Volume();
   if (iso_text == "auto") {
-    in.iso = auto_iso(v, mask);
+    // The local rule's field levelled out, as classify does (host/auto_iso.hpp).
+    LevelledVolume lv = auto_iso_levelled(v, mask, mask ? &filled : nullptr);
+    in.iso = lv.iso;
+    in.data = std::move(lv.data);
   } else {
     char* end = nullptr;
     in.iso = std::strtod(iso_text.c_str(), &end);
     if (iso_text.empty() || *end != '\0' || !std::isfinite(in.iso))
       throw InputError("--iso: expected a number in the input's intensity units or 'auto', got '" + iso_text + "'");
+    in.data = mask ? std::move(filled) : std::move(v);
   }
-  in.data = mask ? fill_unscanned(v, in.mask) : std::move(v);
   in.params.v_iso = in.data.intensity_map().to_unit(in.iso);
   in.params.sigma_mm = 1.0;
   in.u = reclassify(rt, in, in.params, nullptr, &in.report);  // keeps in.classifier

@@ -7,6 +7,7 @@
 #include <optional>
 #include <sstream>
 #include <memory>
+#include <set>
 
 #include "auto_iso.hpp"
 #include "cl_runtime.hpp"
@@ -24,20 +25,22 @@ namespace {
 struct ClassifyOptions {
   std::string in, out, device, method = "variational", iso, init, cycle = "pcg", smoother = "gs", mask = "auto";
   double thickness = 1.0;
+  double iso_fraction = AutoIsoParams().local_fraction, iso_field_sigma = AutoIsoParams().field_sigma_mm;
   double sigma = -1;  // unset: 1 mm for variational, 0 (raw) for levoy
   VariationalParams vp;
   SolverParams sp;
-  bool compress = false, quiet = false, stats = false, no_fmg = false, literal = false;
+  bool compress = false, quiet = false, stats = false, no_fmg = false, literal = false, no_iso_field = false;
+  std::set<std::string> given;  // long option names given on the command line
   RawOptions raw;
 };
 
 // A number, or nullopt for "auto".
 std::optional<double> parse_iso(const std::string& text) {
-  if (text == "auto" || text == "auto-ridge" || text == "auto-edge") return std::nullopt;
+  if (text == "auto" || text == "auto-local" || text == "auto-ridge" || text == "auto-edge") return std::nullopt;
   char* end = nullptr;
   const double v = std::strtod(text.c_str(), &end);
   if (text.empty() || *end != '\0' || !std::isfinite(v))
-    throw InputError("--iso: expected a number in the input's intensity units, auto, auto-ridge or auto-edge, got '" +
+    throw InputError("--iso: expected a number in the input's intensity units, auto, auto-local, auto-ridge or auto-edge, got '" +
                      text + "'");
   return v;
 }
@@ -65,7 +68,15 @@ DataMask make_mask(const std::string& option, const Volume& in) {
     m.scanned = scanned_mask(in, params, &r);
     m.text = "auto: " + percent(r.unscanned) + " (zero fill " + std::to_string(r.zero_fill) + " + " +
              std::to_string(params.grow) + "-voxel rim)";
-    if (r.unscanned == 0) m.scanned.clear(), m.text = "auto: no unscanned region (no solid zero fill at the border)";
+    if (r.rejected) {
+      std::ostringstream t;
+      t << "auto: none; the zero fill is dark fluid, not an unswept region (" << std::fixed << std::setprecision(1)
+        << 100 * r.enclosed_share << " % of it between echoes along the beam, " << r.faces_with_data
+        << " faces with data; --mask none/FILE to choose)";
+      m.scanned.clear(), m.text = t.str();
+    } else if (r.unscanned == 0) {
+      m.scanned.clear(), m.text = "auto: no unscanned region (no solid zero fill at the border)";
+    }
   } else {
     try {
       m.scanned = read_mask(option, in.dims);
@@ -126,7 +137,23 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
   if (!(p.epsilon > 0)) throw InputError("--epsilon must be > 0");
   if (!(p.grad_sigma_mm >= 0)) throw InputError("--grad-sigma must be >= 0");
   if (!(p.kappa >= 0)) throw InputError("--kappa must be >= 0");
-  if (o.literal) p.grad_sigma_mm = 0, p.kappa = 0;
+  if (o.literal) {
+    // The paper's terms exactly; weights not given on the command line take
+    // the values the earlier study chose for the literal functional.
+    const VariationalParams lit = VariationalParams::literal_defaults();
+    const auto given = [&](const char* name) { return o.given.count(name) > 0; };
+    if (!given("--alpha")) p.alpha = lit.alpha;
+    if (!given("--beta")) p.beta = lit.beta;
+    if (!given("--gamma")) p.gamma = lit.gamma;
+    if (!given("--omega")) p.omega = lit.omega;
+    if (!given("--delta")) p.delta = lit.delta;
+    if (!given("--epsilon")) p.epsilon = lit.epsilon;
+    p.grad_sigma_mm = 0, p.kappa = 0, p.thickness_mm = 0, p.edge_share = 0;
+  }
+  if (!(p.thickness_mm >= 0) || !std::isfinite(p.thickness_mm)) throw InputError("--shell must be a finite number >= 0 (mm)");
+  if (!(p.profile_power >= 1 && p.profile_power <= 4)) throw InputError("--profile-power must be in [1, 4]");
+  if (!(p.edge_share >= 0 && p.edge_share <= 0.5)) throw InputError("--edge-share must be in [0, 0.5]");
+  if (!(p.edge_power >= 0 && p.edge_power <= 8)) throw InputError("--edge-power must be in [0, 8]");
   if (p.omega < 0 || p.omega > 1 || p.delta > 1) throw InputError("--omega and --delta must be in [0, 1]");
   SolverParams sp = o.sp;
   if (o.cycle != "pcg" && o.cycle != "v") throw InputError("--cycle must be pcg or v");
@@ -170,8 +197,13 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
               << "  params   alpha " << p.alpha << " beta " << p.beta << " gamma " << p.gamma << " omega " << p.omega
               << " delta " << p.delta << " epsilon " << p.epsilon << " u_ind " << p.u_ind << " sigma " << p.sigma_mm
               << " mm, kappa " << p.kappa << " grad-sigma " << p.grad_sigma_mm << " mm"
-              << (p.kappa == 0 && p.grad_sigma_mm == 0 ? " (the paper's functional)" : "") << "\n"
-              << "  solve    " << report.levels << " levels, " << report.cycles << (sp.krylov ? " PCG iterations" : " V-cycles")
+              << (p.literal() ? " (the paper's functional)" : "") << "\n";
+    if (!p.literal())
+      std::cout << "  shell    thickness " << timing.resolved.thickness_mm << " mm, profile power " << p.profile_power
+                << ", reference edge gradient " << std::setprecision(4) << timing.resolved.g_ref
+                << " per mm (top " << std::setprecision(1) << 100 * p.edge_share << " %), edge power "
+                << std::setprecision(3) << p.edge_power << "\n";
+    std::cout << "  solve    " << report.levels << " levels, " << report.cycles << (sp.krylov ? " PCG iterations" : " V-cycles")
               << ", relative residual " << std::scientific << std::setprecision(2) << report.residuals.back()
               << std::fixed << std::setprecision(3) << '\n'
               << "  opacity  " << drawn << " splats (u > 0.2), " << std::setprecision(1)
@@ -198,21 +230,37 @@ int run_classify(const ClassifyOptions& o) {
   const DataMask mask = make_mask(o.mask, in);
   double iso = 0;
   std::string iso_text;
+  std::vector<float> iso_field;  // the local rule's isovalue per voxel (file units)
   if (given_iso) {
     iso = *given_iso;
   } else {
-    // auto: the echo crest for the variational shell, the edge midpoint for
-    // Levoy's contours (host/auto_iso.hpp); auto-ridge / auto-edge force one.
+    // auto: for the variational shell the local rule (an isovalue field near
+    // the bright side of each boundary), for Levoy's contours the edge
+    // midpoint (host/auto_iso.hpp); auto-local / auto-ridge / auto-edge
+    // force one.
     AutoIsoParams ap;
-    const bool ridge = o.iso == "auto-ridge" || (o.iso == "auto" && o.method != "levoy");
-    ap.rule = ridge ? AutoIsoRule::EchoRidge : AutoIsoRule::Edge;
-    iso = auto_iso(in, mask.scanned.empty() ? nullptr : &mask.scanned, ap);
-    iso_text = ridge ? " (auto: echo ridge)" : " (auto: edge)";
+    if (o.iso == "auto") ap.rule = o.method == "levoy" ? AutoIsoRule::Edge : AutoIsoRule::Local;
+    else if (o.iso == "auto-local") ap.rule = AutoIsoRule::Local;
+    else if (o.iso == "auto-ridge") ap.rule = AutoIsoRule::EchoRidge;
+    else ap.rule = AutoIsoRule::Edge;
+    ap.want_field = ap.rule == AutoIsoRule::Local && !o.no_iso_field;
+    ap.local_fraction = o.iso_fraction;
+    ap.field_sigma_mm = o.iso_field_sigma;
+    AutoIsoReport rep;
+    iso = auto_iso(in, mask.scanned.empty() ? nullptr : &mask.scanned, ap, &rep);
+    iso_field = std::move(rep.field);
+    iso_text = ap.rule == AutoIsoRule::Local ? (iso_field.empty() ? " (auto: local rule, one value)"
+                                                                 : " (auto: local rule, the median of a field)")
+               : ap.rule == AutoIsoRule::EchoRidge ? " (auto: echo ridge)"
+                                                   : " (auto: edge)";
   }
   // Unscanned samples continue the scanned data, so the lowpass and the
   // gradients see no step at the edge of the sweep (host/mask.hpp).
-  const Volume filled = mask.scanned.empty() ? Volume() : fill_unscanned(in, mask.scanned);
-  const Volume& data = mask.scanned.empty() ? in : filled;
+  Volume filled = mask.scanned.empty() ? Volume() : fill_unscanned(in, mask.scanned);
+  // The local isovalue field levelled out: the classifier then works at one
+  // isovalue on data whose brightness no longer drifts (host/auto_iso.hpp).
+  if (!iso_field.empty()) filled = level_isovalue(mask.scanned.empty() ? in : filled, iso_field, iso);
+  const Volume& data = filled.voxels() > 0 ? filled : in;
   return o.method == "levoy" ? run_levoy(o, rt, data, iso, iso_text, mask, t0)
                              : run_variational(o, rt, data, iso, iso_text, mask, t0);
 }
@@ -225,11 +273,23 @@ void add_classify_command(CLI::App& app, Action& action) {
   sub->add_option("IN", o->in, "Input volume")->required();
   sub->add_option("-o,--output", o->out, "Output opacity volume (.nrrd, .mha, .mhd), float")->required();
   sub->add_option("--iso", o->iso,
-                  "Isovalue, in the input's own intensity units (e.g. 0-255 for 8-bit data), or auto: the crest of the "
-                  "boundary echoes (auto-ridge) for the variational method, where the gradient of the lowpassed data "
-                  "peaks (auto-edge) for levoy (docs/real-data.md)")
+                  "Isovalue, in the input's own intensity units (e.g. 0-255 for 8-bit data), or auto: for the "
+                  "variational method a field near the bright side of each boundary (auto-local), for levoy where the "
+                  "gradient of the lowpassed data peaks (auto-edge); auto-ridge: the crest of the boundary echoes "
+                  "(docs/parameters.md)")
       ->required()
-      ->type_name("V|auto|auto-ridge|auto-edge");
+      ->type_name("V|auto|auto-local|auto-ridge|auto-edge");
+  sub->add_option("--iso-fraction", o->iso_fraction,
+                  "The local rule: where between a boundary's dark trough (0) and bright crest (1) its isovalue lies")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
+  sub->add_option("--iso-field-sigma", o->iso_field_sigma,
+                  "The local rule: Gaussian spread (mm) of the boundaries' isovalues into the isovalue field")
+      ->capture_default_str()
+      ->check(CLI::Range(0.5, 1000.0));
+  sub->add_flag("--no-iso-field", o->no_iso_field,
+                "With the local rule: one isovalue (the median of the edges') instead of a field that follows "
+                "depth and local brightness");
   sub->add_option("--mask", o->mask,
                   "Scanned region: auto (the solid zero fill at the border is unscanned), none, or a volume FILE whose "
                   "nonzero voxels are scanned; unscanned voxels get opacity 0 (docs/real-data.md)")
@@ -252,7 +312,24 @@ void add_classify_command(CLI::App& app, Action& action) {
                 "Weight of an added isotropic smoothness term kappa |grad u|^2; 0: the paper's functional")
       ->capture_default_str();
   g->add_flag("--literal", o->literal,
-              "The paper's functional exactly: --grad-sigma 0 --kappa 0 (overrides both)");
+              "The paper's functional exactly: --grad-sigma 0 --kappa 0 --shell 0 --edge-share 0 (overrides them), "
+              "with the earlier study's weights for it (alpha 0.2 beta 3 gamma 3.5 omega 0.6 delta 0.02) unless given");
+  g->add_option("--shell", o->vp.thickness_mm,
+                "Shell thickness in mm (full width at half maximum across the surface, at least 2 voxels); F_iso's "
+                "weight rises as (distance / half the thickness)^(2 profile-power); 0: the paper's F_iso")
+      ->capture_default_str();
+  g->add_option("--profile-power", o->vp.profile_power,
+                "Power of the shell's normalised squared distance in F_iso (1: the paper's 1/(1+d^2) fall-off)")
+      ->capture_default_str();
+  g->add_option("--edge-share", o->vp.edge_share,
+                "The reference edge gradient is the median |grad v| of this top share of the scanned voxels; F_ind's "
+                "edge weight, beta, kappa and epsilon are relative to it; 0: the paper's absolute units")
+      ->capture_default_str();
+  g->add_option("--weight-cap", o->vp.weight_cap, "Upper bound of the shell F_iso weight (u outside the shell < 1/(1+cap))")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 1e12));
+  g->add_option("--edge-power", o->vp.edge_power, "Power of the relative edge strength in F_ind's weight")
+      ->capture_default_str();
   g->add_option("--grad-sigma", o->vp.grad_sigma_mm,
                 "Take |grad v| (F_iso, F_ind) from v lowpassed by this sigma in mm; 0: the paper's literal terms")
       ->capture_default_str();
@@ -272,7 +349,11 @@ void add_classify_command(CLI::App& app, Action& action) {
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   add_device_option(sub, o->device);
   o->raw.add_to(sub);
-  sub->callback([&action, o] { action = [o] { return run_classify(*o); }; });
+  sub->callback([&action, o, sub] {
+    for (const CLI::Option* opt : sub->get_options())
+      if (opt->count() > 0) o->given.insert("--" + opt->get_single_name());
+    action = [o] { return run_classify(*o); };
+  });
 }
 
 }  // namespace softshell::cli

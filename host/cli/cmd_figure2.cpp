@@ -39,12 +39,9 @@ constexpr Rgb kBackground{24, 26, 40};
 constexpr Rgb kLabel{255, 230, 120};
 constexpr int kGap = 8;  // around and between cells
 
-// Beta of panels (e) and (f) when the classifier's default beta is below 1:
-// the paper's 0.03 was for 0-255 intensities, and on normalised data a beta
-// that small changes nothing visible; 5 visibly smooths the shell along the
-// surface while keeping it above the splat threshold, 30 dims it below
-// (docs/real-data.md, "Figure 2").
-constexpr double kFigureBeta = 5.0;
+// Beta of panels (e) and (f): the paper's 0.03 was for 0-255 intensities,
+// and F_tan scales with the square of the intensity unit.
+constexpr double kFigureBeta = 0.03 * 255.0 * 255.0;  // the paper's 0.03 on 0-255 data
 
 struct Figure2Options {
   std::string in, out, device, slice = "y", iso = "auto", mask = "auto";
@@ -154,7 +151,7 @@ int run_figure2(const Figure2Options& o) {
   const SliceSpec spec = parse_slice(o.slice);
   std::optional<double> given_iso;
   AutoIsoParams auto_params;  // auto / auto-ridge: the echo crest; auto-edge: the edge midpoint
-  if (o.iso == "auto-edge") auto_params.rule = AutoIsoRule::Edge;
+  auto_params.rule = o.iso == "auto-edge" ? AutoIsoRule::Edge : AutoIsoRule::EchoRidge;
   if (o.iso != "auto" && o.iso != "auto-ridge" && o.iso != "auto-edge") {
     char* end = nullptr;
     const double v = std::strtod(o.iso.c_str(), &end);
@@ -198,8 +195,11 @@ int run_figure2(const Figure2Options& o) {
       if (!mask[i]) u.data[i] = 0.0f;
   };
 
-  const VariationalParams defaults;
-  const double beta = beta_given ? o.beta : (defaults.beta >= 1.0 ? defaults.beta : kFigureBeta);
+  // The paper's functional exactly (--literal), at the paper's omega and
+  // beta: its beta = 0.03 was for 0-255 intensities, and F_tan scales with
+  // the square of the intensity unit, so on [0, 1] data it is 0.03 x 255^2.
+  const VariationalParams defaults = VariationalParams::literal_defaults();
+  const double beta = beta_given ? o.beta : kFigureBeta;
 
   std::vector<Volume> opacities;
   LevoyParams lp;
@@ -291,8 +291,8 @@ void add_figure2_command(CLI::App& app, Action& action) {
       ->capture_default_str()
       ->type_name("FILE|auto|none");
   sub->add_option("--beta", o->beta,
-                  "Beta of panels (e) and (f) (default: the classifier's default beta, or 5 if that is below 1; "
-                  "docs/real-data.md)");
+                  "Beta of panels (e) and (f), on intensities normalised to [0, 1] (default: the paper's 0.03 on "
+                  "0-255 data, i.e. 0.03 x 255^2 = 1951; the panels use the paper's functional, --literal)");
   sub->add_option("--levoy-sigma", o->levoy_sigma, "Lowpass of panel (b) in mm (0: the raw volume, as in the paper)")
       ->capture_default_str();
   sub->add_option("--zoom", o->zoom, "Pixels per voxel (default: panels about 256 pixels on their long side)");
