@@ -87,7 +87,7 @@ int main(int argc, char** argv) {
     const double thicknesses[] = {1.0, 2.0};
     std::printf("Levoy baselines, %d^3 phantoms, seeds %zu, device %s\n\n", size, seeds.size(),
                 rt.info().label().c_str());
-    std::printf("| shape | sigma (vox) | setting | iso frac | r (vox) | precision | recall | blobs | normal err (deg) | %% opaque | splats |\n");
+    std::printf("| shape | sigma (vox) | setting | iso frac | r (vox) | precision | recall | blobs | normal err (deg) | %% opaque (u > %g) | splats |\n", kOpaqueLevel);
     std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (const auto& shape_name : shapes) {
       PhantomParams pp;

@@ -152,7 +152,7 @@ int main(int argc, char** argv) {
     std::stable_sort(results.begin(), results.end(), [](const auto& a, const auto& b) {
       return a.second.goals() != b.second.goals() ? a.second.goals() > b.second.goals() : a.second.f1() > b.second.f1();
     });
-    std::printf("| setting | goals | precision | recall | blobs | normal (deg) | %% opaque | splats | iters | unconv |\n");
+    std::printf("| setting | goals | precision | recall | blobs | normal (deg) | %% opaque (u > %g) | splats | iters | unconv |\n", kOpaqueLevel);
     std::printf("|---|---|---|---|---|---|---|---|---|---|\n");
     for (int i = 0; i < int(results.size()) && i < top; ++i) {
       const auto& [label, m] = results[i];

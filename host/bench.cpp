@@ -20,6 +20,7 @@
 #include "error.hpp"
 #include "filter.hpp"
 #include "gradient.hpp"
+#include "metrics.hpp"
 #include "phantom.hpp"
 #include "stencil.h"
 #include "stream.hpp"
@@ -618,7 +619,7 @@ void bench_table1(Runtime& rt, DeviceBench& db, bool quick, int reps, const Rend
     row.residual = best.report.residuals.empty() ? 0 : best.report.residuals.back();
     row.converged = best.report.converged;
     std::size_t opaque = 0;
-    for (float a : best.u.data) opaque += a > 0.01f, row.splats += a > 0.2f;
+    for (float a : best.u.data) opaque += a > kOpaqueLevel, row.splats += a > 0.2f;
     row.opaque_percent = 100.0 * double(opaque) / double(best.u.voxels());
     check(db, row.converged, "table 1 " + row.dataset + ": solve did not converge");
     if (render) {

@@ -62,7 +62,7 @@ struct Table1Row {
   int reps = 0, iterations = 0, levels = 0;
   double residual = 0;               // final relative residual
   bool converged = false;
-  double opaque_percent = 0;         // u > 0.01
+  double opaque_percent = 0;         // u > kOpaqueLevel (0.05, host/metrics.hpp)
   std::size_t splats = 0;            // u > 0.2
   std::optional<double> render_shearwarp, render_splat;  // seconds, 400x400
   std::string render_note;           // "n/a (renderer issue)" when not measured

@@ -3,11 +3,13 @@
 // for them: docs/metrics.md.
 //
 // Everything is O(N) on the host: one pass over the voxels for the pointwise
-// sums and per-voxel flags, an exact separable Euclidean distance transform
-// of the drawn set for recall, and a flood fill with an explicit stack for
-// the 26-connected components. Passes run on std::threads over slices (or
-// lines); each slice keeps its own partial sums and they are added in slice
-// order, so the result does not depend on the number of threads.
+// sums, per-voxel flags and the opacity profiles across the facing surface
+// (O(|S| x samples)), an exact separable Euclidean distance transform of the
+// drawn set for recall, and flood fills with an explicit stack for the
+// 26-connected drawn components and the 6-connected components at the
+// relative threshold. Passes run on std::threads over slices (or lines); each
+// slice keeps its own partial sums and they are added in slice order, so the
+// result does not depend on the number of threads.
 #include "metrics.hpp"
 
 #include <algorithm>
@@ -31,8 +33,21 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-// Per-voxel flags of the first pass; kVisited is used by the flood fill.
-enum : std::uint8_t { kDrawn = 1, kNear = 2, kFacing = 4, kVisited = 8 };
+// Per-voxel flags of the first pass; kBright (u above the relative blob threshold) is set
+// once that is known; kVisited and kVisited6 are used by the flood fills.
+enum : std::uint8_t { kDrawn = 1, kNear = 2, kFacing = 4, kVisited = 8, kBright = 16, kVisited6 = 32 };
+
+// The opacity profile across the surface (surface_peak, shell_thickness_mm):
+// samples every kProfileStep smallest spacings along the true normal, out to
+// R = max(kProfileMinVoxels smallest spacings, kProfileMinMm) on either side
+// of the surface point. 6 voxels holds the half-maximum crossings of a shell
+// up to 12 voxels wide; 4 mm keeps the same physical reach on fine grids.
+constexpr double kProfileStep = 0.1;
+constexpr double kProfileMinVoxels = 6.0;
+constexpr double kProfileMinMm = 4.0;
+// A profile whose peak is below this fraction of u_ind has no shell to measure:
+// it counts in surface_peak (as a hole) but not in the thickness median.
+constexpr double kPeakFloor = 0.05;
 
 // Below this change of u across one voxel, grad u has no meaningful direction
 // (it is 1/4 of an 8-bit opacity step): such voxels stay out of the normal error.
@@ -127,10 +142,114 @@ struct Grid {
   }
 };
 
+// Trilinear interpolation of f at index coordinates q, clamped to the volume
+// (outside it the border values continue).
+double trilinear(const float* f, const Grid& g, const double q[3]) {
+  const std::size_t n[3] = {g.nx, g.ny, g.nz};
+  std::size_t i0[3], step[3] = {1, g.sy, g.sz};
+  double w[3];
+  for (int a = 0; a < 3; ++a) {
+    double c = q[a] > 0 ? q[a] : 0.0;  // NaN-safe: a NaN coordinate samples the corner
+    c = c < double(n[a] - 1) ? c : double(n[a] - 1);
+    std::size_t i = std::size_t(c);
+    if (i + 1 >= n[a]) i = n[a] >= 2 ? n[a] - 2 : 0;
+    i0[a] = i;
+    w[a] = n[a] >= 2 ? c - double(i) : 0.0;
+    if (n[a] < 2) step[a] = 0;
+  }
+  const float* p = f + i0[0] + i0[1] * g.sy + i0[2] * g.sz;
+  const double c00 = p[0] + w[0] * (p[step[0]] - p[0]);
+  const double c10 = p[step[1]] + w[0] * (p[step[1] + step[0]] - p[step[1]]);
+  const double c01 = p[step[2]] + w[0] * (p[step[2] + step[0]] - p[step[2]]);
+  const double c11 = p[step[2] + step[1]] + w[0] * (p[step[2] + step[1] + step[0]] - p[step[2] + step[1]]);
+  const double c0 = c00 + w[1] * (c10 - c00), c1 = c01 + w[1] * (c11 - c01);
+  return c0 + w[2] * (c1 - c0);
+}
+
+// The profile of u along the true normal through one facing surface voxel.
+struct ProfileGeometry {
+  double step_mm = 0, tol_mm = 0;  // sample spacing; the peak is searched within |t| <= tol_mm
+  int half = 0;                    // samples t = k step_mm for k in [-half, half]
+};
+
+struct ProfileResult {
+  double peak = 0;          // max of u for |t| <= tol
+  double width_mm = 0;      // full width at half that maximum (a lower bound when censored)
+  bool measured = false;    // peak above the floor: width_mm enters the thickness median
+  bool censored = false;    // ... but a crossing lies beyond the window, which then stands in for it
+};
+
+// foot: the surface point in mm; n: the unit outward normal (per mm). Samples
+// are taken only as far as needed: the tolerance window, then outward to the
+// half-maximum crossings.
+ProfileResult profile(const float* u, const Grid& g, const ProfileGeometry& pg, const double foot[3],
+                      const double n[3], double floor) {
+  const int half = pg.half;
+  const double q0[3] = {foot[0] / g.h[0], foot[1] / g.h[1], foot[2] / g.h[2]};
+  const double dq[3] = {pg.step_mm * n[0] / g.h[0], pg.step_mm * n[1] / g.h[1], pg.step_mm * n[2] / g.h[2]};
+  const auto sample = [&](int k) {  // u at t = k step_mm
+    const double q[3] = {q0[0] + k * dq[0], q0[1] + k * dq[1], q0[2] + k * dq[2]};
+    return trilinear(u, g, q);
+  };
+  ProfileResult r;
+  // The surface's own peak: the largest sample with |t| <= tol (on ties the
+  // one nearest the inside).
+  const double steps = std::floor(pg.tol_mm / pg.step_mm + 1e-9);
+  const int reach = steps >= double(half) ? half : int(steps);
+  int at = -reach;
+  r.peak = sample(-reach);
+  for (int k = -reach + 1; k <= reach; ++k) {
+    const double v = sample(k);
+    if (v > r.peak) r.peak = v, at = k;
+  }
+  if (!(r.peak >= floor) || r.peak <= 0) return r;
+  const double level = 0.5 * r.peak;
+  // Walk out both ways to the first sample below half the peak; the crossing
+  // is interpolated linearly between it and the sample before. Where u stays
+  // above half the peak to the end of the window, the window's end stands in
+  // for the crossing: the width is then a lower bound, and it still enters
+  // the median (leaving the widest shells out would flatter the median).
+  double t_hi = half * pg.step_mm, t_lo = -half * pg.step_mm;
+  bool hi = false, lo = false;
+  double prev = r.peak;
+  for (int k = at + 1; k <= half; ++k) {
+    const double v = sample(k);
+    if (v < level) {
+      t_hi = (k - 1 + (prev - level) / (prev - v)) * pg.step_mm;
+      hi = true;
+      break;
+    }
+    prev = v;
+  }
+  prev = r.peak;
+  for (int k = at - 1; k >= -half; --k) {
+    const double v = sample(k);
+    if (v < level) {
+      t_lo = (k + 1 - (prev - level) / (prev - v)) * pg.step_mm;
+      lo = true;
+      break;
+    }
+    prev = v;
+  }
+  r.measured = true;
+  r.censored = !(hi && lo);
+  r.width_mm = t_hi - t_lo;
+  return r;
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const std::size_t m = v.size() / 2;
+  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
+}
+
 // Partial sums of one z slice (first pass).
 struct SliceSums {
   std::size_t splats = 0, opaque = 0, facing = 0, normal_voxels = 0, non_finite_u = 0, non_finite_sdf = 0;
-  double drawn_u = 0, near_u = 0, normal_w = 0, normal_wangle = 0;
+  std::size_t censored = 0;
+  double drawn_u = 0, near_u = 0, normal_w = 0, normal_wangle = 0, mass = 0, near_mass = 0, max_u = 0;
+  std::vector<double> peaks, widths;  // facing surface voxels in index order; widths of the measured ones
 };
 
 void validate(const Volume& opacity, const Volume& truth, const MetricsParams& p) {
@@ -142,8 +261,15 @@ void validate(const Volume& opacity, const Volume& truth, const MetricsParams& p
     throw InputError("threshold must be a finite number >= 0, got " + std::to_string(p.threshold));
   if (!std::isfinite(p.tolerance) || p.tolerance < 0)
     throw InputError("tolerance must be a finite number >= 0 (voxels), got " + std::to_string(p.tolerance));
+  if (!std::isfinite(p.tolerance_mm) || p.tolerance_mm < 0)
+    throw InputError("tolerance_mm must be a finite number >= 0 (0: use tolerance in voxels), got " +
+                     std::to_string(p.tolerance_mm));
   if (!std::isfinite(p.opaque) || p.opaque < 0)
     throw InputError("opaque must be a finite number >= 0, got " + std::to_string(p.opaque));
+  if (!std::isfinite(p.u_ind) || !(p.u_ind > 0))
+    throw InputError("u_ind must be a finite number > 0, got " + std::to_string(p.u_ind));
+  if (!(p.blob_rel > 0 && p.blob_rel <= 1))
+    throw InputError("blob_rel must be in (0, 1], got " + std::to_string(p.blob_rel));
   if (!(p.tensor_sigma >= 0 && p.tensor_sigma <= 8))
     throw InputError("tensor sigma must be in [0, 8] voxels, got " + std::to_string(p.tensor_sigma));
   if (!(p.facing_cos >= -1 && p.facing_cos <= 1))
@@ -220,12 +346,23 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
   const Grid g{opacity.dims[0], opacity.dims[1], opacity.dims[2], opacity.dims[0],
                opacity.dims[0] * opacity.dims[1], opacity.spacing};
   const std::size_t n = opacity.voxels();
-  if (n == 0) return m;
   const float* u = opacity.data.data();
   const float* sdf = truth_sdf.data.data();
   const double blen = std::sqrt(p.beam[0] * p.beam[0] + p.beam[1] * p.beam[1] + p.beam[2] * p.beam[2]);
   const double toward[3] = {-p.beam[0] / blen, -p.beam[1] / blen, -p.beam[2] / blen};  // to the transducer
-  const double min_grad_u = kMinOpacityStep / std::min({g.h[0], g.h[1], g.h[2]});
+  const double h0 = std::min({g.h[0], g.h[1], g.h[2]});
+  const double min_grad_u = kMinOpacityStep / h0;
+  // The tolerance in voxels of the smallest spacing (the SDF's unit on an anisotropic grid).
+  const double tol = p.tolerance_mm > 0 ? p.tolerance_mm / h0 : p.tolerance;
+  m.tolerance = tol;
+  m.tolerance_mm = tol * h0;
+  ProfileGeometry pg;
+  pg.step_mm = kProfileStep * h0;
+  m.profile_radius_mm = std::max(kProfileMinVoxels * h0, kProfileMinMm);
+  pg.half = int(std::ceil(m.profile_radius_mm / pg.step_mm - 1e-9));
+  pg.tol_mm = m.tolerance_mm;
+  const double peak_floor = kPeakFloor * p.u_ind;
+  if (n == 0) return m;
 
   // ---- pass 1: pointwise sums and flags ----------------------------------
   std::vector<std::uint8_t> flags(n, 0);
@@ -239,9 +376,12 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
         const double ui = u[i], si = sdf[i];
         if (!std::isfinite(ui)) ++s.non_finite_u;
         if (!std::isfinite(si)) ++s.non_finite_sdf;
-        const bool near = std::abs(si) <= p.tolerance;
+        const bool near = std::abs(si) <= tol;
         std::uint8_t f = near ? kNear : 0;
         bool have_gs = false;
+        s.mass += ui;
+        if (near) s.near_mass += ui;
+        s.max_u = std::max(s.max_u, ui);
         if (ui > p.opaque) ++s.opaque;
         if (ui > p.threshold) {
           f |= kDrawn;
@@ -283,9 +423,20 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
         if (surface) {
           if (!have_gs) g.gradient(sdf, i, x, y, z, gs);
           const double ns = std::sqrt(gs[0] * gs[0] + gs[1] * gs[1] + gs[2] * gs[2]);
-          if (ns > 0 && (gs[0] * toward[0] + gs[1] * toward[1] + gs[2] * toward[2]) / ns >= p.facing_cos) {
+          if (ns > 0 && (gs[0] * toward[0] + gs[1] * toward[1] + gs[2] * toward[2]) / ns >= p.facing_cos &&
+              std::isfinite(ns) && std::isfinite(si)) {  // (a non-finite SDF is rejected below)
             f |= kFacing;
             ++s.facing;
+            // The profile through the surface point nearest x: one Newton step
+            // x - sdf grad sdf / |grad sdf|^2 (in mm; exact for a distance field).
+            const double nrm[3] = {gs[0] / ns, gs[1] / ns, gs[2] / ns};
+            const double d = si / ns;
+            const double foot[3] = {double(x) * g.h[0] - d * nrm[0], double(y) * g.h[1] - d * nrm[1],
+                                    double(z) * g.h[2] - d * nrm[2]};
+            const ProfileResult r = profile(u, g, pg, foot, nrm, peak_floor);
+            s.peaks.push_back(r.peak);
+            if (r.measured) s.widths.push_back(r.width_mm);
+            if (r.censored) ++s.censored;
           }
         }
         flags[i] = f;
@@ -293,7 +444,14 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
     }
   });
   SliceSums t;
-  for (const SliceSums& s : slices) {
+  for (SliceSums& s : slices) {
+    t.censored += s.censored;
+    t.mass += s.mass;
+    t.near_mass += s.near_mass;
+    t.max_u = std::max(t.max_u, s.max_u);
+    t.peaks.insert(t.peaks.end(), s.peaks.begin(), s.peaks.end());
+    t.widths.insert(t.widths.end(), s.widths.begin(), s.widths.end());
+    s.peaks = {}, s.widths = {};
     t.splats += s.splats;
     t.opaque += s.opaque;
     t.facing += s.facing;
@@ -315,6 +473,11 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
   m.percent_opaque = 100.0 * double(t.opaque) / double(n);
   m.precision = t.drawn_u > 0 ? t.near_u / t.drawn_u : 0.0;
   m.normal_error_deg = t.normal_w > 0 ? t.normal_wangle / t.normal_w : 0.0;
+  m.mass_precision = t.mass > 0 ? t.near_mass / t.mass : 0.0;
+  m.surface_peak = median(std::move(t.peaks)) / p.u_ind;
+  m.thickness_points = t.widths.size();
+  m.thickness_censored = t.censored;
+  m.shell_thickness_mm = median(std::move(t.widths));
 
   // ---- recall: distance from each facing surface voxel to the drawn set --
   if (m.splats > 0 && m.facing_surface_voxels > 0) {
@@ -323,7 +486,7 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
     const std::vector<float> d2 = metrics_detail::squared_edt(drawn, opacity.dims);
     drawn = {};
     // Squared distances between voxel centres are integers: compare exactly.
-    const double tol2 = std::floor(p.tolerance * p.tolerance + 1e-9);
+    const double tol2 = std::floor(tol * tol + 1e-9);
     std::vector<std::size_t> hits(g.nz, 0);
     parallel_items(g.nz, [&](std::size_t z) {
       for (std::size_t i = z * g.sz, e = i + g.sz; i < e; ++i)
@@ -367,6 +530,52 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
       m.spurious_voxels += size;
     }
   }
+
+  // ---- 6-connected components of {u > blob_rel max u} -----------------------
+  // Relative, so that a dim u cannot hide its debris below a fixed threshold;
+  // 6-connected, so that speckle touching a shell only at an edge or a corner
+  // stays a blob of its own.
+  m.blob_threshold = p.blob_rel * t.max_u;
+  const double t6 = m.blob_threshold;
+  parallel_items(g.nz, [&](std::size_t z) {
+    for (std::size_t i = z * g.sz, e = i + g.sz; i < e; ++i)
+      if (double(u[i]) > t6) flags[i] |= kBright;
+  });
+  const auto bright = [&](std::size_t j) { return (flags[j] & (kBright | kVisited6)) == kBright; };
+  std::size_t bright_voxels = 0, blob_voxels = 0;
+  for (std::size_t start = 0; start < n; ++start) {
+    if (!bright(start)) continue;
+    flags[start] |= kVisited6;
+    stack.push_back(start);
+    bool near = false;
+    std::size_t size = 0;
+    while (!stack.empty()) {
+      const std::size_t i = stack.back();
+      stack.pop_back();
+      ++size;
+      near = near || (flags[i] & kNear);
+      const std::size_t x = i % g.nx, y = (i / g.nx) % g.ny, z = i / g.sz;
+      const std::size_t nb[6] = {x > 0 ? i - 1 : i,         x + 1 < g.nx ? i + 1 : i,
+                                 y > 0 ? i - g.sy : i,      y + 1 < g.ny ? i + g.sy : i,
+                                 z > 0 ? i - g.sz : i,      z + 1 < g.nz ? i + g.sz : i};
+      for (std::size_t j : nb)
+        if (bright(j)) {
+          flags[j] |= kVisited6;
+          stack.push_back(j);
+        }
+    }
+    bright_voxels += size;
+    ++m.components6;
+    if (!near) {
+      ++m.blobs6;
+      blob_voxels += size;
+    }
+  }
+  m.blob6_voxel_share = bright_voxels > 0 ? double(blob_voxels) / double(bright_voxels) : 0.0;
+
+  const auto f1 = [](double a, double b) { return a + b > 0 ? 2 * a * b / (a + b) : 0.0; };
+  m.f1 = f1(m.precision, m.recall);
+  m.f1_mass = f1(m.mass_precision, m.recall);
   return m;
 }
 
@@ -380,8 +589,18 @@ std::string metrics_json(const Metrics& m, const MetricsParams& p) {
     << ", \"normal_error_deg\": " << json_number(m.normal_error_deg)
     << ", \"percent_opaque\": " << json_number(m.percent_opaque) << ", \"splats\": " << m.splats
     << ", \"facing_surface_voxels\": " << m.facing_surface_voxels << ", \"normal_voxels\": " << m.normal_voxels
-    << ", \"spurious_voxels\": " << m.spurious_voxels << ", \"threshold\": " << json_number(p.threshold)
-    << ", \"tolerance\": " << json_number(p.tolerance) << ", \"opaque\": " << json_number(p.opaque)
+    << ", \"spurious_voxels\": " << m.spurious_voxels << ", \"mass_precision\": " << json_number(m.mass_precision)
+    << ", \"f1\": " << json_number(m.f1) << ", \"f1_mass\": " << json_number(m.f1_mass)
+    << ", \"surface_peak\": " << json_number(m.surface_peak)
+    << ", \"shell_thickness_mm\": " << json_number(m.shell_thickness_mm)
+    << ", \"thickness_points\": " << m.thickness_points << ", \"thickness_censored\": " << m.thickness_censored
+    << ", \"blobs6\": " << m.blobs6 << ", \"components6\": " << m.components6
+    << ", \"blob6_voxel_share\": " << json_number(m.blob6_voxel_share)
+    << ", \"threshold\": " << json_number(p.threshold)
+    << ", \"tolerance\": " << json_number(m.tolerance) << ", \"tolerance_mm\": " << json_number(m.tolerance_mm)
+    << ", \"opaque\": " << json_number(p.opaque) << ", \"u_ind\": " << json_number(p.u_ind)
+    << ", \"blob_rel\": " << json_number(p.blob_rel) << ", \"blob_threshold\": " << json_number(m.blob_threshold)
+    << ", \"profile_radius_mm\": " << json_number(m.profile_radius_mm)
     << ", \"facing_cos\": " << json_number(p.facing_cos) << ", \"tensor_sigma\": " << json_number(p.tensor_sigma)
     << ", \"beam\": [" << json_number(b[0] + 0.0) << ", "
     << json_number(b[1] + 0.0) << ", " << json_number(b[2] + 0.0) << "]}";

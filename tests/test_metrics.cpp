@@ -72,11 +72,11 @@ TEST(MetricsSphere, PerfectShellScoresPerfectly) {
   // SmoothShellHasAccurateNormals and docs/metrics.md.
   EXPECT_LT(m.normal_error_deg, 20.0);
   EXPECT_GT(m.normal_voxels, 1000u);
-  // Splats: voxels with |sdf| < 1.5 * (1 - 0.2); percent_opaque likewise with 0.01.
+  // Splats: voxels with |sdf| < 1.5 * (1 - 0.2); percent_opaque likewise with the default 0.05.
   std::size_t splats = 0, opaque = 0;
   for (float s : sdf.data) {
     splats += 1.0 - std::abs(s) / 1.5 > 0.2;
-    opaque += 1.0 - std::abs(s) / 1.5 > 0.01;
+    opaque += 1.0 - std::abs(s) / 1.5 > 0.05;
   }
   EXPECT_EQ(m.splats, splats);
   EXPECT_NEAR(m.percent_opaque, 100.0 * double(opaque) / double(sdf.voxels()), 1e-9);
@@ -211,6 +211,16 @@ TEST(MetricsSphere, EmptyOpacityDrawsNothing) {
   EXPECT_EQ(m.normal_error_deg, 0.0);
   EXPECT_EQ(m.percent_opaque, 0.0);
   EXPECT_GT(m.facing_surface_voxels, 0u);
+  EXPECT_EQ(m.mass_precision, 0.0);
+  EXPECT_EQ(m.f1, 0.0);
+  EXPECT_EQ(m.f1_mass, 0.0);
+  EXPECT_EQ(m.surface_peak, 0.0) << "every facing point is a hole";
+  EXPECT_EQ(m.shell_thickness_mm, 0.0);
+  EXPECT_EQ(m.thickness_points, 0u);
+  EXPECT_EQ(m.blobs6, 0u);
+  EXPECT_EQ(m.components6, 0u);
+  EXPECT_EQ(m.blob6_voxel_share, 0.0);
+  EXPECT_EQ(m.blob_threshold, 0.0);
 }
 
 TEST(MetricsSphere, AnisotropicSpacingKeepsTheAnswers) {
@@ -256,6 +266,290 @@ TEST(MetricsSphere, AnisotropicSpacingKeepsTheAnswers) {
   EXPECT_GT(facing_grid, facing_hi) << "the check does not tell mm from voxels";
 }
 
+// ---- metrics that see all of u (mass precision, surface peak, thickness, 6-connected blobs) ----
+
+constexpr double kFwhmPerSigma = 2.3548200450309493;  // 2 sqrt(2 ln 2)
+
+// The same shell in a volume whose every voxel is h mm (the SDF stays in voxels).
+Volume with_spacing(Volume v, const Vec3d& h) {
+  v.spacing = h;
+  return v;
+}
+
+// Independent serial sums: share of sum u with |sdf| <= tol.
+double mass_share(const Volume& u, const Volume& sdf, double tol) {
+  double near = 0, all = 0;
+  for (std::size_t i = 0; i < u.data.size(); ++i) {
+    all += u.data[i];
+    if (std::abs(sdf.data[i]) <= tol) near += u.data[i];
+  }
+  return near / all;
+}
+
+TEST(MetricsShell, GaussianShellHasItsFullWidthAtHalfMaximumAndPeak) {
+  // u = exp(-sdf^2 / 2 s^2) has FWHM 2.3548 s and peak 1 on the surface. Trilinear sampling
+  // between voxel centres blurs a little: +1.8 % and peak 0.983 at s = 2, +0.9 % and 0.992 at s = 3.
+  const Volume sdf = sphere_sdf();
+  for (const double sigma : {2.0, 3.0}) {
+    SCOPED_TRACE("sigma " + std::to_string(sigma));
+    const Metrics m = evaluate_opacity(smooth_shell(sdf, sigma), sdf);
+    EXPECT_NEAR(m.shell_thickness_mm, kFwhmPerSigma * sigma, 0.025 * kFwhmPerSigma * sigma);
+    EXPECT_GT(m.surface_peak, 0.97);
+    EXPECT_LE(m.surface_peak, 1.0);
+    EXPECT_EQ(m.thickness_points, m.facing_surface_voxels) << "every facing point has a measurable shell";
+    EXPECT_EQ(m.thickness_censored, 0u);
+    EXPECT_EQ(m.profile_radius_mm, 6.0) << "max(6 voxels, 4 mm) at 1 mm";
+  }
+  // Wider is wider: the width follows sigma.
+  const double w15 = evaluate_opacity(smooth_shell(sdf, 1.5), sdf).shell_thickness_mm;
+  const double w3 = evaluate_opacity(smooth_shell(sdf, 3.0), sdf).shell_thickness_mm;
+  EXPECT_NEAR(w3 / w15, 2.0, 0.1);
+}
+
+TEST(MetricsShell, ThicknessIsInMillimetres) {
+  // The same voxels at 0.5 mm: every length halves exactly (the profile steps 0.1 voxel either way).
+  const Volume sdf = sphere_sdf();
+  const Volume u = smooth_shell(sdf, 2.0);
+  const Metrics one = evaluate_opacity(u, sdf);
+  const Metrics half = evaluate_opacity(with_spacing(u, {0.5, 0.5, 0.5}), with_spacing(sdf, {0.5, 0.5, 0.5}));
+  EXPECT_NEAR(half.shell_thickness_mm, 0.5 * one.shell_thickness_mm, 1e-9);
+  EXPECT_EQ(half.surface_peak, one.surface_peak);
+  EXPECT_EQ(half.tolerance, 2.0) << "--tolerance is in voxels";
+  EXPECT_EQ(half.tolerance_mm, 1.0);
+  EXPECT_EQ(half.profile_radius_mm, 4.0) << "max(6 voxels = 3 mm, 4 mm)";
+
+  // Anisotropic 1 x 1 x 2 mm voxels around a physical sphere (SDF in units of the smallest
+  // spacing, 1 mm) with a Gaussian shell of sigma 2 mm: FWHM 4.71 mm along the physical normal.
+  // The facing cap points along z, where the samples are 2 mm apart: a coarser blur (+4 %).
+  const std::size_t nx = 48, nz = 24;
+  const double c = 23.5, cz = 11.5, r = 15;
+  Volume asdf({nx, nx, nz}, {1.0, 1.0, 2.0});
+  for (std::size_t z = 0; z < nz; ++z)
+    for (std::size_t y = 0; y < nx; ++y)
+      for (std::size_t x = 0; x < nx; ++x) {
+        const double dz = 2.0 * (z - cz);
+        asdf.at(x, y, z) = float(std::sqrt((x - c) * (x - c) + (y - c) * (y - c) + dz * dz) - r);
+      }
+  const Metrics a = evaluate_opacity(smooth_shell(asdf, 2.0), asdf);
+  EXPECT_NEAR(a.shell_thickness_mm, kFwhmPerSigma * 2.0, 0.06 * kFwhmPerSigma * 2.0);
+  EXPECT_GT(a.surface_peak, 0.95);
+  EXPECT_EQ(a.thickness_points, a.facing_surface_voxels);
+  // Read as 1 mm cubes (ignoring the 2 mm z spacing), the same field would be half as thick
+  // along z: the measurement must not be that.
+  Volume cubes = smooth_shell(asdf, 2.0);
+  cubes.spacing = {1.0, 1.0, 1.0};
+  Volume cube_sdf = asdf;
+  cube_sdf.spacing = {1.0, 1.0, 1.0};
+  EXPECT_LT(evaluate_opacity(cubes, cube_sdf).shell_thickness_mm, 0.8 * a.shell_thickness_mm);
+}
+
+TEST(MetricsShell, SurfacePeakIsAFractionOfUInd) {
+  const Volume sdf = sphere_sdf();
+  const Volume full = smooth_shell(sdf, 2.0);
+  Volume dim = full;
+  for (float& f : dim.data) f *= 0.55f;
+  const Metrics a = evaluate_opacity(full, sdf), b = evaluate_opacity(dim, sdf);
+  // Trilinear sampling and the median are linear in u: the peak scales exactly, the width not at all.
+  EXPECT_NEAR(b.surface_peak, 0.55 * a.surface_peak, 1e-6);
+  EXPECT_NEAR(b.surface_peak, 0.55, 0.02);
+  EXPECT_NEAR(b.shell_thickness_mm, a.shell_thickness_mm, 1e-4);
+  // Measured against u_ind = 0.55 the dim shell reaches its target.
+  MetricsParams p;
+  p.u_ind = 0.55;
+  EXPECT_NEAR(evaluate_opacity(dim, sdf, p).surface_peak, a.surface_peak, 1e-6);
+  // Precision and recall do not see the difference (the dim shell is still drawn where it
+  // exceeds 0.2); percent_opaque and splats do.
+  EXPECT_EQ(b.recall, a.recall);
+  EXPECT_LT(b.splats, a.splats);
+}
+
+TEST(MetricsShell, HolesInTheShellLowerTheMedianPeakOnceMoreThanHalfIsMissing) {
+  const Volume sdf = sphere_sdf();
+  const Volume u = smooth_shell(sdf, 2.0);
+  const auto holes = [&](double x_cut) {
+    Volume h = u;
+    for (std::size_t z = 0; z < kN; ++z)
+      for (std::size_t y = 0; y < kN; ++y)
+        for (std::size_t x = 0; x < kN; ++x)
+          if (double(x) < x_cut) h.at(x, y, z) = 0.0f;
+    return evaluate_opacity(h, sdf);
+  };
+  const Metrics whole = evaluate_opacity(u, sdf);
+  // The facing cap is symmetric about x = 24: cutting x < 21 removes well under half of it,
+  // x < 27 well over half.
+  const Metrics some = holes(21.0), most = holes(27.0);
+  EXPECT_NEAR(some.surface_peak, whole.surface_peak, 0.02) << "the median still sees the shell";
+  EXPECT_LT(most.surface_peak, 0.05) << "the median sees the holes";
+  EXPECT_LT(most.thickness_points, whole.thickness_points / 2) << "holes have no width to measure";
+  EXPECT_EQ(most.facing_surface_voxels, whole.facing_surface_voxels);
+}
+
+TEST(MetricsShell, ShellsTooFaintOrTooWideToMeasureAreCounted) {
+  const Volume sdf = sphere_sdf();
+  // A peak below 0.05 u_ind: no width is measured; the peak still counts.
+  Volume faint = smooth_shell(sdf, 2.0);
+  for (float& f : faint.data) f *= 0.04f;
+  const Metrics f = evaluate_opacity(faint, sdf);
+  EXPECT_EQ(f.thickness_points, 0u);
+  EXPECT_EQ(f.thickness_censored, 0u);
+  EXPECT_EQ(f.shell_thickness_mm, 0.0);
+  EXPECT_NEAR(f.surface_peak, 0.04, 0.002);
+  // sigma 6: FWHM 14 voxels, its half-maximum crossings 7 voxels out, beyond the +-6 voxel
+  // window: every width is censored and enters as the window's 12 voxels, a lower bound (the
+  // widest shells must not drop out of the median and leave it to the thin ones).
+  const Metrics w = evaluate_opacity(smooth_shell(sdf, 6.0), sdf);
+  EXPECT_EQ(w.thickness_points, w.facing_surface_voxels);
+  EXPECT_EQ(w.thickness_censored, w.facing_surface_voxels);
+  EXPECT_NEAR(w.shell_thickness_mm, 12.0, 1e-9);
+  EXPECT_GT(w.surface_peak, 0.99);
+  // At 0.25 mm voxels the window is 4 mm = 16 voxels: the same field is measured, 14 voxels.
+  const Metrics fine = evaluate_opacity(with_spacing(smooth_shell(sdf, 6.0), {0.25, 0.25, 0.25}),
+                                        with_spacing(sdf, {0.25, 0.25, 0.25}));
+  EXPECT_EQ(fine.thickness_censored, 0u);
+  EXPECT_NEAR(fine.shell_thickness_mm, 0.25 * kFwhmPerSigma * 6.0, 0.02 * 0.25 * kFwhmPerSigma * 6.0);
+  // Half wide, half thin: the median sits at the boundary of the two groups, not at the thin one.
+  Volume mixed = smooth_shell(sdf, 1.5);
+  const Volume wide = smooth_shell(sdf, 6.0);
+  for (std::size_t z = 0; z < kN; ++z)
+    for (std::size_t y = 0; y < kN; ++y)
+      for (std::size_t x = 0; x < kN; ++x)
+        if (x < 21) mixed.at(x, y, z) = wide.at(x, y, z);  // under half of the facing cap
+  const Metrics mx = evaluate_opacity(mixed, sdf);
+  EXPECT_GT(mx.thickness_censored, mx.thickness_points / 4);
+  EXPECT_LT(mx.shell_thickness_mm, 5.0) << "the thin part is the majority";
+  for (std::size_t z = 0; z < kN; ++z)
+    for (std::size_t y = 0; y < kN; ++y)
+      for (std::size_t x = 0; x < kN; ++x)
+        if (x < 28) mixed.at(x, y, z) = wide.at(x, y, z);  // over half
+  EXPECT_GT(evaluate_opacity(mixed, sdf).shell_thickness_mm, 10.0) << "the wide part is the majority";
+}
+
+TEST(MetricsMass, UniformHazeLowersMassPrecisionOnly) {
+  const Volume sdf = sphere_sdf();
+  const Volume clean = shell(sdf);
+  Volume hazy = clean;
+  for (float& f : hazy.data) f += 0.03f;
+  const Metrics a = evaluate_opacity(clean, sdf), b = evaluate_opacity(hazy, sdf);
+  EXPECT_DOUBLE_EQ(a.mass_precision, 1.0) << "the tent lies within |sdf| < 1.5 <= 2";
+  // The haze adds 0.03 to every voxel: sum u grows by 0.03 N, the near part by 0.03 |near|.
+  double shell_mass = 0;
+  std::size_t near = 0;
+  for (std::size_t i = 0; i < sdf.data.size(); ++i) {
+    shell_mass += clean.data[i];
+    near += std::abs(sdf.data[i]) <= 2.0f;
+  }
+  const double n = double(sdf.voxels()), haze_near = 0.03 * double(near);
+  EXPECT_NEAR(b.mass_precision, (shell_mass + haze_near) / (shell_mass + 0.03 * n), 1e-5);
+  EXPECT_NEAR(b.mass_precision, mass_share(hazy, sdf, 2.0), 1e-9);
+  // 0.03 over 48^3 voxels is 3318, nearly as much as the shell's 4900: 0.61.
+  EXPECT_LT(b.mass_precision, 0.65);
+  // The thresholded precision cannot see it: every drawn voxel (|sdf| < 1.245) is still near.
+  EXPECT_DOUBLE_EQ(b.precision, 1.0);
+  EXPECT_DOUBLE_EQ(b.f1, 1.0);
+  EXPECT_LT(b.f1_mass, 0.8);
+  EXPECT_NEAR(b.f1_mass, 2 * b.mass_precision * b.recall / (b.mass_precision + b.recall), 1e-12);
+  EXPECT_EQ(b.blobs6, 0u) << "0.03 is below 0.2 max u";
+}
+
+TEST(MetricsMass, ShiftedShellLosesMassPrecision) {
+  const Volume sdf = sphere_sdf();
+  const Volume shifted = shell(sdf, 3.0);  // 1.5 < sdf < 4.5: only 1.5 < sdf <= 2 is near
+  const Metrics m = evaluate_opacity(shifted, sdf);
+  EXPECT_NEAR(m.mass_precision, mass_share(shifted, sdf, 2.0), 1e-9);
+  // A flat shell would keep 1/18 of its mass (a triangle of height 1/3 and base 0.5 of one
+  // with height 1 and base 3); the sphere's inner side is smaller.
+  EXPECT_GT(m.mass_precision, 0.03);
+  EXPECT_LT(m.mass_precision, 1.0 / 18.0);
+  EXPECT_LT(m.f1_mass, 0.2);
+  // Its peak within 2 voxels of the surface is the tent's flank, u(2) = 1/3.
+  EXPECT_NEAR(m.surface_peak, 1.0 / 3.0, 0.04);
+}
+
+TEST(MetricsMass, PhysicalToleranceScoresTheSameAnatomyAlikeAtTwoResolutions) {
+  // A sphere of radius 10 mm at 1 mm (32^3) and at 0.5 mm (64^3), each SDF in its own voxels;
+  // a Gaussian shell of sigma 1.5 mm; scored with a 2 mm tolerance.
+  MetricsParams p;
+  p.tolerance_mm = 2.0;
+  Metrics m[2];
+  for (int k = 0; k < 2; ++k) {
+    const double h = k == 0 ? 1.0 : 0.5;
+    const std::size_t n = k == 0 ? 32 : 64;
+    const Volume sdf = with_spacing(sphere_sdf(n, 0.5 * (double(n) - 1), 10.0 / h), {h, h, h});
+    const Volume u = with_spacing(smooth_shell(sdf, 1.5 / h), {h, h, h});
+    m[k] = evaluate_opacity(u, sdf, p);
+    EXPECT_EQ(m[k].tolerance, 2.0 / h);
+    EXPECT_EQ(m[k].tolerance_mm, 2.0);
+    EXPECT_NEAR(m[k].mass_precision, mass_share(u, sdf, 2.0 / h), 1e-9);
+  }
+  EXPECT_NEAR(m[0].mass_precision, m[1].mass_precision, 0.01);
+  EXPECT_NEAR(m[0].precision, m[1].precision, 0.03);
+  EXPECT_NEAR(m[0].shell_thickness_mm, kFwhmPerSigma * 1.5, 0.05 * kFwhmPerSigma * 1.5);
+  EXPECT_NEAR(m[1].shell_thickness_mm, kFwhmPerSigma * 1.5, 0.02 * kFwhmPerSigma * 1.5);
+  // The voxel tolerance would score the finer volume against a 1 mm band instead.
+  const double h = 0.5;
+  const Volume sdf = with_spacing(sphere_sdf(64, 31.5, 20.0), {h, h, h});
+  EXPECT_LT(evaluate_opacity(with_spacing(smooth_shell(sdf, 3.0), {h, h, h}), sdf).mass_precision,
+            m[1].mass_precision - 0.2);
+  // Anisotropic: the smallest spacing converts.
+  Volume a = with_spacing(sphere_sdf(16, 8, 5), {0.5, 0.75, 1.0});
+  const Metrics ma = evaluate_opacity(with_spacing(shell(a), a.spacing), a, p);
+  EXPECT_EQ(ma.tolerance, 4.0);
+  EXPECT_EQ(ma.tolerance_mm, 2.0);
+}
+
+TEST(MetricsBlobs, DiagonalChainIsOneBlobAt26AndManyAt6) {
+  const Volume sdf = sphere_sdf();
+  const Volume clean = shell(sdf);
+  Volume u = clean;
+  const std::size_t chain = 8;  // (2,2,2) ... (9,9,9): corners touch, faces do not
+  for (std::size_t i = 0; i < chain; ++i) {
+    ASSERT_GT(sdf.at(2 + i, 2 + i, 2 + i), 10.0f);
+    u.at(2 + i, 2 + i, 2 + i) = 1.0f;
+  }
+  const Metrics a = evaluate_opacity(clean, sdf), b = evaluate_opacity(u, sdf);
+  EXPECT_EQ(a.blobs6, 0u);
+  EXPECT_EQ(a.components6, 1u);
+  EXPECT_EQ(b.spurious_blobs, a.spurious_blobs + 1);
+  EXPECT_EQ(b.components, a.components + 1);
+  EXPECT_EQ(b.blobs6, chain);
+  EXPECT_EQ(b.components6, a.components6 + chain);
+  EXPECT_EQ(b.blob_threshold, 0.2) << "0.2 x max u = 1";
+  // Share: the chain's voxels among all with u > 0.2 (the shell's splats and the chain).
+  EXPECT_NEAR(b.blob6_voxel_share, double(chain) / double(a.splats + chain), 1e-12);
+  EXPECT_EQ(b.splats, a.splats + chain);
+}
+
+TEST(MetricsBlobs, RelativeThresholdSeesDimDebris) {
+  // A shell of peak 0.5 and a ball of u = 0.15 far from it: below the absolute splat
+  // threshold 0.2, above 0.2 x max u = 0.1.
+  const Volume sdf = sphere_sdf();
+  Volume u = shell(sdf);
+  for (float& f : u.data) f *= 0.5f;
+  std::size_t ball = 0;
+  for (std::size_t z = 3; z <= 9; ++z)
+    for (std::size_t y = 3; y <= 9; ++y)
+      for (std::size_t x = 3; x <= 9; ++x)
+        if ((x - 6.0) * (x - 6.0) + (y - 6.0) * (y - 6.0) + (z - 6.0) * (z - 6.0) <= 4.0) {
+          u.at(x, y, z) = 0.15f;
+          ++ball;
+        }
+  const Metrics m = evaluate_opacity(u, sdf);
+  EXPECT_EQ(m.spurious_blobs, 0u) << "invisible at the absolute threshold";
+  EXPECT_EQ(m.blobs6, 1u);
+  EXPECT_EQ(m.components6, 2u);
+  EXPECT_NEAR(m.blob_threshold, 0.1, 1e-7);
+  std::size_t bright = 0;
+  for (float f : u.data) bright += double(f) > m.blob_threshold;
+  EXPECT_NEAR(m.blob6_voxel_share, double(ball) / double(bright), 1e-12);
+  // blob_rel = 0.5: u > 0.25 keeps the shell's ridge only and drops the ball.
+  MetricsParams p;
+  p.blob_rel = 0.5;
+  const Metrics q = evaluate_opacity(u, sdf, p);
+  EXPECT_EQ(q.blobs6, 0u);
+  EXPECT_EQ(q.blob6_voxel_share, 0.0);
+  EXPECT_NEAR(q.blob_threshold, 0.25, 1e-7);
+}
+
 TEST(Metrics, RejectsMismatchedDimsAndBadInput) {
   const Volume sdf = sphere_sdf(16, 8, 5);
   try {
@@ -275,6 +569,21 @@ TEST(Metrics, RejectsMismatchedDimsAndBadInput) {
   p = {};
   p.tolerance = -1;
   EXPECT_THROW(evaluate_opacity(u, sdf, p), InputError);
+  for (const double bad : {0.0, -1.0, std::numeric_limits<double>::infinity(), std::nan("")}) {
+    p = {};
+    p.u_ind = bad;
+    EXPECT_THROW(evaluate_opacity(u, sdf, p), InputError) << "u_ind " << bad;
+  }
+  for (const double bad : {0.0, -0.1, 1.01, std::nan("")}) {
+    p = {};
+    p.blob_rel = bad;
+    EXPECT_THROW(evaluate_opacity(u, sdf, p), InputError) << "blob_rel " << bad;
+  }
+  for (const double bad : {-1.0, std::numeric_limits<double>::infinity(), std::nan("")}) {
+    p = {};
+    p.tolerance_mm = bad;
+    EXPECT_THROW(evaluate_opacity(u, sdf, p), InputError) << "tolerance_mm " << bad;
+  }
   u.data[5] = std::nanf("");
   EXPECT_THROW(evaluate_opacity(u, sdf), InputError);
 }
@@ -290,6 +599,12 @@ TEST(Metrics, RepeatedRunsGiveIdenticalResults) {
   EXPECT_EQ(a.precision, b.precision);
   EXPECT_EQ(a.normal_error_deg, b.normal_error_deg);
   EXPECT_EQ(a.recall, b.recall);
+  EXPECT_EQ(a.mass_precision, b.mass_precision);
+  EXPECT_EQ(a.surface_peak, b.surface_peak);
+  EXPECT_EQ(a.shell_thickness_mm, b.shell_thickness_mm);
+  EXPECT_EQ(a.thickness_points, b.thickness_points);
+  EXPECT_EQ(a.blobs6, b.blobs6);
+  EXPECT_EQ(a.blob6_voxel_share, b.blob6_voxel_share);
 }
 
 // ---- exact EDT -----------------------------------------------------------
@@ -413,7 +728,10 @@ TEST_F(CliEvaluate, JsonForAPerfectShell) {
   ASSERT_NO_THROW(j = parse_flat_json(r.out)) << r.out;
   for (const char* key : {"precision", "recall", "spurious_blobs", "components", "normal_error_deg",
                           "percent_opaque", "splats", "facing_surface_voxels", "threshold", "tolerance",
-                          "facing_cos", "beam"})
+                          "facing_cos", "beam", "mass_precision", "f1", "f1_mass", "surface_peak",
+                          "shell_thickness_mm", "thickness_points", "thickness_censored", "blobs6", "components6",
+                          "blob6_voxel_share", "blob_threshold", "tolerance_mm", "u_ind", "blob_rel", "opaque",
+                          "profile_radius_mm"})
     EXPECT_EQ(j.count(key), 1u) << key << " missing in " << r.out;
   const Metrics m = evaluate_opacity(shell(sdf), sdf);
   EXPECT_EQ(j["precision"], std::vector<double>{1.0});
@@ -428,6 +746,18 @@ TEST_F(CliEvaluate, JsonForAPerfectShell) {
   EXPECT_EQ(j["tolerance"], std::vector<double>{2.0});
   EXPECT_EQ(j["facing_cos"], std::vector<double>{0.3});
   EXPECT_EQ(j["beam"], (std::vector<double>{0.0, 0.0, 1.0}));
+  EXPECT_EQ(j["opaque"], std::vector<double>{0.05});
+  EXPECT_EQ(j["tolerance_mm"], std::vector<double>{2.0});
+  EXPECT_EQ(j["u_ind"], std::vector<double>{1.0});
+  EXPECT_EQ(j["blob_rel"], std::vector<double>{0.2});
+  EXPECT_EQ(j["blob_threshold"], std::vector<double>{0.2});
+  EXPECT_EQ(j["mass_precision"], std::vector<double>{1.0});
+  EXPECT_EQ(j["f1"], std::vector<double>{1.0});
+  EXPECT_EQ(j["blobs6"], std::vector<double>{0.0});
+  EXPECT_EQ(j["components6"], std::vector<double>{1.0});
+  EXPECT_NEAR(j["surface_peak"].at(0), m.surface_peak, 1e-8);
+  EXPECT_NEAR(j["shell_thickness_mm"].at(0), m.shell_thickness_mm, 1e-8);
+  EXPECT_EQ(j["thickness_points"], std::vector<double>{double(m.thickness_points)});
   // Options reach the computation; the beam is reported as a unit vector.
   const test::RunResult o = run({"evaluate", file("u.nrrd"), file("truth.nrrd"), "--json", "--threshold", "0.5",
                                  "--tolerance", "1", "--beam", "0,0,-4", "--facing-cos", "0.5"});
@@ -444,6 +774,25 @@ TEST_F(CliEvaluate, JsonForAPerfectShell) {
   EXPECT_EQ(j["facing_surface_voxels"], std::vector<double>{double(mo.facing_surface_voxels)});
   EXPECT_EQ(j["beam"], (std::vector<double>{0.0, 0.0, -1.0}));
   EXPECT_EQ(j["threshold"], std::vector<double>{0.5});
+  // The new options: the tolerance in mm (here 1 mm voxels), u_ind, the relative blob threshold.
+  const test::RunResult n = run({"evaluate", file("u.nrrd"), file("truth.nrrd"), "--json", "--tolerance-mm", "1.5",
+                                 "--tolerance", "7", "--u-ind", "0.5", "--blob-rel", "0.6", "--opaque", "0.01"});
+  ASSERT_EQ(n.status, 0) << n.err;
+  ASSERT_NO_THROW(j = parse_flat_json(n.out)) << n.out;
+  p = {};
+  p.tolerance_mm = 1.5;
+  p.u_ind = 0.5;
+  p.blob_rel = 0.6;
+  p.opaque = 0.01;
+  const Metrics mn = evaluate_opacity(shell(sdf), sdf, p);
+  EXPECT_EQ(j["tolerance"], std::vector<double>{1.5}) << "--tolerance-mm overrides --tolerance";
+  EXPECT_EQ(j["tolerance_mm"], std::vector<double>{1.5});
+  EXPECT_EQ(j["blob_threshold"], std::vector<double>{0.6});
+  EXPECT_NEAR(j["surface_peak"].at(0), mn.surface_peak, 1e-8);
+  EXPECT_NEAR(j["surface_peak"].at(0), 2 * m.surface_peak, 1e-8);
+  EXPECT_NEAR(j["mass_precision"].at(0), mn.mass_precision, 1e-8);
+  EXPECT_NEAR(j["percent_opaque"].at(0), mn.percent_opaque, 1e-8);
+  EXPECT_GT(mn.percent_opaque, m.percent_opaque);
 }
 
 TEST_F(CliEvaluate, TableNamesEveryMetric) {
@@ -453,7 +802,9 @@ TEST_F(CliEvaluate, TableNamesEveryMetric) {
   const test::RunResult r = run({"evaluate", file("u.mha"), file("truth.nrrd")});
   ASSERT_EQ(r.status, 0) << r.err;
   for (const char* word : {"precision", "recall", "spurious_blobs", "components", "normal_error_deg",
-                           "percent_opaque", "splats", "facing_surface_voxels", "24x24x24", "1.0000"})
+                           "percent_opaque", "splats", "facing_surface_voxels", "24x24x24", "1.0000",
+                           "mass_precision", "f1_mass", "surface_peak", "shell_thickness_mm", "blobs6",
+                           "blob6_voxel_share", "components6", "u > 0.050"})
     EXPECT_NE(r.out.find(word), std::string::npos) << word << " not in:\n" << r.out;
 }
 
@@ -475,6 +826,15 @@ TEST_F(CliEvaluate, MissingFileAndBadOptionsAreOneLineErrors) {
   expect_one_line_error(run({"evaluate", t, t, "--facing-cos", "1.5"}), {"--facing-cos"});
   expect_one_line_error(run({"evaluate", t, t, "--tolerance", "-1"}), {"--tolerance"});
   expect_one_line_error(run({"evaluate", t, t, "--threshold", "nan"}), {"--threshold"});
+  for (const char* bad : {"0", "-1", "inf", "nan"}) {
+    SCOPED_TRACE(bad);
+    expect_one_line_error(run({"evaluate", t, t, "--u-ind", bad}), {"--u-ind"});
+    expect_one_line_error(run({"evaluate", t, t, "--tolerance-mm", bad}), {"--tolerance-mm"});
+  }
+  for (const char* bad : {"0", "-0.5", "1.5", "nan"}) {
+    SCOPED_TRACE(bad);
+    expect_one_line_error(run({"evaluate", t, t, "--blob-rel", bad}), {"--blob-rel"});
+  }
   expect_one_line_error(run({"evaluate", t}), {"TRUTH_SDF"});
 }
 

@@ -16,6 +16,7 @@
 #include "io.hpp"
 #include "levoy.hpp"
 #include "mask.hpp"
+#include "metrics.hpp"
 #include "variational.hpp"
 #include "text.hpp"
 
@@ -189,7 +190,7 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
   write_opacity(o, u);
   if (!o.quiet) {
     std::size_t drawn = 0, opaque = 0;
-    for (float a : u.data) drawn += a > 0.2f, opaque += a > 0.01f;
+    for (float a : u.data) drawn += a > 0.2f, opaque += a > kOpaqueLevel;
     std::cout << std::fixed << std::setprecision(3) << "classify (variational) " << o.in << " -> " << o.out << '\n'
               << "  volume   " << dims_text(in.dims) << ' ' << scalar_type_name(in.source_type) << ", iso " << iso
               << iso_text << " (" << p.v_iso << " normalised, " << map.describe() << ")\n"
@@ -207,7 +208,8 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
               << ", relative residual " << std::scientific << std::setprecision(2) << report.residuals.back()
               << std::fixed << std::setprecision(3) << '\n'
               << "  opacity  " << drawn << " splats (u > 0.2), " << std::setprecision(1)
-              << 100.0 * double(opaque) / double(u.voxels()) << " % opaque (u > 0.01)\n"
+              << 100.0 * double(opaque) / double(u.voxels()) << " % opaque (u > " << std::setprecision(2)
+              << kOpaqueLevel << ")\n"
               << std::setprecision(3) << "  device   " << rt.info().label() << '\n'
               << "  time     setup " << timing.setup << " s, solve " << timing.solve << " s, total " << seconds_since(t0)
               << " s\n";

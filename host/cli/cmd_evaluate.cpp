@@ -1,6 +1,7 @@
 // `softshell evaluate OPACITY TRUTH_SDF`: surface-quality metrics of an
 // opacity volume against a phantom's ground-truth signed distance field
-// (precision, recall, spurious blobs, normal error, the paper's Table 1
+// (precision, recall, spurious blobs, normal error, mass precision, F1,
+// surface peak, shell thickness, 6-connected blobs, the paper's Table 1
 // counts). Runs on the host; no OpenCL device is needed. Definitions:
 // docs/metrics.md.
 #include <array>
@@ -24,6 +25,7 @@ namespace {
 struct EvaluateOptions {
   std::string opacity, truth, beam = "0,0,1";
   bool json = false;
+  bool tolerance_mm_given = false;  // --tolerance-mm was on the command line
   MetricsParams params;
 };
 
@@ -53,7 +55,11 @@ void check_options(const EvaluateOptions& o) {
   if (!std::isfinite(p.tolerance) || p.tolerance < 0 || p.tolerance > 1e6)
     throw InputError("--tolerance must be in [0, 1e6] voxels");
   if (!(p.facing_cos >= -1 && p.facing_cos <= 1)) throw InputError("--facing-cos must be in [-1, 1]");
+  if (o.tolerance_mm_given && (!std::isfinite(p.tolerance_mm) || !(p.tolerance_mm > 0)))
+    throw InputError("--tolerance-mm must be a finite number > 0 (mm)");
   if (!std::isfinite(p.opaque) || p.opaque < 0) throw InputError("--opaque must be a finite number >= 0");
+  if (!std::isfinite(p.u_ind) || !(p.u_ind > 0)) throw InputError("--u-ind must be a finite number > 0");
+  if (!(p.blob_rel > 0 && p.blob_rel <= 1)) throw InputError("--blob-rel must be in (0, 1]");
 }
 
 std::string fixed(double v, int digits) {
@@ -82,7 +88,8 @@ int run_evaluate(EvaluateOptions o) {
   }
   const MetricsParams& p = o.params;
   const double bl = std::sqrt(p.beam[0] * p.beam[0] + p.beam[1] * p.beam[1] + p.beam[2] * p.beam[2]);
-  const std::string tol = fixed(p.tolerance, 2) + " voxels", thr = fixed(p.threshold, 3);
+  const std::string tol = fixed(m.tolerance, 2) + " voxels (" + fixed(m.tolerance_mm, 2) + " mm)",
+                    thr = fixed(p.threshold, 3);
   const std::string beam = fixed(p.beam[0] / bl + 0.0, 2) + "," + fixed(p.beam[1] / bl + 0.0, 2) + "," +
                            fixed(p.beam[2] / bl + 0.0, 2);
   struct Row {
@@ -102,6 +109,23 @@ int run_evaluate(EvaluateOptions o) {
            (p.tensor_sigma > 0 ? "structure tensor, sigma " + fixed(p.tensor_sigma, 1) + " voxels" : std::string("grad u")) +
            ") and the true normal, over " +
            std::to_string(m.normal_voxels) + " drawn voxels near a surface"},
+      {"mass_precision", fixed(m.mass_precision, 4), "share of all opacity (sum of u, no threshold) within " + tol +
+                                                          " of a true surface"},
+      {"f1", fixed(m.f1, 4), "2 precision recall / (precision + recall)"},
+      {"f1_mass", fixed(m.f1_mass, 4), "the same with mass_precision"},
+      {"surface_peak", fixed(m.surface_peak, 4),
+       "median over the facing surface voxels of max u across the surface (within the tolerance) / u_ind " +
+           fixed(p.u_ind, 3)},
+      {"shell_thickness_mm", fixed(m.shell_thickness_mm, 3),
+       "median full width at half maximum of u along the true normal, over " + std::to_string(m.thickness_points) +
+           " points (" + std::to_string(m.thickness_censored) + " wider than the +-" + fixed(m.profile_radius_mm, 1) +
+           " mm window, counted at that)"},
+      {"blobs6", std::to_string(m.blobs6),
+       "6-connected blobs of u > " + fixed(m.blob_threshold, 4) + " (" + fixed(p.blob_rel, 2) +
+           " max u) nowhere within " + tol + " of a true surface"},
+      {"blob6_voxel_share", fixed(m.blob6_voxel_share, 4), "share of the voxels with u > " +
+                                                               fixed(m.blob_threshold, 4) + " that lie in those blobs"},
+      {"components6", std::to_string(m.components6), "6-connected components of u > " + fixed(m.blob_threshold, 4)},
       {"percent_opaque", fixed(m.percent_opaque, 2), "% of voxels with u > " + fixed(p.opaque, 3) + " (paper Table 1)"},
       {"splats", std::to_string(m.splats), "voxels with u > " + thr + ", one splat each (paper Table 1)"},
       {"facing_surface_voxels", std::to_string(m.facing_surface_voxels),
@@ -136,6 +160,13 @@ void add_evaluate_command(CLI::App& app, Action& action) {
       ->capture_default_str();
   sub->add_option("--tolerance", o->params.tolerance, "Voxels: how near a true surface counts as on it")
       ->capture_default_str();
+  auto* tol_mm = sub->add_option("--tolerance-mm", o->params.tolerance_mm,
+                                 "The tolerance in mm instead (overrides --tolerance; divided by the smallest spacing)");
+  sub->add_option("--u-ind", o->params.u_ind, "The opacity a surface should reach: surface_peak is a fraction of it")
+      ->capture_default_str();
+  sub->add_option("--blob-rel", o->params.blob_rel,
+                  "6-connected blobs are components of u > this times max u, in (0, 1]")
+      ->capture_default_str();
   sub->add_option("--beam", o->beam, "Beam direction X,Y,Z (transducer on the z = 0 face: 0,0,1)")
       ->capture_default_str();
   sub->add_option("--facing-cos", o->params.facing_cos,
@@ -145,8 +176,13 @@ void add_evaluate_command(CLI::App& app, Action& action) {
                   "Splat orientation scored by the normal error: the structure tensor of u with this sigma in voxels "
                   "(the renderer's default), or 0 for grad u (the paper's)")
       ->capture_default_str();
-  sub->add_option("--opaque", o->params.opaque, "u > this counts toward percent_opaque")->capture_default_str();
-  sub->callback([&action, o] { action = [o] { return run_evaluate(*o); }; });
+  sub->add_option("--opaque", o->params.opaque,
+                  "u > this counts toward percent_opaque (the paper's 'negligibly small' opacity)")
+      ->capture_default_str();
+  sub->callback([&action, o, tol_mm] {
+    o->tolerance_mm_given = tol_mm->count() > 0;
+    action = [o] { return run_evaluate(*o); };
+  });
 }
 
 }  // namespace softshell::cli
