@@ -313,8 +313,16 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
   if (init && init->dims != geometry_.dims)
     throw std::invalid_argument("initial opacity has other dims than the volume");
   std::vector<float> u = mg_->solve(report, init ? &init->data : nullptr, warm);
-  for (float& f : u) f = std::clamp(f, 0.0f, 1.0f);
-  return geometry_.with_data(std::move(u), ScalarType::Float32);
+  Volume out = geometry_.with_data(std::move(u), ScalarType::Float32);
+  gain_ = 1.0;
+  if (params_.max_gain > 0 && !params_.literal()) {
+    // u_ind from the data (VariationalParams::max_gain): by linearity the
+    // solution for u_ind / crest is u / crest.
+    const double crest = crest_of(out);
+    if (crest > 0) gain_ = std::clamp(params_.u_ind / crest, 1.0, params_.max_gain);
+  }
+  for (float& f : out.data) f = std::clamp(float(gain_ * f), 0.0f, 1.0f);
+  return out;
 }
 
 Volume classify_variational(Runtime& rt, const Volume& v, const VariationalParams& params, const SolverParams& sp,

@@ -60,6 +60,34 @@ double VariationalParams::effective_thickness_mm(const Vec3d& spacing) const {
   return std::max(thickness_mm, 2.0 * std::max({spacing[0], spacing[1], spacing[2]}));
 }
 
+double crest_of(const Volume& u) {
+  const Dims3& d = u.dims;
+  if (d[0] < 3 || d[1] < 3 || d[2] < 3) return 0;
+  float umax = 0;
+  for (float x : u.data) umax = std::max(umax, x);
+  if (!(umax > 0)) return 0;
+  const float floor = 0.05f * umax;
+  const std::size_t stride[3] = {1, d[0], d[0] * d[1]};
+  std::vector<float> ridge;
+  for (std::size_t z = 1; z + 1 < d[2]; ++z)
+    for (std::size_t y = 1; y + 1 < d[1]; ++y)
+      for (std::size_t x = 1; x + 1 < d[0]; ++x) {
+        const std::size_t i = u.index(x, y, z);
+        const float c = u.data[i];
+        if (c <= floor) continue;
+        int axis = -1;
+        float most = 0;
+        for (int a = 0; a < 3; ++a) {
+          const float d2 = u.data[i - stride[a]] + u.data[i + stride[a]] - 2 * c;
+          if (d2 < most) most = d2, axis = a;
+        }
+        if (axis >= 0 && c >= u.data[i - stride[axis]] && c >= u.data[i + stride[axis]]) ridge.push_back(c);
+      }
+  if (ridge.empty()) return 0;
+  std::nth_element(ridge.begin(), ridge.begin() + long(ridge.size() / 2), ridge.end());
+  return ridge[ridge.size() / 2];
+}
+
 double reference_edge_gradient(const std::vector<float>& grad2, double share) {
   std::vector<float> g;
   g.reserve(grad2.size());

@@ -50,6 +50,12 @@ struct VariationalParams {
   // contrast, hence the multigrid convergence, in check.
   double weight_cap = 100.0;
   double edge_share = 0.03, edge_power = 4.0;
+  // u_ind from the data (the shell functional): the system is linear in
+  // u_ind, so solving with u_ind / crest scales u by 1 / crest exactly; the
+  // crest is the median of u on the shell's ridge (voxels where u is a
+  // maximum across the shell, crest_of()), so the typical shell peaks at
+  // u_ind. The factor is at most max_gain; 0 turns it off.
+  double max_gain = 0.0;
   // The resolved reference gradient (per mm of normalised intensity): 0
   // until DeviceSystem takes it from the data (edge_share > 0), or given.
   double g_ref = 0;
@@ -63,6 +69,11 @@ struct VariationalParams {
   // sampled, rendered or oriented).
   double effective_thickness_mm(const Vec3d& spacing) const;
 };
+
+// The median of u over its ridge voxels: u above 5 % of its maximum and not
+// below either neighbour along the axis where its second difference is most
+// negative (a maximum across a shell). 0 when there is none.
+double crest_of(const Volume& u);
 
 // The reference edge gradient of a field of |grad v|^2 (negative entries are
 // not scanned): the median |grad v| of its top `share` entries. 0 when no
@@ -255,6 +266,8 @@ class VariationalClassifier {
   // The opacity u, clamped to [0, 1], with the volume's geometry: from
   // `init` when given, else from the previous solution when `warm`, else cold.
   Volume solve(SolveReport* report = nullptr, const Volume* init = nullptr, bool warm = false);
+  // The factor the last solve scaled u by (u_ind from the data, max_gain).
+  double gain() const { return gain_; }
   double setup_seconds() const { return setup_seconds_; }    // the constructor, hierarchy included
   double update_seconds() const { return update_seconds_; }  // the last update()
   int levels() const { return mg_->levels(); }
@@ -266,7 +279,7 @@ class VariationalClassifier {
   Volume geometry_;  // the volume's header, no samples
   std::unique_ptr<DeviceSystem> sys_;
   std::unique_ptr<MultigridSolver> mg_;
-  double setup_seconds_ = 0, update_seconds_ = 0;
+  double setup_seconds_ = 0, update_seconds_ = 0, gain_ = 1.0;
 };
 
 // The whole classifier on a volume in its own intensity units: normalise

@@ -330,6 +330,11 @@ void add_classify_command(CLI::App& app, Action& action) {
   g->add_option("--weight-cap", o->vp.weight_cap, "Upper bound of the shell F_iso weight (u outside the shell < 1/(1+cap))")
       ->capture_default_str()
       ->check(CLI::Range(1.0, 1e12));
+  g->add_option("--max-gain", o->vp.max_gain,
+                "u_ind from the data: u scaled so the median crest of the shell reaches u_ind, by at most this "
+                "factor (the system is linear in u_ind); 0: off")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 100.0));
   g->add_option("--edge-power", o->vp.edge_power, "Power of the relative edge strength in F_ind's weight")
       ->capture_default_str();
   g->add_option("--grad-sigma", o->vp.grad_sigma_mm,

@@ -1,0 +1,262 @@
+// A study that cannot overfit (issue 12, docs/parameters.md "Held-out
+// study"): the baselines' settings are chosen on a TRAINING set of phantoms
+// with randomised physics, and everything -- the variational classifier at
+// its defaults with `--iso auto`, and each baseline at the one setting its
+// training chose -- is scored on a disjoint TEST set of other seeds (other
+// physics, other poses). Per case and worst case, by the metrics that see all
+// of u (docs/metrics.md).
+//
+//   softshell_study_shells [--train 101,102,...] [--test 201,202,...]
+//                          [--shapes face,spine] [--size 96] [--physics random]
+//                          [--tolerance-mm MM]
+//
+// Baselines (each at one fixed setting for every test case, in the file's
+// own grey levels, as a user would set a threshold once):
+//   levoy-raw     Levoy's classifier on the raw volume: iso
+//   levoy-lowpass Levoy on the Gaussian-lowpassed volume: iso and sigma
+//   median-levoy  a 3x3x3 median filter, then Levoy: iso
+// The training criterion is the mean F1 (thresholded precision, recall).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "auto_iso.hpp"
+#include "error.hpp"
+#include "levoy.hpp"
+#include "mask.hpp"
+#include "metrics.hpp"
+#include "phantom.hpp"
+#include "variational.hpp"
+
+using namespace softshell;
+
+namespace {
+
+std::vector<std::string> split(const std::string& s, char sep) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, sep))
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+struct Case {
+  std::string name;
+  Phantom ph;
+};
+
+// 3x3x3 median (clamped at the border): the denoiser baseline.
+Volume median3(const Volume& v) {
+  Volume out = v;
+  const Dims3& d = v.dims;
+  float w[27];
+  for (std::size_t z = 0; z < d[2]; ++z)
+    for (std::size_t y = 0; y < d[1]; ++y)
+      for (std::size_t x = 0; x < d[0]; ++x) {
+        int k = 0;
+        for (int dz = -1; dz <= 1; ++dz)
+          for (int dy = -1; dy <= 1; ++dy)
+            for (int dx = -1; dx <= 1; ++dx) {
+              const auto c = [](long a, std::size_t n) { return std::size_t(std::clamp(a, 0L, long(n) - 1)); };
+              w[k++] = v.at(c(long(x) + dx, d[0]), c(long(y) + dy, d[1]), c(long(z) + dz, d[2]));
+            }
+        std::nth_element(w, w + 13, w + 27);
+        out.at(x, y, z) = w[13];
+      }
+  return out;
+}
+
+// As `softshell classify IN --iso auto -o U` does (host/cli/cmd_classify.cpp):
+// the automatic mask, the local isovalue field levelled out, the defaults.
+Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveReport* rep) {
+  MaskReport mr;
+  std::vector<std::uint8_t> mask = scanned_mask(in, MaskParams{}, &mr);
+  if (mr.unscanned == 0) mask.clear();
+  const std::vector<std::uint8_t>* mp = mask.empty() ? nullptr : &mask;
+  const Volume filled = mp ? fill_unscanned(in, mask) : Volume();
+  const LevelledVolume lv = auto_iso_levelled(in, mp, mp ? &filled : nullptr);
+  VariationalParams p;
+  p.v_iso = lv.data.intensity_map().to_unit(lv.iso);
+  *iso_out = lv.iso;
+  return classify_variational(rt, lv.data, p, SolverParams{}, rep, nullptr, mp);
+}
+
+Metrics score(const Volume& u, const Case& c, double tol_mm) {
+  MetricsParams mp;
+  mp.beam = c.ph.beam;
+  if (tol_mm > 0) mp.tolerance_mm = tol_mm;
+  return evaluate_opacity(u, c.ph.truth_sdf, mp);
+}
+
+struct Row {
+  std::string method, setting;
+  std::vector<Metrics> m;  // per test case
+};
+
+void print_rows(const std::vector<Case>& cases, const std::vector<Row>& rows) {
+  std::printf("\n#### Per test case\n\n| case | method | precision | mass precision | recall | F1 | blobs6 | normal (deg) "
+              "| surface peak | thickness (mm) | %% opaque |\n|---|---|---|---|---|---|---|---|---|---|---|\n");
+  for (std::size_t c = 0; c < cases.size(); ++c)
+    for (const Row& r : rows) {
+      const Metrics& m = r.m[c];
+      std::printf("| %s | %s | %.3f | %.3f | %.3f | %.3f | %zu | %.1f | %.2f | %.2f | %.1f |\n", cases[c].name.c_str(),
+                  r.method.c_str(), m.precision, m.mass_precision, m.recall, m.f1, m.blobs6, m.normal_error_deg,
+                  m.surface_peak, m.shell_thickness_mm, m.percent_opaque);
+    }
+  std::printf("\n#### Worst case and mean over the test cases\n\n| method | setting (from training) | precision | mass "
+              "precision | recall | F1 | blobs6 | normal (deg) | surface peak | %% opaque |\n"
+              "|---|---|---|---|---|---|---|---|---|---|\n");
+  for (const Row& r : rows) {
+    auto worst = [&](auto get, bool low) {
+      double w = low ? 1e300 : -1e300, mean = 0;
+      for (const Metrics& m : r.m) {
+        const double x = get(m);
+        w = low ? std::min(w, x) : std::max(w, x);
+        mean += x / double(r.m.size());
+      }
+      char buf[64];
+      std::snprintf(buf, sizeof buf, "%.3g (%.3g)", w, mean);
+      return std::string(buf);
+    };
+    std::printf("| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n", r.method.c_str(), r.setting.c_str(),
+                worst([](const Metrics& m) { return m.precision; }, true).c_str(),
+                worst([](const Metrics& m) { return m.mass_precision; }, true).c_str(),
+                worst([](const Metrics& m) { return m.recall; }, true).c_str(),
+                worst([](const Metrics& m) { return m.f1; }, true).c_str(),
+                worst([](const Metrics& m) { return double(m.blobs6); }, false).c_str(),
+                worst([](const Metrics& m) { return m.normal_error_deg; }, false).c_str(),
+                worst([](const Metrics& m) { return m.surface_peak; }, true).c_str(),
+                worst([](const Metrics& m) { return m.percent_opaque; }, false).c_str());
+  }
+  std::printf("\nEach cell: worst case over the test cases (mean in brackets).\n");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::vector<std::string> train{"101", "102", "103", "104"}, test{"201", "202", "203", "204", "205", "206"};
+  std::vector<std::string> shapes{"face", "spine"};
+  std::string physics = "random";
+  int size = 96;
+  double tol_mm = 0;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&] { return i + 1 < argc ? std::string(argv[++i]) : std::string(); };
+    if (a == "--train") train = split(next(), ',');
+    else if (a == "--test") test = split(next(), ',');
+    else if (a == "--shapes") shapes = split(next(), ',');
+    else if (a == "--size") size = std::stoi(next());
+    else if (a == "--physics") physics = next();
+    else if (a == "--tolerance-mm") tol_mm = std::stod(next());
+    else {
+      std::fprintf(stderr, "usage: softshell_study_shells [--train S,S..] [--test S,S..] [--shapes face,spine] "
+                           "[--size N] [--physics NAME] [--tolerance-mm MM]\n");
+      return 2;
+    }
+  }
+  for (const auto& s : train)
+    if (std::find(test.begin(), test.end(), s) != test.end()) {
+      std::fprintf(stderr, "softshell_study_shells: seed %s is in both the training and the test set\n", s.c_str());
+      return 2;
+    }
+  try {
+    Runtime rt("");
+    auto make_cases = [&](const std::vector<std::string>& seeds) {
+      std::vector<Case> out;
+      for (const auto& sh : shapes)
+        for (const auto& sd : seeds) {
+          PhantomParams pp;
+          if (!parse_phantom_shape(sh, pp.shape)) throw InputError("unknown shape " + sh);
+          pp.size = size;
+          pp.seed = std::stoull(sd);
+          pp.physics_name = physics;
+          pp.physics = phantom_physics(physics, pp.shape, pp.seed);
+          out.push_back({sh + "-" + sd, make_phantom(rt, pp)});
+          std::fprintf(stderr, "phantom %s\n", out.back().name.c_str());
+        }
+      return out;
+    };
+    const std::vector<Case> training = make_cases(train), testing = make_cases(test);
+
+    // Training: each baseline's one setting, by mean F1 over the training set.
+    const std::vector<double> isos{30, 50, 70, 90, 110, 130, 150, 170, 190, 210};
+    const std::vector<double> sigmas{0.5, 1.0, 1.5, 2.0};
+    struct Setting {
+      double iso, sigma;
+      bool median;
+    };
+    auto run_levoy = [&](const Volume& v, const Setting& s) {
+      LevoyParams lp;
+      lp.iso = s.iso;
+      lp.sigma_mm = s.sigma;
+      return classify_levoy(rt, v, lp);
+    };
+    std::vector<Volume> medians_train, medians_test;
+    for (const Case& c : training) medians_train.push_back(median3(c.ph.volume));
+    for (const Case& c : testing) medians_test.push_back(median3(c.ph.volume));
+    auto train_best = [&](const std::string& kind) {
+      Setting best{0, 0, kind == "median-levoy"};
+      double best_f1 = -1;
+      const std::vector<double> sig = kind == "levoy-lowpass" ? sigmas : std::vector<double>{0.0};
+      for (double sg : sig)
+        for (double iso : isos) {
+          const Setting s{iso, sg, kind == "median-levoy"};
+          double f1 = 0;
+          for (std::size_t k = 0; k < training.size(); ++k) {
+            const Volume& v = s.median ? medians_train[k] : training[k].ph.volume;
+            f1 += score(run_levoy(v, s), training[k], tol_mm).f1 / double(training.size());
+          }
+          if (f1 > best_f1) best_f1 = f1, best = s;
+        }
+      std::fprintf(stderr, "trained %s: iso %g sigma %g (training mean F1 %.3f)\n", kind.c_str(), best.iso, best.sigma,
+                   best_f1);
+      return best;
+    };
+
+    std::vector<Row> rows;
+    {
+      Row r{"variational (defaults, --iso auto)", "none (automatic)", {}};
+      double seconds = 0;
+      for (const Case& c : testing) {
+        double iso = 0;
+        SolveReport rep;
+        const auto t0 = std::chrono::steady_clock::now();
+        const Volume u = classify_default(rt, c.ph.volume, &iso, &rep);
+        seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        r.m.push_back(score(u, c, tol_mm));
+        std::fprintf(stderr, "variational %s: iso %.1f, %d iterations%s\n", c.name.c_str(), iso, rep.cycles,
+                     rep.converged ? "" : " (NOT converged)");
+      }
+      std::fprintf(stderr, "variational: %.2f s per case\n", seconds / double(testing.size()));
+      rows.push_back(std::move(r));
+    }
+    for (const std::string kind : {"levoy-raw", "levoy-lowpass", "median-levoy"}) {
+      const Setting s = train_best(kind);
+      char setting[96];
+      std::snprintf(setting, sizeof setting, "iso %g%s", s.iso,
+                    kind == "levoy-lowpass" ? (" sigma " + std::to_string(s.sigma).substr(0, 3) + " mm").c_str() : "");
+      Row r{kind, setting, {}};
+      for (std::size_t k = 0; k < testing.size(); ++k)
+        r.m.push_back(score(run_levoy(s.median ? medians_test[k] : testing[k].ph.volume, s), testing[k], tol_mm));
+      rows.push_back(std::move(r));
+    }
+    std::printf("### Held-out study: physics `%s`, %d^3, training seeds", physics.c_str(), size);
+    for (const auto& s : train) std::printf(" %s", s.c_str());
+    std::printf(", test seeds");
+    for (const auto& s : test) std::printf(" %s", s.c_str());
+    std::printf(", shapes");
+    for (const auto& s : shapes) std::printf(" %s", s.c_str());
+    std::printf("%s\n", tol_mm > 0 ? (", tolerance " + std::to_string(tol_mm) + " mm").c_str() : ", tolerance 2 voxels");
+    print_rows(testing, rows);
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "softshell_study_shells: %s\n", e.what());
+    return 2;
+  }
+}
