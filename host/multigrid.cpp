@@ -305,6 +305,7 @@ void VariationalClassifier::update(const VariationalParams& p) {
   sys_->update_point(p);
   mg_->update_point();
   rt_.queue().finish();
+  sharpened_ = false;
   params_ = p;
   update_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -312,10 +313,38 @@ void VariationalClassifier::update(const VariationalParams& p) {
 Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, bool warm) {
   if (init && init->dims != geometry_.dims)
     throw std::invalid_argument("initial opacity has other dims than the volume");
+  if (sharpened_) {
+    // The last solve left the sharpening term in the system: back to the
+    // linear functional first.
+    sys_->update_point(params_);
+    mg_->update_point();
+    sharpened_ = false;
+  }
   std::vector<float> u = mg_->solve(report, init ? &init->data : nullptr, warm);
+  const int steps = params_.sharpen_iterations;
+  double crest = 0;
+  if (steps > 0 && params_.sharpen_lambda > 0 && (crest = crest_of(geometry_.with_data(u, ScalarType::Float32))) > 0) {
+    // The barrier relative to the linear solution's own crest, in units of
+    // u_ind: ratio = (1 - barrier) / barrier puts the unstable point there.
+    const double barrier = std::clamp(params_.sharpen_barrier * crest / params_.u_ind, 0.05, 0.95);
+    const double ratio = (1 - barrier) / barrier;
+    SolveReport step_report;
+    for (int s = 0; s < steps; ++s) {
+      sys_->update_sharpen(params_, u, params_.sharpen_lambda, ratio);
+      mg_->update_point();
+      sharpened_ = true;
+      u = mg_->solve(&step_report, nullptr, true);
+      if (report) {
+        report->cycles += step_report.cycles;
+        report->seconds += step_report.seconds;
+        report->converged = report->converged && step_report.converged;
+        report->residuals.push_back(step_report.residuals.back());
+      }
+    }
+  }
   Volume out = geometry_.with_data(std::move(u), ScalarType::Float32);
   gain_ = 1.0;
-  if (params_.max_gain > 0 && !params_.literal()) {
+  if (params_.max_gain > 0) {
     // u_ind from the data (VariationalParams::max_gain): by linearity the
     // solution for u_ind / crest is u / crest.
     const double crest = crest_of(out);

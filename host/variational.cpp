@@ -44,7 +44,7 @@ ClassifyCoeffs VariationalParams::coeffs() const {
   k.shell_h2 = float(h * h), k.profile_power = float(profile_power);
   k.g_ref = edge_share > 0 ? float(g_ref) : 0.0f, k.edge_power = float(edge_power);
   k.weight_cap = float(weight_cap);
-  k.pad0 = k.pad1 = 0.0f;
+  k.sharpen_lambda = 0.0f, k.sharpen_ratio = 1.0f;
   return k;
 }
 
@@ -52,6 +52,7 @@ VariationalParams VariationalParams::literal_defaults() {
   VariationalParams p;
   p.alpha = 0.2, p.beta = 3.0, p.gamma = 3.5, p.omega = 0.6, p.delta = 0.02, p.epsilon = 0.01;
   p.grad_sigma_mm = 0, p.kappa = 0, p.thickness_mm = 0, p.edge_share = 0;
+  p.sharpen_iterations = 0, p.max_gain = 0;
   return p;
 }
 
@@ -194,6 +195,24 @@ void DeviceSystem::update_point(const VariationalParams& p) {
   Runtime::set_args(k, sources_[0], sources_[1], sources_[2], fixed_, dT_, mu_, rho_, coef_, b_, r.coeffs(), grid_);
   resolved_ = r;
   rt_.enqueue_3d(k, grid_);
+}
+
+void DeviceSystem::update_sharpen(const VariationalParams& p, const std::vector<float>& u0, double lambda,
+                                  double ratio) {
+  if (!updatable())
+    throw std::logic_error("DeviceSystem::update_sharpen: the system was not built from a volume");
+  if (u0.size() != voxels()) throw std::invalid_argument("DeviceSystem::update_sharpen: u0 has the wrong size");
+  VariationalParams r = p;
+  r.g_ref = resolved_.g_ref;
+  r.thickness_mm = p.effective_thickness_mm(spacing_);
+  ClassifyCoeffs k = r.coeffs();
+  k.sharpen_lambda = float(lambda), k.sharpen_ratio = float(ratio);
+  if (!u0_()) u0_ = rt_.buffer(voxels() * sizeof(float));
+  rt_.queue().enqueueWriteBuffer(u0_, CL_TRUE, 0, voxels() * sizeof(float), u0.data());
+  cl::Kernel kern = rt_.kernel(kSystem, "system_update_sharpen");
+  Runtime::set_args(kern, sources_[0], sources_[1], sources_[2], fixed_, dT_, u0_, mu_, rho_, coef_, b_, k, grid_);
+  rt_.enqueue_3d(kern, grid_);
+  resolved_ = r;
 }
 
 void DeviceSystem::restrict_point(const DeviceSystem& fine) {

@@ -56,6 +56,14 @@ struct VariationalParams {
   // maximum across the shell, crest_of()), so the typical shell peaks at
   // u_ind. The factor is at most max_gain; 0 turns it off.
   double max_gain = 0.0;
+  // Sharpening (docs/numerics.md, "Sharpening"): a non-linear term
+  // lambda u^2 (1 - u/u_ind)^2 weighted so its barrier sits at
+  // sharpen_barrier x the crest of the linear solution (crest_of); it pulls
+  // u above the barrier toward u_ind and below it toward 0. Solved by
+  // sharpen_iterations fixed-point steps, each a pointwise update and a warm
+  // re-solve. 0 iterations: the linear functional.
+  int sharpen_iterations = 2;
+  double sharpen_lambda = 2.0, sharpen_barrier = 0.6;
   // The resolved reference gradient (per mm of normalised intensity): 0
   // until DeviceSystem takes it from the data (edge_share > 0), or given.
   double g_ref = 0;
@@ -63,7 +71,10 @@ struct VariationalParams {
   // The paper's functional exactly (no lowpassed |grad v|, no kappa, no
   // shell terms) with the weights chosen for it by the earlier study.
   static VariationalParams literal_defaults();
-  bool literal() const { return grad_sigma_mm == 0 && kappa == 0 && thickness_mm == 0 && edge_share == 0; }
+  bool literal() const {
+    return grad_sigma_mm == 0 && kappa == 0 && thickness_mm == 0 && edge_share == 0 && sharpen_iterations == 0 &&
+           max_gain == 0;
+  }
   // The shell thickness in force on a grid of this spacing: thickness_mm,
   // but at least 2 voxels along the coarsest axis (a thinner shell cannot be
   // sampled, rendered or oriented).
@@ -118,6 +129,11 @@ class DeviceSystem {
   // a fresh build with `p`. Throws std::logic_error unless updatable().
   void update_point(const VariationalParams& p);
   bool updatable() const { return bool(sources_[0]()); }
+  // update_point(p) plus the sharpening term linearised about u0 (one
+  // fixed-point step of the non-linear functional; docs/numerics.md,
+  // "Sharpening"): mu += lambda ((1 - a)^2 + ratio a^2), rho += lambda ratio
+  // a^2 u_ind, a = clamp(u0 / u_ind, 0, 1).
+  void update_sharpen(const VariationalParams& p, const std::vector<float>& u0, double lambda, double ratio);
   // The parameters in force on a volume-built level: g_ref resolved from the
   // data when it was 0, thickness_mm raised to its voxel floor.
   const VariationalParams& resolved() const { return resolved_; }
@@ -173,7 +189,7 @@ class DeviceSystem {
 
   Runtime& rt_;
   GridDesc grid_;
-  cl::Buffer mu_, rho_, fixed_, coef_, b_, dT_, partial_;
+  cl::Buffer mu_, rho_, fixed_, coef_, b_, dT_, partial_, u0_;
   std::array<cl::Buffer, 6> T_;
   std::array<cl::Buffer, 3> sources_;  // v, v~, |grad v|^2 of a volume-built level (for update_point)
   VariationalParams resolved_;
@@ -280,6 +296,7 @@ class VariationalClassifier {
   std::unique_ptr<DeviceSystem> sys_;
   std::unique_ptr<MultigridSolver> mg_;
   double setup_seconds_ = 0, update_seconds_ = 0, gain_ = 1.0;
+  bool sharpened_ = false;  // the system holds the sharpening term of the last solve
 };
 
 // The whole classifier on a volume in its own intensity units: normalise

@@ -31,7 +31,11 @@ typedef struct ClassifyCoeffs {
    * T and epsilon in units of g_ref^2; weight_cap bounds the shell weight
    * (far outside the shell u is 0 either way, and a bounded coefficient
    * contrast keeps multigrid fast). */
-  float shell_h2, profile_power, g_ref, edge_power, weight_cap, pad0, pad1;
+  float shell_h2, profile_power, g_ref, edge_power, weight_cap;
+  /* The sharpening term (docs/numerics.md, "Sharpening"), linearised about
+   * a previous u: sharpen_lambda (0: off) and sharpen_ratio, the weight of
+   * the pull toward u_ind against the pull toward 0. */
+  float sharpen_lambda, sharpen_ratio;
 } ClassifyCoeffs;
 
 #ifdef __OPENCL_VERSION__

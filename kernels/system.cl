@@ -123,6 +123,32 @@ __kernel void system_update_point(__global const float* restrict v, __global con
               density_rho(k, grad2[p]));
 }
 
+/* The pointwise densities plus the sharpening term linearised about the
+ * previous solution u0 (docs/numerics.md, "Sharpening"): with a = u0 / u_ind
+ * clamped to [0, 1], lambda ((1 - a)^2 u^2 + ratio a^2 (u - u_ind)^2) adds
+ * lambda ((1 - a)^2 + ratio a^2) to mu and lambda ratio a^2 u_ind to rho. */
+#ifndef SHARPEN_EDGE_POWER
+#define SHARPEN_EDGE_POWER 2.0f
+#endif
+__kernel void system_update_sharpen(__global const float* restrict v, __global const float* restrict vs,
+                                    __global const float* restrict grad2, __global const uchar* restrict fixed,
+                                    __global const float* restrict dT, __global const float* restrict u0,
+                                    __global float* restrict mu, __global float* restrict rho,
+                                    __global float* restrict coef, __global float* restrict b, const ClassifyCoeffs k,
+                                    const GridDesc g) {
+  const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
+  if (!grid_contains(g, x, y, z)) return;
+  const size_t p = grid_index(g, x, y, z);
+  const float a = clamp(u0[p] / k.u_ind, 0.0f, 1.0f);
+  /* The pull toward u_ind only as strong as the edge under it (relative to
+   * g_ref): speckle crossings, with weak edges, are not lifted. */
+  const float e = k.g_ref > 0.0f ? fmin(1.0f, sqrt(grad2[p]) / k.g_ref) : 1.0f;
+  const float lam = k.sharpen_lambda, ra2 = k.sharpen_ratio * a * a * shell_power(e, SHARPEN_EDGE_POWER);
+  store_point(mu, rho, coef, b, fixed, dT, p, g.hx * g.hy * g.hz,
+              density_mu(k, v[p], vs[p], grad2[p]) + lam * ((1.0f - a) * (1.0f - a) + ra2),
+              density_rho(k, grad2[p]) + lam * ra2 * k.u_ind);
+}
+
 /* ------------------------------------------------------------- assembly */
 
 /* T component (a, b) of voxel q (T[0..5] = xx, yy, zz, xy, xz, yz). */

@@ -206,7 +206,8 @@ Densities random_densities(Dims3 dims, Vec3d spacing, std::uint64_t seed, double
   return d;
 }
 
-Densities reference_densities(const Volume& v, const VariationalParams& p, const std::vector<std::uint8_t>* mask) {
+Densities reference_densities(const Volume& v, const VariationalParams& p, const std::vector<std::uint8_t>* mask,
+                              const SharpenTerm* sharpen) {
   const std::size_t n = v.voxels();
   if (mask && mask->size() != n) throw std::invalid_argument("reference_densities: mask has the wrong size");
   const std::vector<double> smooth = reference_lowpass(v, p.sigma_mm, 3.0);
@@ -262,8 +263,16 @@ Densities reference_densities(const Volume& v, const VariationalParams& p, const
         if (shell) W = std::min(std::pow(W / h2, p.profile_power), p.weight_cap);
         const double c = relative ? p.delta + (1.0 - p.delta) * std::pow(std::min(1.0, std::sqrt(gv2) / g_ref), p.edge_power)
                                   : p.delta + (1.0 - p.delta) * std::sqrt(gv2);
-        d.mu[i] = float(p.alpha * W + p.gamma * c);
-        d.rho[i] = float(p.gamma * c * p.u_ind);
+        double mu = p.alpha * W + p.gamma * c, rho = p.gamma * c * p.u_ind;
+        if (sharpen) {
+          const double a = std::clamp(double(sharpen->u0[i]) / p.u_ind, 0.0, 1.0);
+          const double e = relative ? std::min(1.0, std::sqrt(gv2) / g_ref) : 1.0;
+          const double ra2 = sharpen->ratio * a * a * e * e;
+          mu += sharpen->lambda * ((1 - a) * (1 - a) + ra2);
+          rho += sharpen->lambda * ra2 * p.u_ind;
+        }
+        d.mu[i] = float(mu);
+        d.rho[i] = float(rho);
         const double g[3] = {gs[0][i], gs[1][i], gs[2][i]};
         const double g2 = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]) * tscale;
         d.T[0][i] = float(p.beta * (g2 - g[0] * g[0] * tscale) + p.kappa);

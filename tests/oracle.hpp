@@ -60,8 +60,16 @@ Densities random_densities(Dims3 dims, Vec3d spacing, std::uint64_t seed, double
 // reference_lowpass (truncate 3, as the device's Lowpass) and
 // reference_gradient: W, c, mu, rho and T exactly as docs/numerics.md defines
 // them; fixed = boundary, or mask byte 0 (unscanned) when a mask is given.
+// With `sharpen` (docs/numerics.md, "Sharpening"): the sharpening term
+// linearised about u0 added, lambda ((1 - a)^2 + ratio a^2 e^2) to mu and
+// lambda ratio a^2 e^2 u_ind to rho, a = clamp(u0 / u_ind, 0, 1),
+// e = min(1, |grad v| / g_ref).
+struct SharpenTerm {
+  std::vector<float> u0;
+  double lambda = 0, ratio = 1;
+};
 Densities reference_densities(const Volume& v, const VariationalParams& p,
-                              const std::vector<std::uint8_t>* mask = nullptr);
+                              const std::vector<std::uint8_t>* mask = nullptr, const SharpenTerm* sharpen = nullptr);
 
 // Offset (dx, dy, dz) of stencil coefficient k (kernels/stencil.h).
 struct StencilOffset {

@@ -15,6 +15,7 @@
 #include <iostream>
 #include <cmath>
 #include <random>
+#include <tuple>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -215,7 +216,7 @@ VariationalParams test_params() {
   // The paper's F_iso and F_ind (with the lowpassed |grad v| and kappa of
   // the earlier defaults); shell_test_params() turns the shell terms on.
   p.kappa = 1.0, p.grad_sigma_mm = 1.5;
-  p.thickness_mm = 0, p.edge_share = 0;
+  p.thickness_mm = 0, p.edge_share = 0, p.sharpen_iterations = 0;
   return p;
 }
 
@@ -281,6 +282,36 @@ TEST(SystemOracle, AssemblyIsTheEnergysGradient) {
     checker[p] = d.fixed[p] ? 0.0 : ((x + y + z) % 2 ? 1.0 : -1.0);
   }
   EXPECT_GT(oracle_energy(no_mass, checker), 0.1 * oracle_energy(no_mass, u));
+}
+
+TEST(System, SharpenedDensitiesMatchReference) {
+  // The sharpening term linearised about a u0 (docs/numerics.md,
+  // "Sharpening") on top of the shell functional's densities: device against
+  // the float64 reference, and the update equals a fresh build's diagonal
+  // and b from those densities.
+  const Volume v = test_volume(kSmall, kSmallSpacing, test::seed() + 131);
+  const VariationalParams p = shell_test_params();
+  std::mt19937_64 rng(test::seed() + 132);
+  std::uniform_real_distribution<float> U(-0.2f, 1.3f);  // outside [0, u_ind] too: clamped
+  test::SharpenTerm sh;
+  sh.u0.resize(v.voxels());
+  for (float& f : sh.u0) f = U(rng);
+  sh.lambda = 1.7, sh.ratio = 2.5;
+  DeviceSystem sys(runtime(), v, p);
+  sys.update_sharpen(p, sh.u0, sh.lambda, sh.ratio);
+  const Densities got = sys.download_densities();
+  const Densities want = test::reference_densities(v, p, nullptr, &sh);
+  const Densities plain = test::reference_densities(v, p);
+  for (const auto& [g, w, name] : {std::tuple{&got.mu, &want.mu, "mu"}, std::tuple{&got.rho, &want.rho, "rho"}}) {
+    double wmax = 0;
+    for (float x : *w) wmax = std::max(wmax, double(std::abs(x)));
+    EXPECT_TRUE(test::all_near(*g, std::vector<double>(w->begin(), w->end()), want.dims, 1e-5 * wmax, 1e-4)) << name;
+  }
+  EXPECT_GT(test::max_relative_deviation(got.mu, plain.mu), 1e-2) << "the term must change mu";
+  // The assembled system equals one built from the sharpened densities.
+  const DeviceSystem from(runtime(), got);
+  EXPECT_LT(test::max_relative_deviation(sys.download_coefficients(), from.download_coefficients()), 1e-6);
+  EXPECT_LT(test::max_relative_deviation(sys.download_b(), from.download_b()), 1e-6);
 }
 
 // ---------------------------------------------------------------- (a) operator == energy gradient

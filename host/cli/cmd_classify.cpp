@@ -149,7 +149,7 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
     if (!given("--omega")) p.omega = lit.omega;
     if (!given("--delta")) p.delta = lit.delta;
     if (!given("--epsilon")) p.epsilon = lit.epsilon;
-    p.grad_sigma_mm = 0, p.kappa = 0, p.thickness_mm = 0, p.edge_share = 0;
+    p.grad_sigma_mm = 0, p.kappa = 0, p.thickness_mm = 0, p.edge_share = 0, p.sharpen_iterations = 0, p.max_gain = 0;
   }
   if (!(p.thickness_mm >= 0) || !std::isfinite(p.thickness_mm)) throw InputError("--shell must be a finite number >= 0 (mm)");
   if (!(p.profile_power >= 1 && p.profile_power <= 4)) throw InputError("--profile-power must be in [1, 4]");
@@ -314,7 +314,8 @@ void add_classify_command(CLI::App& app, Action& action) {
                 "Weight of an added isotropic smoothness term kappa |grad u|^2; 0: the paper's functional")
       ->capture_default_str();
   g->add_flag("--literal", o->literal,
-              "The paper's functional exactly: --grad-sigma 0 --kappa 0 --shell 0 --edge-share 0 (overrides them), "
+              "The paper's functional exactly: --grad-sigma 0 --kappa 0 --shell 0 --edge-share 0 --sharpen 0 --max-gain 0 "
+              "(overrides them), "
               "with the earlier study's weights for it (alpha 0.2 beta 3 gamma 3.5 omega 0.6 delta 0.02) unless given");
   g->add_option("--shell", o->vp.thickness_mm,
                 "Shell thickness in mm (full width at half maximum across the surface, at least 2 voxels); F_iso's "
@@ -335,6 +336,18 @@ void add_classify_command(CLI::App& app, Action& action) {
                 "factor (the system is linear in u_ind); 0: off")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 100.0));
+  g->add_option("--sharpen", o->vp.sharpen_iterations,
+                "Fixed-point steps of the sharpening term (a double well pulling u to 0 or u_ind, its barrier at "
+                "--sharpen-barrier x the linear solution's crest); 0: the linear functional")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 10));
+  g->add_option("--sharpen-lambda", o->vp.sharpen_lambda, "Weight of the sharpening term")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e6));
+  g->add_option("--sharpen-barrier", o->vp.sharpen_barrier,
+                "The sharpening term's barrier, as a fraction of the linear solution's crest")
+      ->capture_default_str()
+      ->check(CLI::Range(0.05, 1.0));
   g->add_option("--edge-power", o->vp.edge_power, "Power of the relative edge strength in F_ind's weight")
       ->capture_default_str();
   g->add_option("--grad-sigma", o->vp.grad_sigma_mm,
