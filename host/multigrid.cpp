@@ -170,11 +170,13 @@ int MultigridSolver::levels() const { return impl_->levels(); }
 const SolverParams& MultigridSolver::params() const { return impl_->params(); }
 void MultigridSolver::update_point() { impl_->update_point(); }
 
-std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector<float>* init, bool warm) {
+std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector<float>* init, bool warm,
+                                          double tol_override) {
   const auto t0 = std::chrono::steady_clock::now();
   Multigrid& mg = *impl_;
   DeviceSystem& fine = impl_->sys;
   const SolverParams& sp = mg.params();
+  const double tol = tol_override > 0 ? tol_override : sp.tol;
   Runtime& rt = fine.runtime();
   Level& F = mg.fine();
   const std::size_t n = fine.voxels();
@@ -201,12 +203,12 @@ std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector
   }
   mg.has_solution = false;  // F.u is scratch until the solve ends
   if (!sp.krylov) {
-    while (rep.residuals.back() > sp.tol && rep.cycles < sp.max_cycles) {
+    while (rep.residuals.back() > tol && rep.cycles < sp.max_cycles) {
       mg.vcycle(0);
       ++rep.cycles;
       rep.residuals.push_back(mg.relative_residual());
     }
-  } else if (rep.residuals.back() > sp.tol) {
+  } else if (rep.residuals.back() > tol) {
     // Preconditioned conjugate gradients on A x = b from the current u; the
     // multigrid's fine-level buffers serve the V-cycle, so x, r, z, p, q are
     // separate.
@@ -231,7 +233,7 @@ std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector
       ++rep.cycles;
       double rel = nb > 0 ? fine.norm(r) / nb : 0.0;
       true_residual = false;
-      if (rel <= sp.tol) {
+      if (rel <= tol) {
         // The recursive residual drifts from the true one in float32: stop
         // only when the true residual agrees, else go on from it (residual
         // replacement) rather than stop just short of tol.
@@ -240,7 +242,7 @@ std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector
         true_residual = true;
       }
       rep.residuals.push_back(rel);
-      if (rel <= sp.tol) break;
+      if (rel <= tol) break;
       mg.precondition(r, z);
       const double rz_new = fine.dot(r, z);
       fine.axpby(1.0f, z, float(rz_new / rz), p);
@@ -251,7 +253,7 @@ std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector
     rt.queue().enqueueCopyBuffer(x, F.u, 0, 0, bytes);
     if (!true_residual) rep.residuals.back() = mg.relative_residual();
   }
-  rep.converged = rep.residuals.back() <= sp.tol;
+  rep.converged = rep.residuals.back() <= tol;
   std::vector<float> u(n);
   rt.queue().enqueueReadBuffer(F.u, CL_TRUE, 0, n * sizeof(float), u.data());
   mg.has_solution = true;
@@ -275,6 +277,9 @@ std::vector<float> solve(Runtime& rt, const Densities& d, const SolverParams& sp
   DeviceSystem fine(rt, d);
   return solve(fine, sp, report, init);
 }
+
+// Relative residual of the intermediate solves of the sharpening iteration.
+constexpr double kSharpenTol = 1e-2;
 
 VariationalClassifier::VariationalClassifier(Runtime& rt, const Volume& v, const VariationalParams& params,
                                              const SolverParams& sp, const std::vector<std::uint8_t>* mask)
@@ -320,8 +325,12 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
     mg_->update_point();
     sharpened_ = false;
   }
-  std::vector<float> u = mg_->solve(report, init ? &init->data : nullptr, warm);
   const int steps = params_.sharpen_iterations;
+  // With sharpening, the linear solution and every step but the last only
+  // give the next linearisation point: solved to kSharpenTol (or the
+  // solver's tol, if looser), the last step to the solver's tol.
+  const double loose = std::max(kSharpenTol, mg_->params().tol);
+  std::vector<float> u = mg_->solve(report, init ? &init->data : nullptr, warm, steps > 0 ? loose : 0.0);
   double crest = 0;
   if (steps > 0 && params_.sharpen_lambda > 0 && (crest = crest_of(geometry_.with_data(u, ScalarType::Float32))) > 0) {
     // The barrier relative to the linear solution's own crest, in units of
@@ -333,11 +342,11 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
       sys_->update_sharpen(params_, u, params_.sharpen_lambda, ratio);
       mg_->update_point();
       sharpened_ = true;
-      u = mg_->solve(&step_report, nullptr, true);
+      u = mg_->solve(&step_report, nullptr, true, s + 1 < steps ? loose : 0.0);
       if (report) {
         report->cycles += step_report.cycles;
         report->seconds += step_report.seconds;
-        report->converged = report->converged && step_report.converged;
+        report->converged = step_report.converged;  // the last step's, to the solver's tol
         report->residuals.push_back(step_report.residuals.back());
       }
     }

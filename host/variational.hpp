@@ -236,8 +236,9 @@ class MultigridSolver {
   // previous solve's solution (kept on the device) when `warm` and there is
   // one, else from FMG (or 0, per SolverParams). Never throws for
   // non-convergence: the report says so and the caller decides.
+  // `tol_override` > 0 replaces SolverParams::tol for this solve.
   std::vector<float> solve(SolveReport* report = nullptr, const std::vector<float>* init = nullptr,
-                           bool warm = false);
+                           bool warm = false, double tol_override = 0);
   // After fine.update_point(): carries the new mu and rho down every level.
   void update_point();
   int levels() const;
