@@ -348,6 +348,10 @@ std::string phantom_json(const PhantomParams& params, const Phantom& p) {
         << ", " << json_number(p.psf_elevation_cells[1]) << "], \"axial\": " << json_number(p.psf_axial_cells)
         << "}, \"psf_radius_cells\": [" << p.psf_radius[0] << ", " << p.psf_radius[1] << ", " << p.psf_radius[2]
         << "]},\n";
+    if (phys)
+      j << "  \"shadow_db\": \"shadow_db.nrrd\",\n"
+        << "  \"shadow_db_meaning\": \"two-way loss (dB) beyond what the TGC restores: > 0 in acoustic shadows, < 0 "
+           "below fluid, 0 outside the scanned region\",\n";
     j << "  \"labels\": \"labels.nrrd\",\n"
       << "  \"label_values\": {\"0\": \"fluid / background\", \"1\": \"object (sdf < 0)\", \"2\": \"near-field "
          "layers\", \"3\": \"outside the scanned region (grey 0)\"},\n"

@@ -171,6 +171,11 @@ struct Phantom {
   // object (sdf < 0), 2 near-field layers, 3 outside the scanned region.
   // Without: empty.
   Volume labels;
+  // With --physics other than default: per voxel the two-way loss (dB) the
+  // echo suffered beyond what the TGC restores (the reference tissue's
+  // attenuation over the depth): > 0 in acoustic shadows, < 0 below fluid
+  // (enhancement), 0 outside the scanned region; float. Otherwise empty.
+  Volume shadow_db;
   double near_field_median = 0;  // grey level over label 2 (NaN when none)
   // The beam grid of a physics phantom (phantom.json "scan"): cells along
   // u, v, w, and the PSF's widths in cells (range over depth) and radii.

@@ -92,13 +92,13 @@ PhantomPhysics draw_random(PhantomShape shape, std::uint64_t seed) {
   p.geometry = u < 0.4 ? BeamGeometry::Linear : (u < 0.7 ? BeamGeometry::Fan : BeamGeometry::Fan3d);
   switch (shape) {
     case PhantomShape::Face:
-      p.fov_mm = r.uniform(85, 125);
+      p.fov_mm = r.uniform(80, 115);
       break;
     case PhantomShape::Spine:
       p.fov_mm = r.uniform(55, 80);
       break;
     case PhantomShape::Sphere:
-      p.fov_mm = r.uniform(85, 115);
+      p.fov_mm = r.uniform(80, 110);
       break;
   }
   const bool fan = p.geometry != BeamGeometry::Linear;

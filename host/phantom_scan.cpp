@@ -195,6 +195,7 @@ std::vector<float> parameter_block(const PhantomPhysics& p, PhantomShape shape, 
   P[PS_NOISE] = std::pow(10.0, p.noise_db / 20.0);
   P[PS_DR_DB] = p.dynamic_range_db;
   P[PS_TOP_DB] = p.dynamic_range_db * (1.0 - p.tissue_grey / 255.0);
+  P[PS_ATT_REF] = att;
   return std::vector<float>(P.begin(), P.end());
 }
 
@@ -268,12 +269,13 @@ Phantom make_scan_phantom(Runtime& rt, const PhantomParams& params) {
   cl::Kernel geometry = kernel("phantom_geometry"), finish = kernel("phantom_scan_finish");
   cl::Kernel redistance[3] = {kernel("phantom_redistance_x"), kernel("phantom_redistance_y"),
                               kernel("phantom_redistance_z")};
-  cl::Kernel echo = kernel("phantom_scan_echo"), attenuate = kernel("phantom_attenuate");
+  cl::Kernel echo = kernel("phantom_scan_echo"), attenuate = kernel("phantom_scan_attenuate");
   cl::Kernel psf[3] = {kernel("phantom_scan_psf_x"), kernel("phantom_scan_psf_y"), kernel("phantom_scan_psf_z")};
   cl::Kernel bmode = kernel("phantom_scan_bmode"), convert = kernel("phantom_scan_convert");
 
-  // Voxel planes: sdf (truth), aux (normal_z + 4 part), seeds in b and c.
-  // Beam planes: (re, im) and (re2, im2) ping-pong, t = transmission, later grey.
+  // Voxel planes: sdf (truth), aux (normal_z + 4 part), seeds in b and c,
+  // later the shadow (b). Beam planes: (re, im) and (re2, im2) ping-pong
+  // (re later the grey levels), t = the loss per cell, then accumulated.
   cl::Buffer d_sdf = rt.buffer(bytes), d_aux = rt.buffer(bytes), d_b = rt.buffer(bytes), d_c = rt.buffer(bytes);
   cl::Buffer d_re = rt.buffer(cell_bytes), d_im = rt.buffer(cell_bytes), d_re2 = rt.buffer(cell_bytes),
              d_im2 = rt.buffer(cell_bytes), d_t = rt.buffer(cell_bytes);
@@ -320,15 +322,18 @@ Phantom make_scan_phantom(Runtime& rt, const PhantomParams& params) {
   run("psf_v", psf[1], bg);
   Runtime::set_args(psf[2], d_re, d_im, d_re2, d_im2, d_ww, static_cast<cl_int>(psf_w.radius), bg);
   run("psf_w", psf[2], bg);
-  Runtime::set_args(bmode, d_re2, d_im2, d_t, bg, d_gain, d_P, static_cast<cl_uint>(stream_key(seed, 2)));
+  Runtime::set_args(bmode, d_re2, d_im2, d_re, bg, d_gain, d_P, static_cast<cl_uint>(stream_key(seed, 2)));
   run("bmode", bmode, lane_items(bg));
-  Runtime::set_args(convert, d_t, bg, d_sdf, d_out, d_labels, g, d_P, static_cast<cl_uint>(stream_key(seed, 4)));
+  Runtime::set_args(convert, d_re, d_t, bg, d_sdf, d_out, d_labels, d_b, g, d_P,
+                    static_cast<cl_uint>(stream_key(seed, 4)));
   run("convert", convert, lane_items(g));
 
   p.fov_mm = phys.fov_mm;
   p.device = rt.info().label();
   p.truth_sdf = Volume({nn, nn, nn}, {h, h, h}, ScalarType::Float32);
   rt.queue().enqueueReadBuffer(d_sdf, CL_FALSE, 0, bytes, p.truth_sdf.data.data());
+  p.shadow_db = Volume({nn, nn, nn}, {h, h, h}, ScalarType::Float32);
+  rt.queue().enqueueReadBuffer(d_b, CL_FALSE, 0, bytes, p.shadow_db.data.data());
   std::vector<std::uint8_t> grey(voxels), labels(voxels);
   rt.queue().enqueueReadBuffer(d_labels, CL_FALSE, 0, voxels, labels.data());
   rt.queue().enqueueReadBuffer(d_out, CL_TRUE, 0, voxels, grey.data());

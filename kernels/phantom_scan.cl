@@ -19,11 +19,12 @@
  *   phantom_scan_echo     per beam cell: scatterers (from sparse points to
  *                         fully developed speckle), boundary echoes, the
  *                         layered near field and its reverberations, and
- *                         the cell's two-way transmission
- *   phantom_attenuate     (phantom.cl) along w: depth attenuation, shadows
+ *                         the cell's two-way loss
+ *   phantom_scan_attenuate  along w: depth attenuation, shadows
  *   phantom_scan_psf_x/y/z  separable Gaussian PSF, per-depth widths
  *   phantom_scan_bmode    time-gain compensation, noise, envelope, log
- *   phantom_scan_convert  beam grid -> voxels (uint8), and the label volume
+ *   phantom_scan_convert  beam grid -> voxels (uint8), the label volume and
+ *                         the shadow volume
  *
  * Parameters: one float array, indices in phantom_scan.h.
  */
@@ -195,7 +196,7 @@ INLINE VF scan_texture(VF x, VF y, VF z, VF w_in, uint key, float amp) {
 
 __kernel void phantom_scan_echo(__global const float* restrict sdf, __global const float* restrict aux,
                                 const GridDesc vg, __global float* restrict re, __global float* restrict im,
-                                __global float* restrict half_t, const GridDesc bg, __global const float* restrict P,
+                                __global float* restrict loss, const GridDesc bg, __global const float* restrict P,
                                 const uint scatter_key, const uint texture_key, const uint point_key) {
   const int u0 = get_global_id(0) * LANES, v = get_global_id(1), w = get_global_id(2);
   if (!grid_contains(bg, u0, v, w)) return;
@@ -297,8 +298,10 @@ __kernel void phantom_scan_echo(__global const float* restrict sdf, __global con
   if (ANY(small)) {
     const VF uni = (TO_FLOAT(AS_INT(pa >> 8)) + 0.5f) * (1.0f / 16777216.0f);
     VF term = exp2_poly(-1.44269504f * fmin(p, 12.0f)), cdf = term, k = (VF)(0.0f);
-    for (int j = 1; j <= 40; ++j) {
-      k = SEL(uni > cdf, (VF)((float)j), k);
+    for (int j = 1; j <= 40; ++j) { /* k < 40: P(k >= 40 | p < 12) < 1e-10 */
+      const VI more = uni > cdf;
+      if (!ANY(more)) break; /* cdf only grows: no lane's k changes any more */
+      k = SEL(more, (VF)((float)j), k);
       term = term * p * (1.0f / (float)j);
       cdf += term;
     }
@@ -315,14 +318,70 @@ __kernel void phantom_scan_echo(__global const float* restrict sdf, __global con
   const float path = dr * 0.39894228f / spec_w; /* per unit of a unit-height profile */
   const VF loss_db = att * dr + (by_part(part, P[PS_REFL_PART], P[PS_REFL_PART + 1], P[PS_REFL_PART + 2]) * facing *
                                  cosb * layer + refl_nf) * path;
-  store_lanes(half_t + idx, exp2_poly(loss_db * -0.08304820f), count); /* sqrt(10^(-dB/20)) */
+  store_lanes(loss + idx, loss_db, count);
+}
+
+/* 10^(-db / 20) for db >= 0, as exp2_poly for float8 and float whatever LANES
+ * is (the column kernel below is float8 on every device). */
+#define ATTEN_FACTOR(T, TI, AS_F, TO_I)                                                             \
+  INLINE T atten_factor_##T(T db) {                                                                 \
+    const T v = fmax(fmin(db, 700.0f) * -0.16609640f, -126.0f);                                     \
+    const T n = floor(v);                                                                           \
+    const T f = (v - n) * 0.69314718f;                                                              \
+    const T p = 1.0f + f * (1.0f + f * (0.5f + f * (0.16666667f + f * (0.04166667f + f * (0.00833333f + f * 0.00138889f))))); \
+    return AS_F((TO_I(n) + 127) << 23) * p;                                                         \
+  }
+ATTEN_FACTOR(float8, int8, as_float8, convert_int8)
+ATTEN_FACTOR(float, int, as_float, convert_int)
+
+/* Eight neighbouring beams per work-item, marching along w (depth): an echo
+ * from a cell is weakened by everything between it and the probe, both ways
+ * (half of the cell's own loss: its echo comes from its centre), so deep
+ * tissue darkens and strong reflectors and attenuators cast shadows along the
+ * beams. In place, the cell's loss becomes the two-way loss (dB) accumulated
+ * to its centre. */
+__kernel void phantom_scan_attenuate(__global float* restrict re, __global float* restrict im,
+                                     __global float* restrict loss, const GridDesc g) {
+  const int x0 = 8 * get_global_id(0), y = get_global_id(1);
+  if (x0 >= g.nx || y >= g.ny) return;
+  const size_t stride = (size_t)g.nx * (size_t)g.ny;
+  const size_t start = (size_t)x0 + (size_t)g.nx * (size_t)y;
+  if (x0 + 8 <= g.nx) {
+    float8 acc = (float8)(0.0f);
+    size_t i = start;
+    for (int z = 0; z < g.nz; ++z, i += stride) {
+      const float8 l = vload8(0, loss + i);
+      const float8 centre = acc + 0.5f * l;
+      const float8 t = atten_factor_float8(centre);
+      vstore8(vload8(0, re + i) * t, 0, re + i);
+      vstore8(vload8(0, im + i) * t, 0, im + i);
+      vstore8(centre, 0, loss + i);
+      acc += l;
+    }
+  } else {
+    for (int x = x0; x < g.nx; ++x) {
+      float acc = 0.0f;
+      size_t i = start + (size_t)(x - x0);
+      for (int z = 0; z < g.nz; ++z, i += stride) {
+        const float l = loss[i];
+        const float centre = acc + 0.5f * l;
+        const float t = atten_factor_float(centre);
+        re[i] *= t;
+        im[i] *= t;
+        loss[i] = centre;
+        acc += l;
+      }
+    }
+  }
 }
 
 /* ---- point-spread function ------------------------------------------------ */
 /* Separable Gaussian on the complex field with weights per depth row w
  * (`weights + w * (2 radius + 1)`, unit energy each; the host computes the
  * beam's width at that depth in cells) or the same for all rows (the axial
- * pass). The edge sample is repeated beyond the grid. */
+ * pass). Near the ends of the grid the taps that fall outside are dropped and
+ * the rest rescaled to unit energy, so fully developed speckle keeps its mean
+ * power up to the edge (repeating the edge sample would brighten it). */
 #define SCAN_PSF_PASS(NAME, COORD, EXTENT, STRIDE, ROW)                                          \
   __kernel void NAME(__global const float* restrict in_re, __global const float* restrict in_im,  \
                      __global float* restrict out_re, __global float* restrict out_im,            \
@@ -333,12 +392,26 @@ __kernel void phantom_scan_echo(__global const float* restrict sdf, __global con
     const int c = COORD, n = EXTENT;                                                              \
     const size_t stride = STRIDE;                                                                 \
     __global const float* restrict wk = weights + (size_t)(ROW) * (size_t)(2 * radius + 1);       \
-    const size_t base = idx - (size_t)c * stride;                                                 \
     float ar = 0.0f, ai = 0.0f;                                                                   \
-    for (int k = -radius; k <= radius; ++k) {                                                     \
-      const size_t j = base + (size_t)clamp(c + k, 0, n - 1) * stride;                            \
-      ar = fma(wk[k + radius], in_re[j], ar);                                                     \
-      ai = fma(wk[k + radius], in_im[j], ai);                                                     \
+    if (c >= radius && c + radius < n) {                                                          \
+      const size_t base = idx - (size_t)radius * stride;                                          \
+      for (int k = 0; k <= 2 * radius; ++k) {                                                     \
+        ar = fma(wk[k], in_re[base + (size_t)k * stride], ar);                                    \
+        ai = fma(wk[k], in_im[base + (size_t)k * stride], ai);                                    \
+      }                                                                                           \
+    } else {                                                                                      \
+      const int lo = max(-radius, -c), hi = min(radius, n - 1 - c);                               \
+      float e = 0.0f;                                                                             \
+      for (int k = lo; k <= hi; ++k) {                                                            \
+        const float wv = wk[k + radius];                                                          \
+        const size_t j = idx + (ptrdiff_t)k * (ptrdiff_t)stride;                                  \
+        ar = fma(wv, in_re[j], ar);                                                               \
+        ai = fma(wv, in_im[j], ai);                                                               \
+        e = fma(wv, wv, e);                                                                       \
+      }                                                                                           \
+      const float s = rsqrt(fmax(e, 1e-12f));                                                     \
+      ar *= s;                                                                                    \
+      ai *= s;                                                                                    \
     }                                                                                             \
     out_re[idx] = ar;                                                                             \
     out_im[idx] = ai;                                                                             \
@@ -369,14 +442,18 @@ __kernel void phantom_scan_psf_x(__global const float* restrict in_re, __global 
     const size_t row = idx - ix0;
     float tr[LANES], ti[LANES];
     for (int l = 0; l < LANES; ++l) {
-      float sr = 0.0f, si = 0.0f;
-      for (int k = -radius; k <= radius; ++k) {
-        const size_t j = row + (size_t)clamp(ix0 + l + k, 0, g.nx - 1);
-        sr = fma(wk[k + radius], in_re[j], sr);
-        si = fma(wk[k + radius], in_im[j], si);
+      const int c = min(ix0 + l, g.nx - 1); /* lanes past the row's end are not stored */
+      const int lo = max(-radius, -c), hi = min(radius, g.nx - 1 - c);
+      float sr = 0.0f, si = 0.0f, e = 0.0f;
+      for (int k = lo; k <= hi; ++k) {
+        const float wv = wk[k + radius];
+        sr = fma(wv, in_re[row + (size_t)(c + k)], sr);
+        si = fma(wv, in_im[row + (size_t)(c + k)], si);
+        e = fma(wv, wv, e);
       }
-      tr[l] = sr;
-      ti[l] = si;
+      const float s = (lo == -radius && hi == radius) ? 1.0f : rsqrt(fmax(e, 1e-12f));
+      tr[l] = sr * s;
+      ti[l] = si * s;
     }
     ar = VLOAD_PRIVATE(tr);
     ai = VLOAD_PRIVATE(ti);
@@ -417,10 +494,11 @@ __kernel void phantom_scan_bmode(__global const float* restrict re, __global con
  * the voxel's position, shifted by the sweep's slice displacement where the
  * sweep is freehand; 0 outside the scanned region. Labels (truth, no
  * displacement): 3 outside the scanned region, 2 the near-field layers,
- * 1 the object (sdf < 0), 0 the rest. */
-__kernel void phantom_scan_convert(__global const float* restrict grey, const GridDesc bg,
-                                   __global const float* restrict sdf, __global uchar* restrict out,
-                                   __global uchar* restrict labels, const GridDesc vg,
+ * 1 the object (sdf < 0), 0 the rest. And the shadow (below). */
+__kernel void phantom_scan_convert(__global const float* restrict grey, __global const float* restrict loss,
+                                   const GridDesc bg, __global const float* restrict sdf,
+                                   __global uchar* restrict out, __global uchar* restrict labels,
+                                   __global float* restrict shadow, const GridDesc vg,
                                    __global const float* restrict P, const uint jitter_key) {
   const int ix0 = get_global_id(0) * LANES, iy = get_global_id(1), iz = get_global_id(2);
   if (!grid_contains(vg, ix0, iy, iz)) return;
@@ -452,6 +530,15 @@ __kernel void phantom_scan_convert(__global const float* restrict grey, const Gr
   const VF g11 = mixf(gather(grey, base + sw + sv), gather(grey, base + sw + sv + 1), tu);
   const VF val = mixf(mixf(g00, g10, tv), mixf(g01, g11, tv), tw);
   store_lanes_b(out + idx, TO_UCHAR(SEL(img.inside, clampf(rint(val), 0.0f, 255.0f), (VF)(0.0f))), count);
+  /* Shadow: the two-way loss to the voxel beyond what the TGC restores (the
+   * reference tissue's attenuation over its depth): > 0 in shadows, < 0 where
+   * the beam crossed fluid (enhancement); 0 outside the scanned region. */
+  const VF l00 = mixf(gather(loss, base), gather(loss, base + 1), tu);
+  const VF l10 = mixf(gather(loss, base + sv), gather(loss, base + sv + 1), tu);
+  const VF l01 = mixf(gather(loss, base + sw), gather(loss, base + sw + 1), tu);
+  const VF l11 = mixf(gather(loss, base + sw + sv), gather(loss, base + sw + sv + 1), tu);
+  const VF lost = mixf(mixf(l00, l10, tv), mixf(l01, l11, tv), tw) - P[PS_ATT_REF] * img.d;
+  store_lanes(shadow + idx, SEL(img.inside, lost, (VF)(0.0f)), count);
 
   const BeamPos truth = beam_pos(P, bg, x, (VF)(y), (VF)(z));
   VI band = (VI)(0);

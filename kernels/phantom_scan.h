@@ -50,6 +50,7 @@
 #define PS_NOISE 68      /* electronic noise rms amplitude (tissue 1) */
 #define PS_DR_DB 69      /* dynamic range, dB */
 #define PS_TOP_DB 70     /* level mapped to 255, dB re the mean tissue echo */
-#define PS_COUNT 71
+#define PS_ATT_REF 71    /* the reference (soft) tissue's two-way attenuation, dB/mm: what the TGC restores */
+#define PS_COUNT 72
 
 #endif

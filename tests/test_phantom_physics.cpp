@@ -393,7 +393,7 @@ TEST(PhantomPhysicsFan, ShadowsFollowTheBeams) {
   int deepest = 0;
   for (std::size_t i = 0; i < p.truth_sdf.data.size(); ++i)
     if (p.truth_sdf.data[i] < 0) deepest = std::max<int>(deepest, int(i / (n * n)));
-  std::vector<double> by_ray_only, clear;
+  std::vector<double> by_ray_only, clear, shadow_ray, shadow_clear;
   const double step = 0.25;  // mm
   for (std::size_t k = deepest + 3; k < n; ++k)
     for (std::size_t j = n / 2 - 4; j < n / 2 + 4; ++j)
@@ -408,12 +408,52 @@ TEST(PhantomPhysicsFan, ShadowsFollowTheBeams) {
         }
         for (double zc = step / 2; zc < z; zc += step) column += inside(x, y, zc) ? step : 0;
         if (column > 0) continue;
-        if (ray > 5) by_ray_only.push_back(p.volume.at(i, j, k));
-        if (ray == 0) clear.push_back(p.volume.at(i, j, k));
+        if (ray > 5) by_ray_only.push_back(p.volume.at(i, j, k)), shadow_ray.push_back(p.shadow_db.at(i, j, k));
+        if (ray == 0) clear.push_back(p.volume.at(i, j, k)), shadow_clear.push_back(p.shadow_db.at(i, j, k));
       }
   ASSERT_GT(by_ray_only.size(), 50u);
   ASSERT_GT(clear.size(), 50u);
   EXPECT_LT(mean(by_ray_only), mean(clear) - 20) << "beam crossed " << mean(by_ray_only) << ", clear " << mean(clear);
+  // shadow_db.nrrd: enhancement (< 0) below fluid, less of it behind the sphere.
+  EXPECT_LT(mean(shadow_clear), -3);
+  EXPECT_GT(mean(shadow_ray), mean(shadow_clear) + 3);
+  for (std::size_t i = 0; i < p.labels.data.size(); ++i)
+    if (p.labels.data[i] == 3) ASSERT_EQ(p.shadow_db.data[i], 0.0f);
+}
+
+// ---- speckle ----------------------------------------------------------------------------
+
+// Speckle density: few scatterers per resolution cell give bright isolated
+// points (intensity contrast std / mean well above 1, non-Rayleigh), many give
+// fully developed speckle (exponential intensity: contrast 1).
+TEST(PhantomPhysicsSpeckle, SparseScatterersAreNonRayleighDenseAreRayleigh) {
+  Runtime& rt = runtime();
+  auto contrast = [&](double per_cell) {
+    PhantomParams par = physics_params(PhantomShape::Spine, 64, "clean");
+    PhantomPhysics& phys = *par.physics;
+    phys.scatterers_per_cell = per_cell, phys.texture = 0, phys.noise_db = -90, phys.specular = 0.7;
+    phys.dynamic_range_db = 100, phys.tissue_grey = 128;  // 0.39 dB per grey level, nothing clips
+    const Phantom p = make_phantom(rt, par);
+    // Muscle in the columns that miss the bone (and its shadow) by 4 voxels.
+    const std::size_t n = 64, plane = n * n;
+    std::vector<bool> clear(plane, true);
+    for (std::size_t k = 0; k < n; ++k)
+      for (std::size_t i = 0; i < plane; ++i) clear[i] = clear[i] && p.truth_sdf.data[k * plane + i] > 4;
+    double sum = 0, sum2 = 0;
+    std::size_t count = 0;
+    for (std::size_t k = 0; k < n; ++k)  // up to the faces: the PSF keeps the mean power there too
+      for (std::size_t i = 0; i < plane; ++i) {
+        if (!clear[i]) continue;
+        const double intensity = std::pow(10.0, (p.volume.data[k * plane + i] / 255.0 - 1) * 100 / 10);
+        sum += intensity, sum2 += intensity * intensity, ++count;
+      }
+    EXPECT_GT(count, 20000u);
+    const double m = sum / count;
+    return std::sqrt(sum2 / count - m * m) / m;
+  };
+  const double dense = contrast(50), sparse = contrast(0.5);
+  EXPECT_NEAR(dense, 1.0, 0.1) << "fully developed speckle";
+  EXPECT_GT(sparse, 1.6) << "sparse scatterers";
 }
 
 // ---- TGC mismatch and shadows ----------------------------------------------------------
@@ -474,14 +514,19 @@ TEST(PhantomPhysicsShadow, BoneDarkensWhatLiesBelowItAndMoreWhenItAttenuatesMore
       }
       column[i] = lo < -1 ? 1 : (lo > 3 ? 2 : 0);
     }
-    std::vector<double> under, beside;
+    std::vector<double> under, beside, shadow_under, shadow_beside;
     for (std::size_t k = deepest + 4; k < n; ++k)
       for (std::size_t i = 0; i < n * n; ++i) {
-        if (column[i] == 1) under.push_back(p.volume.data[k * n * n + i]);
-        if (column[i] == 2) beside.push_back(p.volume.data[k * n * n + i]);
+        const std::size_t v = k * n * n + i;
+        if (column[i] == 1) under.push_back(p.volume.data[v]), shadow_under.push_back(p.shadow_db.data[v]);
+        if (column[i] == 2) beside.push_back(p.volume.data[v]), shadow_beside.push_back(p.shadow_db.data[v]);
       }
     EXPECT_GT(under.size(), 200u);
     EXPECT_GT(beside.size(), 200u);
+    // shadow_db.nrrd says the same: beside the bone the TGC restores muscle
+    // exactly (after the near field's excess loss, a few dB).
+    EXPECT_GT(mean(shadow_under), mean(shadow_beside) + 10);
+    EXPECT_NEAR(median(shadow_beside), 0, 6);
     return mean(under) - mean(beside);
   };
   const double strong = under_minus_beside(8), weak = under_minus_beside(1);
@@ -501,7 +546,8 @@ TEST_F(CliPhantomPhysics, RandomWritesLabelsAndEveryParameter) {
   std::vector<std::string> names;
   for (const auto& e : fs::directory_iterator(dir)) names.push_back(e.path().filename().string());
   std::sort(names.begin(), names.end());
-  EXPECT_EQ(names, (std::vector<std::string>{"labels.nrrd", "phantom.json", "truth_sdf.nrrd", "volume.nrrd"}));
+  EXPECT_EQ(names, (std::vector<std::string>{"labels.nrrd", "phantom.json", "shadow_db.nrrd", "truth_sdf.nrrd",
+                                             "volume.nrrd"}));
   const Volume labels = read_volume(dir + "/labels.nrrd");
   EXPECT_EQ(labels.source_type, ScalarType::UInt8);
   EXPECT_EQ(labels.dims, (Dims3{24, 24, 24}));

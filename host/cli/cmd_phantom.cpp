@@ -129,6 +129,7 @@ int run_phantom(PhantomOptions o) {
   write_volume((dir / "volume.nrrd").string(), p.volume);
   write_volume((dir / "truth_sdf.nrrd").string(), p.truth_sdf);
   if (!o.params.physics_name.empty()) write_volume((dir / "labels.nrrd").string(), p.labels);
+  if (!p.shadow_db.data.empty()) write_volume((dir / "shadow_db.nrrd").string(), p.shadow_db);
   write_text_atomically((dir / "phantom.json").string(), phantom_json(o.params, p));
   Image slices;
   if (!o.slices.empty()) {
