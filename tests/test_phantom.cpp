@@ -592,7 +592,7 @@ TEST_F(CliPhantom, HelpDescribesTheCommand) {
   const RunResult r = run({"phantom", "--help"});
   ASSERT_EQ(r.status, 0) << r.err;
   for (const char* s : {"--shape", "--size", "--seed", "--speckle", "--dynamic-range", "--noise", "--fov", "--slices",
-                        "--device", "truth_sdf.nrrd", "z = 0"})
+                        "--device", "truth_sdf.nrrd", "z = 0", "--physics", "--physics-set", "labels.nrrd", "random"})
     EXPECT_NE(r.out.find(s), std::string::npos) << s << " not in help:\n" << r.out;
 }
 

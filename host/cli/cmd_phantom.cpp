@@ -146,7 +146,7 @@ int run_phantom(PhantomOptions o) {
               << (o.physics.empty() ? std::string() : ", physics " + o.physics) << " -> " << o.out << '\n';
     if (o.params.physics) {
       std::cout << "  spacing  " << h << " mm (fov " << std::setprecision(1) << p.fov_mm << " mm), probe at z = 0\n"
-                << std::defaultfloat << physics_summary(*o.params.physics) << std::fixed;
+                << std::defaultfloat << physics_summary(*o.params.physics) << std::fixed << std::setprecision(3);
     } else {
       std::cout << "  spacing  " << h << " mm (fov " << std::setprecision(1) << p.fov_mm
                 << " mm), transducer at z = 0, beams along +z\n"
