@@ -11,16 +11,12 @@
 #include <sstream>
 
 #include "error.hpp"
+#include "phantom_internal.hpp"
 
 namespace softshell {
-namespace {
 
-constexpr int k_min_size = 16, k_max_size = 512;
-constexpr double k_min_sigma = 0.2, k_max_sigma = 8.0;
-constexpr double k_median_band = 3.0;  // voxels from the boundary: fluid sdf > 3, tissue sdf < -3
+namespace phantom_detail {
 
-// splitmix64 finaliser: a 32-bit key per (seed, stream), so the counter-based
-// RNG streams (scatterers, texture, noise) are independent and seed-specific.
 std::uint32_t stream_key(std::uint64_t seed, std::uint64_t stream) {
   std::uint64_t z = seed + 0x9E3779B97F4A7C15ull * (stream + 1);
   z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
@@ -28,6 +24,33 @@ std::uint32_t stream_key(std::uint64_t seed, std::uint64_t stream) {
   z ^= z >> 31;
   return static_cast<std::uint32_t>(z ^ (z >> 32));
 }
+
+double median_of_histogram(const std::array<std::size_t, 256>& hist) {
+  std::size_t n = 0;
+  for (std::size_t c : hist) n += c;
+  if (n == 0) return std::numeric_limits<double>::quiet_NaN();
+  auto kth = [&](std::size_t k) {  // k-th smallest, 0-based
+    std::size_t acc = 0;
+    for (int v = 0; v < 256; ++v)
+      if ((acc += hist[v]) > k) return v;
+    return 255;
+  };
+  return 0.5 * (kth((n - 1) / 2) + kth(n / 2));
+}
+
+int default_lanes(const Runtime& rt) { return rt.info().is_gpu() ? 1 : 8; }
+
+}  // namespace phantom_detail
+
+namespace {
+
+using phantom_detail::default_lanes;
+using phantom_detail::k_median_band;
+using phantom_detail::median_of_histogram;
+using phantom_detail::stream_key;
+
+constexpr int k_min_size = 16, k_max_size = 512;
+constexpr double k_min_sigma = 0.2, k_max_sigma = 8.0;
 
 // 1-D Gaussian with sum of squares 1 (radius ceil(3 sigma)): the separable
 // 3-D PSF then has unit energy, so fully developed speckle from scatterers of
@@ -44,24 +67,6 @@ std::vector<float> psf_weights(double sigma) {
   for (std::size_t i = 0; i < w.size(); ++i) out[i] = static_cast<float>(w[i] / std::sqrt(sum2));
   return out;
 }
-
-double median_of_histogram(const std::array<std::size_t, 256>& hist) {
-  std::size_t n = 0;
-  for (std::size_t c : hist) n += c;
-  if (n == 0) return std::numeric_limits<double>::quiet_NaN();
-  auto kth = [&](std::size_t k) {  // k-th smallest, 0-based
-    std::size_t acc = 0;
-    for (int v = 0; v < 256; ++v)
-      if ((acc += hist[v]) > k) return v;
-    return 255;
-  };
-  return 0.5 * (kth((n - 1) / 2) + kth(n / 2));
-}
-
-// Voxels per work-item of the lane kernels: explicit 8-wide vectors on CPUs
-// (PoCL does not vectorise those kernels itself), one voxel per work-item on
-// GPUs.
-int default_lanes(const Runtime& rt) { return rt.info().is_gpu() ? 1 : 8; }
 
 std::string build_options(const PhantomParams& p, int lanes, int radius_lateral, int radius_axial) {
   return "-DSHAPE=" + std::to_string(static_cast<int>(p.shape)) + " -DLANES=" + std::to_string(lanes) +
@@ -163,6 +168,7 @@ std::array<std::size_t, 3> phantom_dims(const PhantomParams& params) {
 }
 
 Phantom make_phantom(Runtime& rt, const PhantomParams& params) {
+  if (params.physics) return make_scan_phantom(rt, params);
   const auto t0 = std::chrono::steady_clock::now();
   validate_phantom_params(params);
   const std::array<std::size_t, 3> dims = phantom_dims(params);
@@ -265,12 +271,47 @@ Phantom make_phantom(Runtime& rt, const PhantomParams& params) {
   }
   p.fluid_median = median_of_histogram(fluid);
   p.tissue_median = median_of_histogram(tissue);
+  if (!params.physics_name.empty()) {  // `--physics default`: every voxel scanned, no near field
+    p.labels = p.truth_sdf.with_data(std::vector<float>(voxels), ScalarType::UInt8);
+    for (std::size_t i = 0; i < voxels; ++i) p.labels.data[i] = sdf[i] < 0 ? 1.0f : 0.0f;
+    p.near_field_median = std::numeric_limits<double>::quiet_NaN();
+  }
   p.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return p;
 }
 
+namespace {
+
+// phantom.json's description of the beams (`--physics`): the geometry, and
+// how to get the beam direction at a voxel.
+std::string beam_geometry_json(const PhantomPhysics* phys, const Phantom& p) {
+  const double h = p.volume.spacing[0];
+  const auto& d = p.volume.dims;
+  std::ostringstream j;
+  j << "{\"kind\": \"" << (phys ? beam_geometry_name(phys->geometry) : "linear") << '"';
+  if (!phys || phys->geometry == BeamGeometry::Linear) {
+    j << ", \"direction\": [0, 0, 1], \"rule\": \"every beam runs along +z from the z = 0 face\"}";
+    return j.str();
+  }
+  const double R = phys->probe_radius_mm;
+  const bool point = phys->geometry == BeamGeometry::Fan3d;
+  j << ", \"apex\": \"" << (point ? "point" : "line parallel to y") << "\", \"apex_mm\": [0, 0, " << json_number(-R)
+    << "], \"apex_voxels\": [" << json_number(0.5 * (d[0] - 1.0)) << ", " << json_number(0.5 * (d[1] - 1.0)) << ", "
+    << json_number(-R / h - 0.5) << "], \"probe_radius_mm\": " << json_number(R)
+    << ", \"sector_half_angle_deg\": [" << json_number(phys->sector_deg) << ", "
+    << (point ? json_number(phys->sector_y_deg) : std::string("null"))
+    << "], \"scan_depth_mm\": " << json_number(phys->scan_depth_mm) << ", \"rule\": \""
+    << (point ? "beam at voxel (i, j, k) = unit((i, j, k) - apex_voxels)"
+              : "beam at voxel (i, j, k) = unit(i - apex_voxels[0], 0, k - apex_voxels[2])")
+    << "; scanned where |angle| <= the half-angles and 0 <= |p - apex| - R <= scan_depth_mm (label != 3)\"}";
+  return j.str();
+}
+
+}  // namespace
+
 std::string phantom_json(const PhantomParams& params, const Phantom& p) {
   const double h = p.volume.spacing[0];
+  const PhantomPhysics* phys = params.physics ? &*params.physics : nullptr;
   std::ostringstream j;
   j << "{\n"
     << "  \"shape\": \"" << phantom_shape_name(params.shape) << "\",\n"
@@ -280,16 +321,43 @@ std::string phantom_json(const PhantomParams& params, const Phantom& p) {
     << "  \"fov_mm\": " << json_number(p.fov_mm) << ",\n"
     << "  \"spacing_mm\": [" << json_number(h) << ", " << json_number(h) << ", " << json_number(h) << "],\n"
     << "  \"beam\": [" << json_number(p.beam[0]) << ", " << json_number(p.beam[1]) << ", " << json_number(p.beam[2])
-    << "],\n"
-    << "  \"transducer\": \"z = 0 face, parallel beams along +z\",\n"
-    << "  \"psf_sigma_voxels\": {\"axial\": " << json_number(params.psf_axial)
-    << ", \"lateral\": " << json_number(params.psf_lateral) << "},\n"
-    << "  \"dynamic_range_db\": " << json_number(params.dynamic_range_db) << ",\n"
-    << "  \"top_db\": " << json_number(params.top_db) << ",\n"
-    << "  \"noise\": " << json_number(params.noise) << ",\n"
-    << "  \"attenuation\": " << json_number(params.attenuation) << ",\n"
-    << "  \"specular\": " << json_number(params.specular) << ",\n"
-    << "  \"volume\": \"volume.nrrd\",\n"
+    << "],\n";
+  if (!phys) {
+    j << "  \"transducer\": \"z = 0 face, parallel beams along +z\",\n"
+      << "  \"psf_sigma_voxels\": {\"axial\": " << json_number(params.psf_axial)
+      << ", \"lateral\": " << json_number(params.psf_lateral) << "},\n"
+      << "  \"dynamic_range_db\": " << json_number(params.dynamic_range_db) << ",\n"
+      << "  \"top_db\": " << json_number(params.top_db) << ",\n"
+      << "  \"noise\": " << json_number(params.noise) << ",\n"
+      << "  \"attenuation\": " << json_number(params.attenuation) << ",\n"
+      << "  \"specular\": " << json_number(params.specular) << ",\n";
+  } else {
+    j << "  \"transducer\": \"probe surface at the top (z = 0) face; beams as beam_geometry says\",\n";
+  }
+  if (!params.physics_name.empty()) {
+    j << "  \"physics\": \"" << json_escape(params.physics_name) << "\",\n";
+    if (phys)
+      j << "  \"physics_parameters\": {\n" << phantom_physics_json(*phys, 4) << "\n  },\n";
+    j << "  \"world_frame\": \"mm: x = (i + 0.5 - nx/2) h, y = (j + 0.5 - ny/2) h, z = (k + 0.5) h (depth below the top "
+         "face)\",\n"
+      << "  \"beam_geometry\": " << beam_geometry_json(phys, p) << ",\n";
+    if (phys)
+      j << "  \"scan\": {\"beam_cells\": [" << p.beam_cells[0] << ", " << p.beam_cells[1] << ", " << p.beam_cells[2]
+        << "], \"psf_sigma_cells\": {\"lateral\": [" << json_number(p.psf_lateral_cells[0]) << ", "
+        << json_number(p.psf_lateral_cells[1]) << "], \"elevation\": [" << json_number(p.psf_elevation_cells[0])
+        << ", " << json_number(p.psf_elevation_cells[1]) << "], \"axial\": " << json_number(p.psf_axial_cells)
+        << "}, \"psf_radius_cells\": [" << p.psf_radius[0] << ", " << p.psf_radius[1] << ", " << p.psf_radius[2]
+        << "]},\n";
+    if (phys)
+      j << "  \"shadow_db\": \"shadow_db.nrrd\",\n"
+        << "  \"shadow_db_meaning\": \"two-way loss (dB) beyond what the TGC restores: > 0 in acoustic shadows, < 0 "
+           "below fluid, 0 outside the scanned region\",\n";
+    j << "  \"labels\": \"labels.nrrd\",\n"
+      << "  \"label_values\": {\"0\": \"fluid / background\", \"1\": \"object (sdf < 0)\", \"2\": \"near-field "
+         "layers\", \"3\": \"outside the scanned region (grey 0)\"},\n"
+      << "  \"near_field_median\": " << json_number(p.near_field_median) << ",\n";
+  }
+  j << "  \"volume\": \"volume.nrrd\",\n"
     << "  \"truth_sdf\": \"truth_sdf.nrrd\",\n"
     << "  \"sdf_units\": \"voxels\",\n"
     << "  \"sdf_sign\": \"negative inside tissue\",\n"
@@ -310,36 +378,38 @@ std::string phantom_json(const PhantomParams& params, const Phantom& p) {
 
 Image phantom_slices(const Phantom& p, int panel_height) {
   const int height = panel_height > 0 ? panel_height : std::max<int>(static_cast<int>(p.volume.dims[2]), 256);
-  // The inside mask (uint8 0 / 255, so its intensity map is the type range)
-  // goes through the same montage, so its pixels line up with the volume's.
-  Volume mask = p.truth_sdf.with_data(std::vector<float>(p.truth_sdf.voxels()), ScalarType::UInt8);
-  for (std::size_t i = 0; i < mask.voxels(); ++i) mask.data[i] = p.truth_sdf.data[i] < 0 ? 255.0f : 0.0f;
   const Image grey = slice_montage({&p.volume}, height);
-  const Image inside = slice_montage({&mask}, height);
   const int gap = 4;
   Image out(grey.width, 2 * grey.height + gap, 32);
   for (int y = 0; y < grey.height; ++y) {
     std::copy_n(grey.pixel(0, y), grey.width * 3, out.pixel(0, y));
     std::copy_n(grey.pixel(0, y), grey.width * 3, out.pixel(0, grey.height + gap + y));
   }
-  // Boundary: an inside pixel with an outside 4-neighbour (the gaps between
-  // panels are grey 32 in both montages, so they never count as outside).
-  auto in_at = [&](int x, int y) { return inside.pixel(x, y)[0] > 128; };
-  for (int y = 0; y < inside.height; ++y)
-    for (int x = 0; x < inside.width; ++x) {
-      if (!in_at(x, y)) continue;
-      bool edge = false;
-      const int dx[4] = {1, -1, 0, 0}, dy[4] = {0, 0, 1, -1};
-      for (int k = 0; k < 4 && !edge; ++k) {
-        const int u = x + dx[k], v = y + dy[k];
-        if (u < 0 || v < 0 || u >= inside.width || v >= inside.height) continue;
-        edge = inside.pixel(u, v)[0] == 0;
+  // Outlines in the second row: a mask (uint8 0 / 255, so its intensity map
+  // is the type range) goes through the same montage, so its pixels line up
+  // with the volume's; its boundary is a pixel in the mask with a 4-neighbour
+  // outside (the gaps between panels are grey 32 in both montages, so they
+  // never count as outside).
+  auto outline = [&](auto in_mask, std::array<std::uint8_t, 3> colour) {
+    Volume mask = p.truth_sdf.with_data(std::vector<float>(p.truth_sdf.voxels()), ScalarType::UInt8);
+    for (std::size_t i = 0; i < mask.voxels(); ++i) mask.data[i] = in_mask(i) ? 255.0f : 0.0f;
+    const Image inside = slice_montage({&mask}, height);
+    for (int y = 0; y < inside.height; ++y)
+      for (int x = 0; x < inside.width; ++x) {
+        if (inside.pixel(x, y)[0] <= 128) continue;
+        bool edge = false;
+        const int dx[4] = {1, -1, 0, 0}, dy[4] = {0, 0, 1, -1};
+        for (int k = 0; k < 4 && !edge; ++k) {
+          const int u = x + dx[k], v = y + dy[k];
+          if (u < 0 || v < 0 || u >= inside.width || v >= inside.height) continue;
+          edge = inside.pixel(u, v)[0] == 0;
+        }
+        if (edge) std::copy_n(colour.data(), 3, out.pixel(x, grey.height + gap + y));
       }
-      if (edge) {
-        std::uint8_t* q = out.pixel(x, grey.height + gap + y);
-        q[0] = 255, q[1] = 150, q[2] = 0;
-      }
-    }
+  };
+  // The near-field band (label 2) in cyan, under the true boundary in orange.
+  if (!p.labels.data.empty()) outline([&](std::size_t i) { return p.labels.data[i] == 2.0f; }, {0, 200, 255});
+  outline([&](std::size_t i) { return p.truth_sdf.data[i] < 0; }, {255, 150, 0});
   return out;
 }
 
@@ -364,6 +434,17 @@ std::vector<float> phantom_implicit(Runtime& rt, const PhantomParams& params,
   const int lanes = params.lanes > 0 ? params.lanes : default_lanes(rt);
   const int r_lat = static_cast<int>(psf_weights(params.psf_lateral).size() / 2);
   const int r_ax = static_cast<int>(psf_weights(params.psf_axial).size() / 2);
+  if (params.physics) {  // posed: the program of make_scan_phantom
+    const std::string opts =
+        "-DSHAPE=" + std::to_string(static_cast<int>(params.shape)) + " -DLANES=" + std::to_string(lanes) + " -DPOSE=1";
+    cl::Kernel k = rt.kernel("phantom_scan.cl", "phantom_implicit", opts);
+    Runtime::set_args(k, d_p[0], d_p[1], d_p[2], d_f, g, static_cast<cl_float>(100.0 / params.size),
+                      static_cast<cl_uint>(count), phantom_detail::pose_argument(*params.physics));
+    rt.enqueue_1d(k, (count + lanes - 1) / lanes);
+    std::vector<float> f(count);
+    rt.queue().enqueueReadBuffer(d_f, CL_TRUE, 0, count * sizeof(float), f.data());
+    return f;
+  }
   cl::Kernel k = rt.kernel("phantom.cl", "phantom_implicit", build_options(params, lanes, r_lat, r_ax));
   Runtime::set_args(k, d_p[0], d_p[1], d_p[2], d_f, g, static_cast<cl_float>(100.0 / params.size),
                     static_cast<cl_uint>(count));

@@ -379,7 +379,11 @@ INLINE VF face_head(VF x, VF y, VF z, VI unused) {
   d = smax(d, -sd_ellipsoid(x, y - 13.2f, z + 20.5f, 4.6f, 0.5f, 3.0f), 1.0f);                 /* mouth */
   d = smin(d, sd_ellipsoid(x, y - 23.0f, z + 14.5f, 8.0f, 4.5f, 5.5f), 4.0f);                  /* chin */
   d = smin(d, sd_ellipsoid(ax - 23.5f, y - 1.0f, z - 8.0f, 2.5f, 6.5f, 4.5f), 2.0f);           /* ears */
+#ifdef POSE /* rotated, the body's far end could enter a corner: the same line, longer */
+  d = smin(d, sd_capsule(x, y, z, 0.0f, 24.0f, 10.0f, 0.0f, 140.0f, 20.0869565f, 11.5f), 8.0f); /* neck, body */
+#else
   d = smin(d, sd_capsule(x, y, z, 0.0f, 24.0f, 10.0f, 0.0f, 70.0f, 14.0f, 11.5f), 8.0f);      /* neck, body */
+#endif
   return d;
 }
 DEFINE_LOCAL_DISTANCE(face_head_local, face_head)
@@ -550,10 +554,36 @@ INLINE VF inner_bone(VF x, VF y, VF z) {
 
 INLINE VF design_coord(VF i, int n, float vox) { return (i + 0.5f - 0.5f * (float)n) * vox; }
 
+/* ---- pose (-D POSE: the randomised phantoms of phantom_scan.cl) ---------- */
+/* A rigid motion of the whole scene: a point p of the volume (design units,
+ * centred) lies at R^T (p - t) in the shape's own frame; pose.s0-s8 hold R
+ * row-major, pose.s9-sb t. Distances are invariant, so the truth stays exact;
+ * only the seeds (offsets to the surface) are rotated back into the volume's
+ * frame, to 1/64 voxel. The normal_z kept in aux stays in the shape's frame
+ * (phantom_scan.cl takes normals from the final distance instead). */
+#ifdef POSE
+#define POSE_ARG , const float16 pose
+INLINE void to_object(const float16 pose, VF* x, VF* y, VF* z) {
+  const VF dx = *x - pose.s9, dy = *y - pose.sa, dz = *z - pose.sb;
+  *x = pose.s0 * dx + pose.s3 * dy + pose.s6 * dz;
+  *y = pose.s1 * dx + pose.s4 * dy + pose.s7 * dz;
+  *z = pose.s2 * dx + pose.s5 * dy + pose.s8 * dz;
+}
+INLINE VU seed_to_volume(const float16 pose, VU s) {
+  const VF qx = TO_FLOAT(AS_INT(s << 22) >> 22), qy = TO_FLOAT(AS_INT(s << 12) >> 22), qz = TO_FLOAT(AS_INT(s << 2) >> 22);
+  const VF wx = pose.s0 * qx + pose.s1 * qy + pose.s2 * qz;
+  const VF wy = pose.s3 * qx + pose.s4 * qy + pose.s5 * qz;
+  const VF wz = pose.s6 * qx + pose.s7 * qy + pose.s8 * qz;
+  return SEL(AS_INT(s) < 0, pack_seed(TO_INT(rint(wx)), TO_INT(rint(wy)), TO_INT(rint(wz))), (VU)(0u));
+}
+#else
+#define POSE_ARG
+#endif
+
 /* Local distance estimate (sign of f), normal_z and part packed as
  * nz + 4 part, and the seed of every voxel. */
 __kernel void phantom_geometry(__global float* restrict sdf, __global float* restrict aux,
-                               __global uint* restrict seed, const GridDesc g, const float vox) {
+                               __global uint* restrict seed, const GridDesc g, const float vox POSE_ARG) {
   const int ix0 = get_global_id(0) * LANES, iy = get_global_id(1), iz = get_global_id(2);
   if (!grid_contains(g, ix0, iy, iz)) return;
   const size_t idx = grid_index(g, ix0, iy, iz);
@@ -562,10 +592,17 @@ __kernel void phantom_geometry(__global float* restrict sdf, __global float* res
   const VF y = (VF)(design_coord((VF)((float)iy), g.ny, vox));
   const VF z = (VF)(design_coord((VF)((float)iz), g.nz, vox));
   VF part;
+#ifdef POSE
+  VF ox = x, oy = y, oz = z;
+  to_object(pose, &ox, &oy, &oz);
+  const Local l = shape_local(ox, oy, oz, vox, &part);
+  store_lanes_u(seed + idx, seed_to_volume(pose, l.seed), count);
+#else
   const Local l = shape_local(x, y, z, vox, &part);
+  store_lanes_u(seed + idx, l.seed, count);
+#endif
   store_lanes(sdf + idx, l.d, count);
   store_lanes(aux + idx, l.nz + 4.0f * part, count);
-  store_lanes_u(seed + idx, l.seed, count);
 }
 
 /* Redistancing: every voxel takes, of the seeds held by the voxels within
@@ -640,6 +677,23 @@ REDISTANCE_PASS(phantom_redistance_x, 0)
 REDISTANCE_PASS(phantom_redistance_y, 1)
 REDISTANCE_PASS(phantom_redistance_z, 2)
 
+/* The final signed distance of a voxel from its local estimate and the
+ * nearest seed the redistancing found. */
+INLINE VF final_distance(VF est, VU sd) {
+  const VI qx = AS_INT(sd << 22) >> 22, qy = AS_INT(sd << 12) >> 22, qz = AS_INT(sd << 2) >> 22;
+  const VF dist = sqrt(TO_FLOAT(qx * qx + qy * qy + qz * qz)) * (1.0f / SEED_UNIT);
+  /* The seed distance is an upper bound (seeds lie on the surface), too long
+   * by up to ~0.3 voxel where seeds are sparse; the local estimate is exact to
+   * second order where F is smooth but can go wrong near concave blends.
+   * Keep the local one when the bound allows it, the bound otherwise. */
+  const VF m = fabs(est);
+  const VI keep = (m <= dist + 0.02f) & (m >= dist - REDIST_SLACK);
+  /* Beyond REDIST_RADIUS a nearer seed may lie outside the window. */
+  const VI found = (AS_INT(sd) < 0) & (dist <= (float)REDIST_RADIUS);
+  return SEL(found, copysign(SEL(keep, m, dist), est), est);
+}
+
+#ifndef PHANTOM_SCAN /* the fixed physics' image kernels; phantom_scan.cl has its own */
 /* Per voxel: the final signed distance (the redistanced seed distance where
  * a seed was found, the local estimate elsewhere), then the echo model: the
  * complex field (scatterers + specular echo) and the square root of the
@@ -663,17 +717,7 @@ __kernel void phantom_echo(__global float* restrict sdf, __global float* restric
   const VF a = load_lanes(aux_then_half_t + idx, count);
   const VU sd = load_lanes_u(seed_then_im + idx, count);
   const VF part = rint(a * 0.25f), nz = a - 4.0f * part;
-  const VI qx = AS_INT(sd << 22) >> 22, qy = AS_INT(sd << 12) >> 22, qz = AS_INT(sd << 2) >> 22;
-  const VF dist = sqrt(TO_FLOAT(qx * qx + qy * qy + qz * qz)) * (1.0f / SEED_UNIT);
-  /* The seed distance is an upper bound (seeds lie on the surface), too long
-   * by up to ~0.3 voxel where seeds are sparse; the local estimate is exact to
-   * second order where F is smooth but can go wrong near concave blends.
-   * Keep the local one when the bound allows it, the bound otherwise. */
-  const VF m = fabs(est);
-  const VI keep = (m <= dist + 0.02f) & (m >= dist - REDIST_SLACK);
-  /* Beyond REDIST_RADIUS a nearer seed may lie outside the window. */
-  const VI found = (AS_INT(sd) < 0) & (dist <= (float)REDIST_RADIUS);
-  const VF sdf_v = SEL(found, copysign(SEL(keep, m, dist), est), est);
+  const VF sdf_v = final_distance(est, sd);
   store_lanes(sdf + idx, sdf_v, count);
 
   const VF w_in = clampf(0.5f - sdf_v, 0.0f, 1.0f); /* partial-volume share of tissue */
@@ -701,6 +745,8 @@ __kernel void phantom_echo(__global float* restrict sdf, __global float* restric
                      specular * by_part(part, IN_REFL_DB) * facing * c * layer * (0.39894228f / SPEC_WIDTH);
   store_lanes(aux_then_half_t + idx, exp2_poly(loss_db * -0.08304820f), count); /* sqrt(10^(-dB/20)) */
 }
+
+#endif /* PHANTOM_SCAN */
 
 /* Eight neighbouring (x, y) beams per work-item, marching along +z: an echo
  * from depth z is weakened by everything between it and the transducer (both
@@ -737,6 +783,7 @@ __kernel void phantom_attenuate(__global float* restrict re, __global float* res
   }
 }
 
+#ifndef PHANTOM_SCAN
 /* ---- point-spread function: separable Gaussian on the complex field ------- */
 /* Same structure as filter.cl (measurements there): weights in registers
  * first, compile-time radius, clamp-free interior; real and imaginary parts
@@ -843,12 +890,14 @@ __kernel void phantom_bmode(__global const float* restrict re, __global const fl
   store_lanes_b(out + idx, TO_UCHAR(clampf(rint(v), 0.0f, 255.0f)), count);
 }
 
+#endif /* PHANTOM_SCAN */
+
 /* The raw implicit function (voxels, negative inside) at n points given in
  * voxel coordinates (three planes padded to a multiple of LANES): for tests
  * of the distance correction. */
 __kernel void phantom_implicit(__global const float* restrict px, __global const float* restrict py,
                                __global const float* restrict pz, __global float* restrict f, const GridDesc g,
-                               const float vox, const uint n) {
+                               const float vox, const uint n POSE_ARG) {
   const uint i0 = get_global_id(0) * LANES;
   if (i0 >= n) return;
 #if LANES == 8
@@ -857,7 +906,11 @@ __kernel void phantom_implicit(__global const float* restrict px, __global const
   const VF qx = px[i0], qy = py[i0], qz = pz[i0];
 #endif
   VF part;
-  const VF v = shape_f((qx + 0.5f - 0.5f * (float)g.nx) * vox, (qy + 0.5f - 0.5f * (float)g.ny) * vox,
-                       (qz + 0.5f - 0.5f * (float)g.nz) * vox, &part);
+  VF x = (qx + 0.5f - 0.5f * (float)g.nx) * vox, y = (qy + 0.5f - 0.5f * (float)g.ny) * vox,
+     z = (qz + 0.5f - 0.5f * (float)g.nz) * vox;
+#ifdef POSE
+  to_object(pose, &x, &y, &z);
+#endif
+  const VF v = shape_f(x, y, z, &part);
   store_lanes(f + i0, v * (1.0f / vox), (int)(n - i0));
 }

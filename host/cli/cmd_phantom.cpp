@@ -7,7 +7,9 @@
 #include <iomanip>
 #include <iostream>
 #include <memory>
+#include <sstream>
 #include <system_error>
+#include <vector>
 
 #include "cl_runtime.hpp"
 #include "cli_common.hpp"
@@ -23,10 +25,40 @@ namespace {
 namespace fs = std::filesystem;
 
 struct PhantomOptions {
-  std::string shape = "face", out, speckle, slices, device, dims;
+  std::string shape = "face", out, speckle, slices, device, dims, physics, physics_set;
   PhantomParams params;
   bool quiet = false;
+  // Options of the fixed physics given on the command line (they do not
+  // apply to --physics other than default).
+  std::vector<std::string> fixed_physics_options;
+  bool fov_given = false;
 };
+
+// The physics parameters for the console, a few to a line.
+std::string physics_summary(const PhantomPhysics& p) {
+  std::ostringstream s;
+  s << std::setprecision(3);
+  s << "  geometry " << beam_geometry_name(p.geometry) << ", fov " << p.fov_mm << " mm";
+  if (p.geometry != BeamGeometry::Linear)
+    s << ", probe radius " << p.probe_radius_mm << " mm, sector +-" << p.sector_deg << " deg"
+      << (p.geometry == BeamGeometry::Fan3d ? " x +-" + std::to_string(static_cast<int>(std::lround(p.sector_y_deg))) + " deg" : std::string())
+      << ", depth " << p.scan_depth_mm << " mm";
+  s << ", jitter " << p.jitter_mm << " mm\n"
+    << "  psf      sigma lateral " << p.psf_lateral_mm << ", axial " << p.psf_axial_mm << ", elevation "
+    << p.psf_elevation_mm << " mm at focus " << p.focus_depth_mm << " mm, spread " << p.beam_spread << '\n'
+    << "  scatter  " << p.scatterers_per_cell << " per resolution cell, texture " << p.texture << ", contrast "
+    << p.contrast_db << " dB, specular " << p.specular << ", skull " << p.skull_db << " dB, bone "
+    << p.bone_atten_db_mm << " dB/mm\n"
+    << "  signal   " << p.frequency_mhz << " MHz, " << p.attenuation_db_cm_mhz << " dB/cm/MHz, TGC mismatch slope "
+    << p.tgc_slope_db << " dB bow " << p.tgc_bow_db << " dB; range " << p.dynamic_range_db << " dB, tissue grey "
+    << p.tissue_grey << ", noise " << p.noise_db << " dB\n"
+    << "  near     " << p.near_field_mm << " mm (skin " << p.skin_mm << ", fat " << p.fat_mm << "), "
+    << p.near_field_db << " dB, fat " << p.fat_db << " dB, interfaces " << p.near_field_specular << ", wave "
+    << p.near_field_wave << " / " << p.near_field_wavelength_mm << " mm, reverb " << p.reverb_db << " dB\n"
+    << "  pose     yaw " << p.yaw_deg << ", pitch " << p.pitch_deg << ", roll " << p.roll_deg << " deg, shift ("
+    << p.shift_mm[0] << ", " << p.shift_mm[1] << ", " << p.shift_mm[2] << ") mm\n";
+  return s.str();
+}
 
 // "AXIAL,LATERAL": two numbers, PSF standard deviations in voxels.
 void parse_speckle(const std::string& text, PhantomParams& p) {
@@ -64,6 +96,23 @@ int run_phantom(PhantomOptions o) {
     for (int a = 0; a < 3; ++a)
       o.params.dims[a] = static_cast<int>(std::min<std::size_t>(d[a], 1u << 20));  // range checked below
   }
+  if (!o.physics.empty()) {
+    o.params.physics_name = o.physics;
+    o.params.physics = phantom_physics(o.physics, o.params.shape, o.params.seed);  // unknown names throw
+    if (o.params.physics) {
+      if (!o.fixed_physics_options.empty())
+        throw InputError(o.fixed_physics_options.front() + " applies to the fixed physics only, not to --physics " +
+                         o.physics + " (use --physics-set NAME=VALUE; names as in phantom.json)");
+      if (!o.dims.empty()) throw InputError("--dims cannot be combined with --physics " + o.physics + " (cubic volumes only)");
+      if (o.fov_given) o.params.physics->fov_mm = o.params.fov_mm;
+      if (!o.physics_set.empty()) apply_physics_settings(*o.params.physics, o.physics_set);
+      validate_phantom_physics(*o.params.physics);
+    } else if (!o.physics_set.empty()) {
+      throw InputError("--physics-set needs --physics other than default");
+    }
+  } else if (!o.physics_set.empty()) {
+    throw InputError("--physics-set needs --physics NAME");
+  }
   validate_phantom_params(o.params);  // before anything touches the disk or the device
 
   const fs::path dir(o.out);
@@ -79,6 +128,8 @@ int run_phantom(PhantomOptions o) {
   if (ec) throw InputError("-o " + o.out + ": cannot create directory: " + ec.message());
   write_volume((dir / "volume.nrrd").string(), p.volume);
   write_volume((dir / "truth_sdf.nrrd").string(), p.truth_sdf);
+  if (!o.params.physics_name.empty()) write_volume((dir / "labels.nrrd").string(), p.labels);
+  if (!p.shadow_db.data.empty()) write_volume((dir / "shadow_db.nrrd").string(), p.shadow_db);
   write_text_atomically((dir / "phantom.json").string(), phantom_json(o.params, p));
   Image slices;
   if (!o.slices.empty()) {
@@ -91,14 +142,24 @@ int run_phantom(PhantomOptions o) {
     auto median = [](double m) { return std::isfinite(m) ? std::to_string(static_cast<int>(std::lround(m))) : "n/a"; };
     const double h = p.volume.spacing[0];
     std::cout << std::fixed << std::setprecision(3) << "phantom " << phantom_shape_name(o.params.shape) << ' '
-              << dims_text(p.volume.dims) << " uint8, seed " << o.params.seed << " -> " << o.out << '\n'
-              << "  spacing  " << h << " mm (fov " << std::setprecision(1) << p.fov_mm
-              << " mm), transducer at z = 0, beams along +z\n"
-              << std::setprecision(2) << "  psf      sigma axial " << o.params.psf_axial << ", lateral "
-              << o.params.psf_lateral << " voxels; dynamic range " << std::setprecision(1) << o.params.dynamic_range_db
-              << " dB; noise " << std::setprecision(3) << o.params.noise << '\n'
-              << "  medians  fluid " << median(p.fluid_median) << " (sdf > 3), tissue " << median(p.tissue_median)
-              << " (sdf < -3)\n"
+              << dims_text(p.volume.dims) << " uint8, seed " << o.params.seed
+              << (o.physics.empty() ? std::string() : ", physics " + o.physics) << " -> " << o.out << '\n';
+    if (o.params.physics) {
+      std::cout << "  spacing  " << h << " mm (fov " << std::setprecision(1) << p.fov_mm << " mm), probe at z = 0\n"
+                << std::defaultfloat << physics_summary(*o.params.physics) << std::fixed << std::setprecision(3);
+    } else {
+      std::cout << "  spacing  " << h << " mm (fov " << std::setprecision(1) << p.fov_mm
+                << " mm), transducer at z = 0, beams along +z\n"
+                << std::setprecision(2) << "  psf      sigma axial " << o.params.psf_axial << ", lateral "
+                << o.params.psf_lateral << " voxels; dynamic range " << std::setprecision(1)
+                << o.params.dynamic_range_db << " dB; noise " << std::setprecision(3) << o.params.noise << '\n';
+    }
+    std::cout << "  medians  fluid " << median(p.fluid_median) << " (sdf > 3), tissue " << median(p.tissue_median)
+              << " (sdf < -3)"
+              << (o.params.physics && std::isfinite(p.near_field_median)
+                      ? ", near field " + median(p.near_field_median)
+                      : std::string())
+              << '\n'
               << "  device   " << p.device << '\n'
               << "  time     generate " << p.seconds << " s (kernels " << p.device_seconds << " s), write " << t_write
               << " s, total " << seconds_since(t0) << " s\n";
@@ -120,7 +181,10 @@ void add_phantom_command(CLI::App& app, Action& action) {
       "distance in voxels to the true tissue boundary, negative inside tissue) and DIR/phantom.json (parameters,\n"
       "medians of fluid and tissue grey levels, timing). The transducer lies on the z = 0 face and every beam runs\n"
       "along +z (depth). Image formation: scatterers + angle-dependent boundary echoes, depth attenuation and\n"
-      "shadowing, anisotropic Gaussian PSF (speckle), electronic noise, envelope, log compression (docs/phantom.md).");
+      "shadowing, anisotropic Gaussian PSF (speckle), electronic noise, envelope, log compression (docs/phantom.md).\n"
+      "--physics NAME forms the image from parameters in mm instead (presets, or drawn from the seed: PSF, speckle\n"
+      "density, gain, dynamic range, TGC mismatch, shadows, a layered near field, fan geometry, pose) and adds\n"
+      "DIR/labels.nrrd.");
   sub->add_option("--shape", o->shape,
                   "face: fetal face in amniotic fluid with the uterine wall behind; spine: vertebrae in soft "
                   "tissue (tissue = bone); sphere: one sphere of tissue in fluid")
@@ -139,24 +203,44 @@ void add_phantom_command(CLI::App& app, Action& action) {
           "", "non-negative"))
       ->capture_default_str();
   sub->add_option("-o,--output", o->out, "Output directory (created if missing)")->required();
-  sub->add_option("--speckle", o->speckle,
-                  "AXIAL,LATERAL: PSF standard deviations in voxels, each in [0.2, 8] (default 0.6,1.5)");
-  sub->add_option("--dynamic-range", o->params.dynamic_range_db, "Log compression range in dB, in [10, 100]")
-      ->capture_default_str();
-  sub->add_option("--noise", o->params.noise, "Electronic noise rms relative to the mean tissue echo, >= 0")
-      ->capture_default_str();
-  sub->add_option("--attenuation", o->params.attenuation,
-                  "Depth attenuation relative to the default (0.2 dB/mm two-way in soft tissue), >= 0")
-      ->capture_default_str();
-  sub->add_option("--specular", o->params.specular, "Strength of boundary echoes relative to the default, >= 0")
-      ->capture_default_str();
-  sub->add_option("--fov", o->params.fov_mm, "Field of view in mm (default: face 100, spine 60, sphere 80)");
+  sub->add_option("--physics", o->physics,
+                  "Image formation in physical units (mm): default (the fixed physics below, bit for bit; adds "
+                  "labels.nrrd), clean, obstetric, spine, curvilinear, harsh (named presets), or random (every "
+                  "parameter drawn from --seed). Writes DIR/labels.nrrd (0 fluid/background, 1 object, 2 near-field "
+                  "layers, 3 outside the scanned sector) and every parameter to phantom.json (docs/phantom.md)");
+  sub->add_option("--physics-set", o->physics_set,
+                  "NAME=VALUE[,NAME=VALUE...]: override parameters of --physics (names as in phantom.json's "
+                  "physics_parameters, e.g. near_field_mm=0,geometry=fan)");
+  std::vector<CLI::Option*> fixed;
+  fixed.push_back(sub->add_option(
+      "--speckle", o->speckle, "AXIAL,LATERAL: PSF standard deviations in voxels, each in [0.2, 8] (default 0.6,1.5)"));
+  fixed.push_back(
+      sub->add_option("--dynamic-range", o->params.dynamic_range_db, "Log compression range in dB, in [10, 100]")
+          ->capture_default_str());
+  fixed.push_back(
+      sub->add_option("--noise", o->params.noise, "Electronic noise rms relative to the mean tissue echo, >= 0")
+          ->capture_default_str());
+  fixed.push_back(sub->add_option("--attenuation", o->params.attenuation,
+                                  "Depth attenuation relative to the default (0.2 dB/mm two-way in soft tissue), >= 0")
+                      ->capture_default_str());
+  fixed.push_back(
+      sub->add_option("--specular", o->params.specular, "Strength of boundary echoes relative to the default, >= 0")
+          ->capture_default_str());
+  auto* fov = sub->add_option("--fov", o->params.fov_mm,
+                              "Field of view in mm (default: face 100, spine 60, sphere 80; with --physics it "
+                              "replaces the preset's or the drawn fov_mm)");
   sub->add_option("--slices", o->slices,
                   "Also write a PNG of the axial | coronal | sagittal mid-slices, second row with the true "
-                  "boundary in orange");
+                  "boundary in orange (and the near-field layers in cyan)");
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   add_device_option(sub, o->device);
-  sub->callback([&action, o] { action = [o] { return run_phantom(*o); }; });
+  sub->callback([&action, o, fixed, fov] {
+    o->fixed_physics_options.clear();
+    for (CLI::Option* f : fixed)
+      if (f->count() > 0) o->fixed_physics_options.push_back(f->get_name());
+    o->fov_given = fov->count() > 0;
+    action = [o] { return run_phantom(*o); };
+  });
 }
 
 }  // namespace softshell::cli
