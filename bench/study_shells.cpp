@@ -73,11 +73,13 @@ Volume median3(const Volume& v) {
 }
 
 // As `softshell classify IN --iso auto -o U` does (host/cli/cmd_classify.cpp):
-// the automatic mask, the local isovalue field levelled out, the defaults.
+// the automatic mask, the near field removed, the local isovalue field
+// levelled out, the defaults.
 Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveReport* rep) {
   MaskReport mr;
   std::vector<std::uint8_t> mask = scanned_mask(in, MaskParams{}, &mr);
   if (mr.unscanned == 0) mask.clear();
+  remove_near_field(in, mask);
   const std::vector<std::uint8_t>* mp = mask.empty() ? nullptr : &mask;
   const Volume filled = mp ? fill_unscanned(in, mask) : Volume();
   const LevelledVolume lv = auto_iso_levelled(in, mp, mp ? &filled : nullptr);

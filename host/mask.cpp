@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "error.hpp"
+#include "filter.hpp"
 #include "io.hpp"
 #include "text.hpp"
 
@@ -260,6 +261,146 @@ std::vector<std::uint8_t> read_mask(const std::string& path, const Dims3& dims) 
 
 std::size_t count_unscanned(const std::vector<std::uint8_t>& mask) {
   return static_cast<std::size_t>(std::count(mask.begin(), mask.end(), std::uint8_t{0}));
+}
+
+int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned) {
+  // Speckle is finest along the beam (the axial resolution is the best of
+  // the three), so the data's mean squared difference between neighbours, per
+  // mm, is largest along it.
+  const Dims3& d = v.dims;
+  const std::size_t stride[3] = {1, d[0], d[0] * d[1]};
+  double energy[3] = {0, 0, 0};
+  for (int a = 0; a < 3; ++a) {
+    if (d[a] < 2) continue;
+    double sum = 0;
+    std::size_t count = 0;
+    for (std::size_t i = 0; i < v.voxels(); ++i) {
+      if ((i / stride[a]) % d[a] + 1 >= d[a]) continue;
+      const std::size_t j = i + stride[a];
+      if (v.data[i] == 0.0f || v.data[j] == 0.0f) continue;  // unscanned fill or the floor
+      if (scanned && (!(*scanned)[i] || !(*scanned)[j])) continue;
+      const double g = (double(v.data[j]) - double(v.data[i])) / v.spacing[a];
+      sum += g * g, ++count;
+    }
+    energy[a] = count ? sum / double(count) : 0;
+  }
+  return int(std::max_element(energy, energy + 3) - energy);
+}
+
+std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std::uint8_t>* scanned,
+                                          const NearFieldParams& params, NearFieldReport* report) {
+  const Dims3& d = v.dims;
+  const std::size_t n = v.voxels();
+  if (scanned && scanned->size() != n) throw std::invalid_argument("near_field_band: mask size differs from the volume");
+  NearFieldReport rep;
+  rep.axis = params.axis >= 0 && params.axis < 3 ? params.axis : beam_axis_of(v, scanned);
+  std::vector<std::uint8_t> band(n, 0);
+  const int ax = rep.axis, u_ax = ax == 0 ? 1 : 0, w_ax = ax == 2 ? 1 : 2;  // the two lateral axes
+  const std::size_t stride[3] = {1, d[0], d[0] * d[1]};
+  const double hz = v.spacing[ax];
+  const auto bins = std::size_t(std::ceil(params.search_mm / 0.5)) + 1;
+  if (d[ax] < 4) {
+    if (report) *report = rep;
+    return band;
+  }
+  // The data lowpassed across the beam only (beam lines stay lines): speckle
+  // averaged, depth resolution kept.
+  std::vector<float> lp = v.data;
+  for (const int axis : {u_ax, w_ax}) {
+    const std::vector<float> w = gaussian_weights(std::max(0.5, params.sigma_mm / v.spacing[axis]), 3.0);
+    const long r = long(w.size() / 2);
+    std::vector<float> out(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      const long pos = long((i / stride[axis]) % d[axis]);
+      double acc = 0, wsum = 0;
+      for (long k = -r; k <= r; ++k) {
+        const long q = pos + k;
+        if (q < 0 || q >= long(d[axis])) continue;
+        const std::size_t j = std::size_t(long(i) + k * long(stride[axis]));
+        if (scanned && !(*scanned)[j]) continue;
+        acc += w[std::size_t(k + r)] * lp[j], wsum += w[std::size_t(k + r)];
+      }
+      out[i] = wsum > 0 ? float(acc / wsum) : lp[i];
+    }
+    lp.swap(out);
+  }
+  // Skin line per beam line (its first scanned voxel), samples per depth bin.
+  auto voxel = [&](std::size_t a, std::size_t b, std::size_t z) {
+    return a * stride[u_ax] + b * stride[w_ax] + z * stride[ax];
+  };
+  const std::size_t lines = d[u_ax] * d[w_ax];
+  std::vector<long> skin(lines, -1);
+  std::vector<std::vector<float>> at_depth(bins);
+  std::vector<float> all;
+  for (std::size_t b = 0; b < d[w_ax]; ++b)
+    for (std::size_t a = 0; a < d[u_ax]; ++a) {
+      const std::size_t l = a + b * d[u_ax];
+      for (std::size_t z = 0; z < d[ax]; ++z) {
+        const std::size_t i = voxel(a, b, z);
+        if (scanned && !(*scanned)[i]) continue;
+        if (skin[l] < 0) skin[l] = long(z);
+        const auto bin = std::size_t(double(long(z) - skin[l]) * hz / 0.5);
+        if (bin < bins) at_depth[bin].push_back(lp[i]);
+        all.push_back(lp[i]);
+      }
+    }
+  if (all.size() < 100) {
+    if (report) *report = rep;
+    return band;
+  }
+  auto median = [](std::vector<float>& x) {
+    if (x.empty()) return std::nan("");
+    std::nth_element(x.begin(), x.begin() + long(x.size() / 2), x.end());
+    return double(x[x.size() / 2]);
+  };
+  std::vector<double> P(bins);
+  for (std::size_t b = 0; b < bins; ++b) P[b] = median(at_depth[b]);
+  const auto top_bins = std::size_t(std::ceil(params.top_mm / 0.5));
+  double top = -1e300, below = 1e300;
+  std::size_t top_at = 0;
+  for (std::size_t b = 0; b < bins && b < top_bins; ++b)
+    if (!std::isnan(P[b]) && P[b] > top) top = P[b], top_at = b;
+  for (std::size_t b = top_bins; b < bins; ++b)
+    if (!std::isnan(P[b])) below = std::min(below, P[b]);
+  rep.top = top, rep.below = below;
+  // A band: the top at least min_ratio brighter than below it, relative to
+  // the top (log-compressed grey levels: a few dB of contrast are not a band).
+  if (top > 0 && below < 1e300 && top - below > params.min_ratio * top) {
+    // The bottom: where P falls below halfway and stays there for
+    // stay_mm (a layered band -- skin, fat, muscle -- dips in between).
+    const double half = 0.5 * (top + below);
+    const auto stay = std::size_t(std::ceil(params.stay_mm / 0.5));
+    std::size_t b = top_at;
+    for (; b < bins; ++b) {
+      std::size_t k = b;
+      while (k < bins && k < b + stay && !(P[k] >= half)) ++k;
+      if (k == std::min(bins, b + stay)) break;
+    }
+    rep.found = true;
+    rep.depth_mm = double(b) * 0.5 + params.margin_mm;
+    for (std::size_t bb = 0; bb < d[w_ax]; ++bb)
+      for (std::size_t a = 0; a < d[u_ax]; ++a) {
+        const long s0 = skin[a + bb * d[u_ax]];
+        if (s0 < 0) continue;
+        for (std::size_t z = std::size_t(s0); z < d[ax]; ++z) {
+          if (double(long(z) - s0) * hz >= rep.depth_mm) break;
+          band[voxel(a, bb, z)] = 1;
+          ++rep.voxels;
+        }
+      }
+  }
+  if (report) *report = rep;
+  return band;
+}
+
+NearFieldReport remove_near_field(const Volume& v, std::vector<std::uint8_t>& scanned, const NearFieldParams& params) {
+  NearFieldReport rep;
+  const std::vector<std::uint8_t> band = near_field_band(v, scanned.empty() ? nullptr : &scanned, params, &rep);
+  if (!rep.found) return rep;
+  if (scanned.empty()) scanned.assign(v.voxels(), 1);
+  for (std::size_t i = 0; i < band.size(); ++i)
+    if (band[i]) scanned[i] = 0;
+  return rep;
 }
 
 }  // namespace softshell

@@ -63,6 +63,45 @@ struct MaskReport {
 // recursion), O(voxels) time and a few bytes per voxel.
 std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params = {}, MaskReport* report = nullptr);
 
+// The beam axis of a scan, from the data: speckle is finest along the beam,
+// so the mean squared difference between neighbours (per mm, scanned
+// nonzero samples) is largest along it.
+int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned);
+
+// The bright layered near field under the probe (skin, fat, muscle: an
+// occluder, not the object; docs/real-data.md, "The near field"). Along the
+// beam (params.axis, or the data's own, beam_axis_of), depth is counted
+// from each beam line's first scanned voxel (the skin line). P(d), the median over the columns of the lowpassed data at
+// depth d (0.5 mm steps), is compared between the top (the brightest of its
+// first top_mm) and below it (the darkest from top_mm to search_mm): when
+// the top is brighter by more than min_ratio of its own level, the band
+// reaches down to where P first falls below halfway
+// between the two, plus margin_mm. Returns 1 for voxels in the band, all 0
+// when there is none.
+struct NearFieldParams {
+  double top_mm = 3.0, search_mm = 25.0, margin_mm = 1.0;
+  double stay_mm = 3.0;    // the band ends where the profile stays below halfway this long
+  double min_ratio = 0.5;  // the top brighter than below it by this share of the top
+  double sigma_mm = 1.0;   // lowpass across the beam of the profile's samples
+  int axis = -1;           // beam axis (0 x, 1 y, 2 z); -1: beam_axis_of the data
+};
+struct NearFieldReport {
+  int axis = 2;                 // the beam axis used
+  bool found = false;
+  double depth_mm = 0;          // band bottom below the skin line, margin included
+  double top = 0, below = 0;    // P at the top and below it (file units)
+  std::size_t voxels = 0;       // voxels in the band
+};
+std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std::uint8_t>* scanned,
+                                          const NearFieldParams& params = {}, NearFieldReport* report = nullptr);
+
+// near_field_band() merged into a scanned mask (band voxels become
+// unscanned: u held at 0, their samples continued from below before the
+// lowpass, so the band's lower edge is no boundary either). An empty
+// `scanned` means every voxel scanned; it stays empty when there is no band.
+NearFieldReport remove_near_field(const Volume& v, std::vector<std::uint8_t>& scanned,
+                                  const NearFieldParams& params = {});
+
 // A mask from a volume file: nonzero voxels are scanned. Throws InputError
 // naming `path` when its dims differ from `dims`.
 std::vector<std::uint8_t> read_mask(const std::string& path, const Dims3& dims);

@@ -31,11 +31,12 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
     in.note = "opacity volume " + path;
     return in;
   }
-  // As `softshell classify IN --iso auto` does: auto mask, auto isovalue,
+  // As `softshell classify IN --iso auto` does: auto mask, near field removed, auto isovalue,
   // unscanned voxels filled for the lowpass and held at u = 0.
   MaskReport mr;
   in.mask = scanned_mask(v, MaskParams{}, &mr);
   if (mr.unscanned == 0) in.mask.clear();
+  remove_near_field(v, in.mask);  // the near field is an occluder (docs/real-data.md)
   const std::vector<std::uint8_t>* mask = in.mask.empty() ? nullptr : &in.mask;
   Volume filled = mask ? fill_unscanned(v, in.mask) : Volume();
   if (iso_text == "auto") {

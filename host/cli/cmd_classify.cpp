@@ -25,6 +25,7 @@ namespace {
 
 struct ClassifyOptions {
   std::string in, out, device, method = "variational", iso, init, cycle = "pcg", smoother = "gs", mask = "auto";
+  std::string near_field = "remove";
   double thickness = 1.0;
   double iso_fraction = AutoIsoParams().local_fraction, iso_field_sigma = AutoIsoParams().field_sigma_mm;
   double sigma = -1;  // unset: 1 mm for variational, 0 (raw) for levoy
@@ -229,7 +230,22 @@ int run_classify(const ClassifyOptions& o) {
   const auto raw = o.raw.spec();
   Runtime rt(o.device);
   const Volume in = read_volume(o.in, raw);
-  const DataMask mask = make_mask(o.mask, in);
+  DataMask mask = make_mask(o.mask, in);
+  if (o.near_field == "remove") {
+    // The bright near field under the probe is an occluder, not the object
+    // (docs/real-data.md, "The near field").
+    const NearFieldReport nf = remove_near_field(in, mask.scanned);
+    std::ostringstream t;
+    if (nf.found)
+      t << "; near field removed: the first " << std::fixed << std::setprecision(1) << nf.depth_mm
+        << " mm below the skin line along " << "xyz"[nf.axis] << " (" << nf.voxels << " voxels, median " << std::setprecision(0) << nf.top
+        << " over " << nf.below << " below; --near-field keep to draw it)";
+    else
+      t << "; no bright near field (beam along " << "xyz"[nf.axis] << ")";
+    mask.text += t.str();
+  } else if (o.near_field != "keep") {
+    throw InputError("--near-field: expected remove or keep, got '" + o.near_field + "'");
+  }
   double iso = 0;
   std::string iso_text;
   std::vector<float> iso_field;  // the local rule's isovalue per voxel (file units)
@@ -297,6 +313,11 @@ void add_classify_command(CLI::App& app, Action& action) {
                   "nonzero voxels are scanned; unscanned voxels get opacity 0 (docs/real-data.md)")
       ->capture_default_str()
       ->type_name("FILE|auto|none");
+  sub->add_option("--near-field", o->near_field,
+                  "remove: the bright layered band under the probe (skin, fat, muscle) is found from the depth "
+                  "profile and held at u = 0 like unscanned voxels; keep: classify it like the rest")
+      ->capture_default_str()
+      ->type_name("remove|keep");
   sub->add_option("--method", o->method,
                   "variational: the paper's variational classifier; levoy: Levoy's isovalue-contour opacity")
       ->capture_default_str();
