@@ -121,6 +121,85 @@ TEST(Mask, OnePercentRule) {
   }
 }
 
+// ---- the near field ------------------------------------------------------------------------------------------
+
+// Speckle-like samples of a given mean, with a grain along the beam axis
+// finer than across it (a PSF narrower axially, as in ultrasound): runs of
+// `lateral` equal values across, independent values along `beam`.
+Volume layered_scan(Dims3 dims, Vec3d spacing, int beam, const std::vector<std::pair<double, double>>& layers_mm,
+                    double deep_mean, std::uint64_t seed) {
+  Volume v(dims, spacing, ScalarType::UInt8);
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> U(0.6, 1.4);
+  const std::size_t lateral = 3;
+  for (std::size_t z = 0; z < dims[2]; ++z)
+    for (std::size_t y = 0; y < dims[1]; ++y)
+      for (std::size_t x = 0; x < dims[0]; ++x) {
+        const std::size_t c[3] = {x, y, z};
+        const double depth = double(c[beam]) * spacing[beam];
+        double mean = deep_mean;
+        double top = 0;
+        for (const auto& [thick, m] : layers_mm) {
+          if (depth >= top && depth < top + thick) mean = m;
+          top += thick;
+        }
+        // The same random factor for `lateral` neighbours across the beam.
+        std::size_t key = c[beam] * 1000003;
+        for (int a = 0; a < 3; ++a)
+          if (a != beam) key = key * 7919 + c[a] / lateral;
+        std::mt19937_64 cell(seed ^ key);
+        v.at(x, y, z) = float(std::clamp(std::round(mean * U(cell)), 1.0, 255.0));
+      }
+  (void)rng;
+  return v;
+}
+
+TEST(NearField, ABrightLayeredBandUnderTheProbeIsFoundToItsBottom) {
+  // Skin (bright), fat (dimmer), muscle (bright) over 8 mm, then dark fluid:
+  // the band ends below the muscle, not at the fat's dip.
+  const Volume v = layered_scan({40, 40, 60}, {0.5, 0.5, 0.5}, 2, {{2.0, 220}, {2.0, 150}, {4.0, 210}}, 40,
+                                test::seed());
+  EXPECT_EQ(beam_axis_of(v, nullptr), 2);
+  NearFieldReport r;
+  const auto band = near_field_band(v, nullptr, NearFieldParams{}, &r);
+  ASSERT_TRUE(r.found);
+  EXPECT_EQ(r.axis, 2);
+  EXPECT_NEAR(r.depth_mm, 8.0 + NearFieldParams{}.margin_mm, 1.0);
+  EXPECT_EQ(band[v.index(20, 20, 2)], 1);
+  EXPECT_EQ(band[v.index(20, 20, 30)], 0);
+  // Merged into a mask: the band is unscanned, the rest scanned.
+  std::vector<std::uint8_t> mask;
+  remove_near_field(v, mask);
+  ASSERT_EQ(mask.size(), v.voxels());
+  EXPECT_EQ(mask[v.index(5, 5, 1)], 0);
+  EXPECT_EQ(mask[v.index(5, 5, 40)], 1);
+}
+
+TEST(NearField, DarkTopOrAFaintLayerIsNoBand) {
+  // Fluid at the probe (the face phantoms), or a layer only 20 % brighter
+  // than the tissue below it.
+  NearFieldReport r;
+  std::vector<std::uint8_t> mask;
+  remove_near_field(layered_scan({32, 32, 48}, {0.5, 0.5, 0.5}, 2, {{6.0, 20}}, 150, test::seed() + 1), mask);
+  EXPECT_TRUE(mask.empty());
+  near_field_band(layered_scan({32, 32, 48}, {0.5, 0.5, 0.5}, 2, {{5.0, 120}}, 100, test::seed() + 2), nullptr,
+                  NearFieldParams{}, &r);
+  EXPECT_FALSE(r.found);
+}
+
+TEST(NearField, BeamAxisFromTheSpeckleGrain) {
+  // The same band along y: the beam axis is found from the grain, and the
+  // band lies along it.
+  const Volume v = layered_scan({40, 60, 30}, {0.5, 0.5, 0.5}, 1, {{6.0, 230}}, 50, test::seed() + 3);
+  EXPECT_EQ(beam_axis_of(v, nullptr), 1);
+  NearFieldReport r;
+  const auto band = near_field_band(v, nullptr, NearFieldParams{}, &r);
+  ASSERT_TRUE(r.found);
+  EXPECT_EQ(r.axis, 1);
+  EXPECT_EQ(band[v.index(20, 3, 15)], 1);
+  EXPECT_EQ(band[v.index(20, 40, 15)], 0);
+}
+
 TEST(Mask, EnclosedZeroRegionIsScannedHoweverLarge) {
   // A 20^3 block of zeros (22 % of the voxels) not touching the border.
   Volume v = speckle_volume({34, 34, 32}, test::seed());
@@ -552,7 +631,28 @@ TEST_F(CliMask, BadMaskOrIsoIsAOneLineError) {
   for (float& f : flat.data) f = 7;
   write_volume(file("flat.nrrd"), flat);
   expect_one_line_error(run({"classify", file("flat.nrrd"), "--iso", "auto", "-o", file("u.nrrd")}), {"constant"});
+  expect_one_line_error(run({"classify", in, "--iso", "100", "--near-field", "cut", "-o", file("u.nrrd")}),
+                        {"--near-field", "remove or keep"});
+  expect_one_line_error(run({"classify", in, "--iso", "100", "--shell", "-1", "-o", file("u.nrrd")}), {"--shell"});
+  expect_one_line_error(run({"classify", in, "--iso", "100", "--sharpen", "11", "-o", file("u.nrrd")}), {"--sharpen"});
   EXPECT_FALSE(fs::exists(file("u.nrrd")));
+}
+
+TEST_F(CliMask, NearFieldIsRemovedByDefaultAndKeptOnRequest) {
+  const Volume v = layered_scan({32, 32, 48}, {0.5, 0.5, 0.5}, 2, {{2.0, 230}, {3.0, 200}}, 30, test::seed() + 9);
+  write_volume(file("band.nrrd"), v);
+  const test::RunResult r = run({"classify", file("band.nrrd"), "--iso", "100", "-o", file("u.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("near field removed"), std::string::npos) << r.out;
+  const Volume u = read_volume(file("u.nrrd"));
+  for (std::size_t z = 0; z < 8; ++z) ASSERT_EQ(u.at(16, 16, z), 0.0f) << "z " << z;
+  const test::RunResult k = run({"classify", file("band.nrrd"), "--iso", "100", "--near-field", "keep", "-o", file("k.nrrd")});
+  ASSERT_EQ(k.status, 0) << k.err;
+  EXPECT_EQ(k.out.find("near field removed"), std::string::npos) << k.out;
+  const Volume uk = read_volume(file("k.nrrd"));
+  float band_max = 0;
+  for (std::size_t z = 1; z < 10; ++z) band_max = std::max(band_max, uk.at(16, 16, z));
+  EXPECT_GT(band_max, 0.2f) << "kept, the band's lower edge is a boundary at the isovalue";
 }
 
 }  // namespace
