@@ -47,13 +47,13 @@ if [ -f "$spine" ]; then
   "$ss" info "$spine" > "$out/spine-info.txt"
   "$ss" lowpass "$spine" --sigma 1.0 -o "$out/spine-lowpass.nrrd"
   "$ss" slices "$spine" "$out/spine-lowpass.nrrd" --height 256 -o "$out/spine-slices.png"
-  # Unscanned voxels (the zero fill around the sweep) are masked by default.
-  # The strongest echoes here are the near-field band, not the bone, so the
-  # echo-crest rule would draw that band: take the edge rule
-  # (docs/real-data.md, "Automatic isovalue").
-  "$ss" classify "$spine" --iso auto-edge -o "$out/spine-variational.nrrd"
+  # The defaults, no per-volume flag: unscanned voxels (the zero fill around
+  # the sweep) are masked, the bright near-field band under the probe is held
+  # at u = 0, and the isovalue follows the local brightness
+  # (docs/real-data.md, docs/parameters.md).
+  "$ss" classify "$spine" --iso auto -o "$out/spine-variational.nrrd"
   "$ss" classify "$spine" --method levoy --iso auto --sigma 1.0 -o "$out/spine-levoy.nrrd"
-  "$ss" figure2 "$spine" --iso auto-edge -o "$out/spine-figure2.png"
+  "$ss" figure2 "$spine" --iso auto -o "$out/spine-figure2.png"
 else
   log "skipping the real spine volume: $spine not found"
 fi
@@ -76,11 +76,8 @@ if "$ss" render --help >/dev/null 2>&1; then
   "${gl[@]}" "$ss" render "$out/face-variational.nrrd" --view 0,10 --crop "$crop" --size 200x200 --turntable 12 \
     -q -o "$out/turntable/face-%03d.png"
   if [ -f "$out/spine-variational.nrrd" ]; then
-    log "oriented splats of the real spine (classified with the defaults, --iso auto-edge)"
+    log "oriented splats of the real spine (classified with the defaults, --iso auto)"
     "${gl[@]}" "$ss" render "$out/spine-variational.nrrd" --view 0,35 --size 800x500 -o "$out/render-spine.png"
-    # The near-field band under the probe hides the bone; cut the top 40 % of the depth away.
-    "${gl[@]}" "$ss" render "$out/spine-variational.nrrd" --view 0,35 --size 800x500 --crop 0,1,0,1,0.4,1 \
-      -o "$out/render-spine-bone.png"
   fi
   if [ -n "${DISPLAY:-}" ] && [ -t 1 ]; then
     log "opening the viewer on the face (Esc quits)"
