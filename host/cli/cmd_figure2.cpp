@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "auto_iso.hpp"
+#include "filter.hpp"
 #include "cl_runtime.hpp"
 #include "cli_common.hpp"
 #include "error.hpp"
@@ -117,6 +118,92 @@ std::string number(double v) {
   return s.str();
 }
 
+// What Figure 2 is about, per opacity panel, on the slice shown
+// (docs/real-data.md, "Figure 2"): the drawn set is u above half the
+// slice's maximum; `blobs` counts its 8-connected pieces of fewer than
+// kBlobPixels pixels (speckle-sized debris); `roughness` is the length of
+// its boundary (pixel edges between drawn and not drawn) over that of the
+// slice blurred by a Gaussian of 2 pixels and cut at half its own maximum:
+// about 1 for a smooth contour, more for a ragged one.
+struct SliceStats {
+  int blobs = 0;
+  double roughness = 0;
+};
+constexpr int kBlobPixels = 20;
+
+SliceStats slice_stats(const Volume& u, int fixed, std::size_t index) {
+  int au, av;
+  plane_axes(fixed, au, av);
+  const int w = int(u.dims[au]), h = int(u.dims[av]);
+  std::vector<float> s(std::size_t(w) * h);
+  std::size_t c[3];
+  c[fixed] = index;
+  float top = 0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      c[au] = std::size_t(x), c[av] = std::size_t(y);
+      s[std::size_t(y) * w + x] = u.at(c[0], c[1], c[2]);
+      top = std::max(top, s[std::size_t(y) * w + x]);
+    }
+  SliceStats st;
+  if (!(top > 0)) return st;
+  const float t = 0.5f * top;
+  auto boundary = [&](const std::vector<float>& f, float thr) {
+    long edges = 0;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const bool in = f[std::size_t(y) * w + x] > thr;
+        if (x + 1 < w) edges += in != (f[std::size_t(y) * w + x + 1] > thr);
+        if (y + 1 < h) edges += in != (f[std::size_t(y + 1) * w + x] > thr);
+      }
+    return double(edges);
+  };
+  // Gaussian sigma 2 pixels, separable, clamped at the border.
+  std::vector<float> g = s, tmp(s.size());
+  const std::vector<float> k = gaussian_weights(2.0, 3.0);
+  const int r = int(k.size() / 2);
+  for (int pass = 0; pass < 2; ++pass) {
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        double acc = 0;
+        for (int j = -r; j <= r; ++j) {
+          const int xx = pass == 0 ? std::clamp(x + j, 0, w - 1) : x, yy = pass == 1 ? std::clamp(y + j, 0, h - 1) : y;
+          acc += k[std::size_t(j + r)] * g[std::size_t(yy) * w + xx];
+        }
+        tmp[std::size_t(y) * w + x] = float(acc);
+      }
+    g.swap(tmp);
+  }
+  // Each set at half its own maximum (the blur lowers a thin shell's peak).
+  const float gtop = *std::max_element(g.begin(), g.end());
+  const double rough = boundary(s, t), smooth = boundary(g, 0.5f * gtop);
+  st.roughness = smooth > 0 ? rough / smooth : 0.0;
+  // 8-connected pieces of the drawn set, by flood fill.
+  std::vector<std::uint8_t> seen(s.size(), 0);
+  std::vector<int> stack;
+  for (int i0 = 0; i0 < w * h; ++i0) {
+    if (seen[std::size_t(i0)] || !(s[std::size_t(i0)] > t)) continue;
+    int size = 0;
+    stack.assign(1, i0);
+    seen[std::size_t(i0)] = 1;
+    while (!stack.empty()) {
+      const int i = stack.back();
+      stack.pop_back();
+      ++size;
+      const int x = i % w, y = i / w;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int xx = x + dx, yy = y + dy;
+          if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+          const int j = yy * w + xx;
+          if (!seen[std::size_t(j)] && s[std::size_t(j)] > t) seen[std::size_t(j)] = 1, stack.push_back(j);
+        }
+    }
+    st.blobs += size < kBlobPixels;
+  }
+  return st;
+}
+
 // Six captioned panels, 3 across and 2 down, and a footer line.
 Image compose(const std::vector<Image>& panels, const std::vector<std::string>& long_labels,
               const std::vector<std::string>& short_labels, const std::string& footer) {
@@ -133,7 +220,15 @@ Image compose(const std::vector<Image>& panels, const std::vector<std::string>& 
     if (!fits(long_labels, 1)) use_long = false;
   }
   const int caption = text_height("A", scale) + 6;
-  const int footer_h = footer.empty() ? 0 : text_height(footer, 1) + kGap;
+  // The footer: lines separated by '\n'.
+  std::vector<std::string> lines;
+  for (std::size_t a = 0; !footer.empty() && a <= footer.size();) {
+    const std::size_t e = std::min(footer.find('\n', a), footer.size());
+    lines.push_back(footer.substr(a, e - a));
+    a = e + 1;
+  }
+  const int line_h = text_height("A", 1) + 4;
+  const int footer_h = lines.empty() ? 0 : int(lines.size()) * line_h + kGap;
   const int cell_h = caption + ph;
   Image img(4 * kGap + 3 * pw, 3 * kGap + 2 * cell_h + footer_h);
   fill_rect(img, 0, 0, img.width, img.height, kBackground);
@@ -142,7 +237,8 @@ Image compose(const std::vector<Image>& panels, const std::vector<std::string>& 
     draw_text(img, x0, y0 + 2, use_long ? long_labels[k] : short_labels[k], kLabel, scale);
     for (int y = 0; y < ph; ++y) std::copy_n(panels[k].pixel(0, y), pw * 3, img.pixel(x0, y0 + caption + y));
   }
-  if (!footer.empty()) draw_text(img, kGap, img.height - footer_h, footer, kLabel, 1);
+  for (std::size_t l = 0; l < lines.size(); ++l)
+    draw_text(img, kGap, img.height - footer_h + int(l) * line_h, lines[l], kLabel, 1);
   return img;
 }
 
@@ -241,6 +337,8 @@ int run_figure2(const Figure2Options& o) {
   for (const Volume& u : opacities) panels.push_back(slice_panel(u, spec.axis, index, zoom, [](double v) { return v; }));
 
   const std::string b = number(beta);
+  std::vector<SliceStats> stats;
+  for (const Volume& u : opacities) stats.push_back(slice_stats(u, spec.axis, index));
   const std::string levoy_label = o.levoy_sigma > 0 ? "(b) Levoy, sigma " + number(o.levoy_sigma) + " mm" : "(b) Levoy";
   const std::vector<std::string> long_labels = {
       "(a) input",         levoy_label,         "(c) omega 1, beta 0", "(d) omega 0.6, beta 0",
@@ -251,7 +349,10 @@ int run_figure2(const Figure2Options& o) {
   const std::string mask_label = o.mask == "none" ? mask_name : mask_name + " (" + std::to_string(unscanned) + " unscanned)";
   std::ostringstream footer;
   footer << "slice " << "xyz"[spec.axis] << '=' << index << "  iso " << number(iso) << (given_iso ? "" : " (auto)")
-         << "  mask " << mask_label << "  beta " << b;
+         << "  mask " << mask_label << "  beta " << b << "\nblobs / contour roughness:";
+  for (std::size_t k = 0; k < stats.size(); ++k)
+    footer << "  (" << char('b' + k) << ") " << stats[k].blobs << " / " << std::fixed << std::setprecision(2)
+           << stats[k].roughness;
   const Image img = compose(panels, long_labels, short_labels, footer.str());
   write_png(o.out, img);
   if (!o.quiet) {
@@ -264,7 +365,12 @@ int run_figure2(const Figure2Options& o) {
               << "  panels   (a) input, (b) Levoy (thickness 1 voxel, lowpass " << number(o.levoy_sigma)
               << " mm), (c) omega 1 beta 0, (d) omega 0.6 beta 0, "
                  "(e) omega 1 beta "
-              << b << ", (f) omega 0.6 beta " << b << "; other parameters default\n"
+              << b << ", (f) omega 0.6 beta " << b << "; the paper's functional (--literal)\n";
+    std::cout << "  slice    blobs (pieces under " << kBlobPixels << " pixels of u > half the slice's max) / "
+              << "contour roughness (boundary length over that after a 2-pixel Gaussian):";
+    for (std::size_t k = 0; k < stats.size(); ++k)
+      std::cout << " (" << char('b' + k) << ") " << stats[k].blobs << " / " << std::setprecision(2) << stats[k].roughness;
+    std::cout << std::setprecision(3) << '\n'
               << "  device   " << rt.info().label() << '\n'
               << "  time     " << seconds_since(t0) << " s\n";
   }
