@@ -98,6 +98,15 @@ double max_relative_deviation(const std::vector<float>& a, const std::vector<flo
   return scale > 0 ? dev / scale : dev;
 }
 
+double relative_l2(const std::vector<float>& a, const std::vector<float>& b) {
+  double num = 0, den = 0;
+  for (std::size_t i = 0; i < a.size() && i < b.size(); ++i) {
+    const double e = double(a[i]) - double(b[i]);
+    num += e * e, den += double(b[i]) * double(b[i]);
+  }
+  return den > 0 ? std::sqrt(num / den) : std::sqrt(num);
+}
+
 }  // namespace softshell::test
 
 int main(int argc, char** argv) {

@@ -169,13 +169,8 @@ TEST_F(RenderCli, ViewerReSolveUpdatesTheClassifierInPlaceForAnIsoChange) {
   ASSERT_TRUE(warm.converged && cold.converged);
   // The default sharpening linearises about solves stopped at a relative
   // residual of 1e-2 (host/multigrid.cpp): close, not bit-equal.
-  double worst = 0, num = 0, den = 0;
-  for (std::size_t i = 0; i < uw.data.size(); ++i) {
-    const double e = double(uw.data[i]) - double(uc.data[i]);
-    worst = std::max(worst, std::abs(e)), num += e * e, den += double(uc.data[i]) * uc.data[i];
-  }
-  EXPECT_LT(std::sqrt(num / den), 2e-2) << "relative L2";
-  EXPECT_LT(worst, 0.1);
+  EXPECT_LT(test::relative_l2(uw.data, uc.data), 2e-2);
+  EXPECT_LT(test::max_relative_deviation(uw.data, uc.data), 0.1);
   p.beta *= 2;
   viewer::reclassify(runtime(), input, p, &init, &warm);
   EXPECT_TRUE(warm.converged);

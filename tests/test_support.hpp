@@ -51,6 +51,8 @@ std::vector<float> download(Runtime& rt, const cl::Buffer& buf, std::size_t n);
 
 // max |a - b| / max |b| (max |a - b| when b is all 0).
 double max_relative_deviation(const std::vector<float>& a, const std::vector<float>& b);
+// ||a - b|| / ||b|| (||a - b|| when b is all 0).
+double relative_l2(const std::vector<float>& a, const std::vector<float>& b);
 
 // Asserts |got - want| <= abs_tol + rel_tol * |want| everywhere; on failure,
 // reports the first failing index as (x, y, z) and the worst error.
