@@ -6,9 +6,12 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <sstream>
+#include <stdexcept>
 
 #include "error.hpp"
 #include "filter.hpp"
+#include "io.hpp"
 
 namespace softshell {
 namespace {
@@ -54,6 +57,21 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   if (d[0] < 3 || d[1] < 3 || d[2] < 3)
     throw InputError("--iso auto needs a volume of at least 3 voxels along each axis, got " + std::to_string(d[0]) +
                      "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]));
+  if (v.data.size() != n) throw std::invalid_argument("auto_iso: volume data size differs from its dims");
+  // Safety only, the rule is unchanged: a NaN or Inf sample would reach the
+  // histogram's integer bin index, and a lowpass hundreds of voxels wide (a
+  // spacing in metres read as mm) would take hours.
+  require_finite(v, "--iso auto", "");
+  for (int axis = 0; axis < 3; ++axis) {
+    const double sigma_vox = std::max(1.0, params.sigma_mm / v.spacing[axis]);
+    if (std::ceil(3.0 * sigma_vox) > kMaxLowpassRadius) {
+      std::ostringstream m;
+      m << "--iso auto: its " << params.sigma_mm << " mm lowpass is " << sigma_vox << " voxels along " << "xyz"[axis]
+        << " (spacing " << v.spacing[axis] << " mm), more than the " << std::floor(10 * kMaxLowpassRadius / 3.0) / 10.0
+        << " it allows; check the spacing's unit (mm) or give --iso V";
+      throw InputError(m.str());
+    }
+  }
 
   // v~: normalised convolution of the scanned samples.
   std::vector<float> num(n), den;
@@ -95,6 +113,8 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
 
   const int bins = params.bins;
   const double width = (hi - lo) / bins;
+  if (!(width > 0) || !std::isfinite(width))  // a range of a few denormals
+    throw InputError("--iso auto: the volume is constant, it has no boundary to pick an isovalue at");
   std::vector<double> sum(bins, 0.0);
   std::vector<std::size_t> count(bins, 0);
   // |grad v~| per usable voxel (-1 elsewhere), for both rules.
@@ -178,7 +198,8 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
           local_at.push_back(i);
         }
       }
-  if (crests.empty()) throw InputError("--iso auto: no boundary found to take the isovalue from");
+  if (crests.empty())  // no usable voxel has a gradient (e.g. a one-voxel checkerboard)
+    throw InputError("--iso auto: the volume has no boundary to pick an isovalue at (|grad v~| is 0 everywhere)");
   std::vector<float> sorted = crests;
   std::nth_element(sorted.begin(), sorted.begin() + long(sorted.size() / 2), sorted.end());
   const double ridge_iso = sorted[sorted.size() / 2];

@@ -2,43 +2,61 @@
 // the device.
 #include "filter.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <sstream>
 #include <stdexcept>
 
+#include "error.hpp"
+
 namespace softshell {
-namespace {
-constexpr int k_max_radius = 100;
-}  // namespace
 
 std::vector<float> gaussian_weights(double sigma_voxels, double truncate) {
   if (!(sigma_voxels > 1e-6)) return {1.0f};
-  const int r = std::max(1, static_cast<int>(std::ceil(truncate * sigma_voxels)));
-  std::vector<double> w(2 * r + 1);
+  // The radius in double first: ceil(3 sigma) of a huge sigma does not fit
+  // an int (and its vector would not fit in memory).
+  const double radius = std::ceil(truncate * sigma_voxels);
+  if (!(radius <= kMaxWeightsRadius))
+    throw std::invalid_argument("gaussian_weights: a radius of " + std::to_string(radius) + " taps is too large");
+  const int r = std::max(1, static_cast<int>(radius));
+  std::vector<double> w(2 * std::size_t(r) + 1);
   double sum = 0;
-  for (int k = -r; k <= r; ++k) sum += w[k + r] = std::exp(-0.5 * (k * k) / (sigma_voxels * sigma_voxels));
+  for (int k = -r; k <= r; ++k) sum += w[k + r] = std::exp(-0.5 * (double(k) * k) / (sigma_voxels * sigma_voxels));
   std::vector<float> out(w.size());
   for (std::size_t i = 0; i < w.size(); ++i) out[i] = static_cast<float>(w[i] / sum);
   return out;
 }
 
+void check_lowpass_sigma(double sigma_mm, const Vec3d& spacing, const std::string& what, double truncate) {
+  if (!(sigma_mm >= 0) || !std::isfinite(sigma_mm)) {
+    std::ostringstream m;
+    m << what << " must be a finite number >= 0, got " << sigma_mm;
+    throw InputError(m.str());
+  }
+  if (!(truncate > 0) || !std::isfinite(truncate)) throw std::invalid_argument("lowpass truncate must be > 0");
+  for (int a = 0; a < 3; ++a) {
+    const double vox = sigma_mm / spacing[a];
+    if (vox > 1e-6 && std::ceil(truncate * vox) > kMaxLowpassRadius) {
+      std::ostringstream m;
+      m << what << " " << sigma_mm << " mm is " << vox << " voxels along " << "xyz"[a] << " (spacing " << spacing[a]
+        << " mm), more than the " << std::floor(10 * kMaxLowpassRadius / truncate) / 10
+        << " voxels a lowpass allows; use a smaller sigma, or check the spacing's unit (mm)";
+      throw InputError(m.str());
+    }
+  }
+}
+
 Lowpass::Lowpass(Runtime& rt, const GridDesc& grid, const Params& params)
     : rt_(rt), grid_(grid), params_(params) {
-  if (!(params.sigma_mm >= 0) || !std::isfinite(params.sigma_mm))
-    throw std::invalid_argument("lowpass sigma must be a finite number >= 0");
-  if (!(params.truncate > 0)) throw std::invalid_argument("lowpass truncate must be > 0");
   const double h[3] = {grid.hx, grid.hy, grid.hz};
+  // The radius is compiled into the kernel and its tap loops unroll: keep it
+  // bounded. A user's sigma is refused with the numbers (InputError, exit 2).
+  check_lowpass_sigma(params.sigma_mm, {h[0], h[1], h[2]}, "lowpass sigma", params.truncate);
   const char* names[3] = {"filter_gauss_x", "filter_gauss_y", "filter_gauss_z"};
   for (int a = 0; a < 3; ++a) {
     sigma_vox_[a] = params.sigma_mm / h[a];
     std::vector<float> w = gaussian_weights(sigma_vox_[a], params.truncate);
     radius_[a] = static_cast<int>(w.size() / 2);
-    // The radius is compiled into the kernel and its tap loops unroll: keep it
-    // bounded (sigma up to ~33 voxels), which covers any lowpass that still
-    // leaves a surface to find.
-    if (radius_[a] > k_max_radius)
-      throw std::invalid_argument("lowpass sigma too large for this volume (radius " +
-                                  std::to_string(radius_[a]) + " voxels along axis " + "xyz"[a] +
-                                  ", at most " + std::to_string(k_max_radius) + ")");
     weights_[a] = cl::Buffer(rt.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, w.size() * sizeof(float),
                              w.data());
     kernels_[a] = rt.kernel("filter.cl", names[a], "-DRADIUS=" + std::to_string(radius_[a]));

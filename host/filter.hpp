@@ -7,6 +7,7 @@
 #pragma once
 
 #include <array>
+#include <string>
 #include <vector>
 
 #include "cl_runtime.hpp"
@@ -15,8 +16,20 @@
 namespace softshell {
 
 // Normalised 1-D Gaussian weights w[0..2r], r = ceil(truncate * sigma_voxels);
-// sigma_voxels <= 0 gives the identity {1}.
+// sigma_voxels <= 0 gives the identity {1}. Throws std::invalid_argument
+// for a radius above kMaxWeightsRadius (callers refuse such sigmas first).
+inline constexpr double kMaxWeightsRadius = 1e6;
 std::vector<float> gaussian_weights(double sigma_voxels, double truncate);
+
+// The device lowpass compiles its radius into the kernel and unrolls its tap
+// loops: at most 100 voxels, sigma up to 33.3 voxels per axis at the default
+// truncate of 3, which covers any lowpass that still leaves a surface to find.
+inline constexpr int kMaxLowpassRadius = 100;
+// Throws InputError when a lowpass of `sigma_mm` on `spacing` needs a radius
+// above kMaxLowpassRadius along some axis (or sigma is negative or not
+// finite), e.g. "--sigma 1 mm is 10000 voxels along x (spacing 0.0001 mm)
+// ...". `what` names the parameter (an option, "lowpass sigma").
+void check_lowpass_sigma(double sigma_mm, const Vec3d& spacing, const std::string& what, double truncate = 3.0);
 
 class Lowpass {
  public:

@@ -25,8 +25,8 @@ void png_write_to_atomic(png_structp png, png_bytep data, png_size_t n) {
   auto* f = static_cast<io_detail::AtomicFile*>(png_get_io_ptr(png));
   try {
     f->write(data, n);
-  } catch (...) {
-    png_error(png, "write failed");
+  } catch (const std::exception& e) {
+    png_error(png, e.what());  // "<path>: cannot write: <why>", passed on as it is
   }
 }
 void png_flush_noop(png_structp) {}
@@ -128,6 +128,7 @@ void write_png(const std::string& path, const Image& image) {
   for (int y = 0; y < image.height; ++y) rows[y] = const_cast<png_bytep>(image.pixel(0, y));
   if (setjmp(png_jmpbuf(png))) {
     png_destroy_write_struct(&png, &info);
+    if (err.rfind(path + ": ", 0) == 0) throw InputError(err);  // a failed write (a full disk ...)
     throw InputError(path + ": cannot write PNG: " + err);
   }
   png_set_write_fn(png, &file, png_write_to_atomic, png_flush_noop);

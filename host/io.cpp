@@ -3,18 +3,29 @@
 // atomic (temp file + rename) writer shared by the NRRD and MetaImage code.
 #include "io.hpp"
 
+#include <dirent.h>
 #include <fcntl.h>
+#include <sys/file.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
+#include <atomic>
 #include <cctype>
 #include <cerrno>
+#include <climits>
 #include <cmath>
+#include <csignal>
+#include <cstdlib>
 #include <cstring>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <mutex>
+#include <sstream>
 #include <type_traits>
 
 #include "error.hpp"
@@ -45,7 +56,30 @@ bool split3(const std::string& text, std::string out[3]) {
   return true;
 }
 
-// Physical memory, lowered to the cgroup limit when running in a container.
+}  // namespace
+
+namespace {
+
+// A "Key:   123 kB" line of /proc/self/status, in bytes (0 if absent).
+std::uint64_t proc_status_bytes(const char* key) {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  const std::string prefix = std::string(key) + ":";
+  while (std::getline(in, line)) {
+    if (line.rfind(prefix, 0) == 0) return std::strtoull(line.c_str() + prefix.size(), nullptr, 10) * 1024;
+  }
+  return 0;
+}
+
+std::uint64_t headroom(std::uint64_t limit, std::uint64_t used) { return limit > used ? limit - used : 0; }
+
+}  // namespace
+
+// Physical memory, lowered to a cgroup limit and to what the address-space
+// and data-segment limits (ulimit -v, -d) leave this process: beyond those
+// an allocation fails, and PoCL aborts on a failed allocation. The ulimits
+// count what the process already holds (PoCL and LLVM map hundreds of MB of
+// address space), so their headroom is the limit less the current use.
 std::uint64_t usable_memory_bytes() {
   const long pages = sysconf(_SC_PHYS_PAGES);
   const long page = sysconf(_SC_PAGESIZE);
@@ -55,15 +89,24 @@ std::uint64_t usable_memory_bytes() {
                              &total)) {
     total = std::numeric_limits<std::uint64_t>::max();
   }
-  for (const char* f : {"/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"}) {
-    std::ifstream in(f);
+  const std::pair<const char*, const char*> cgroups[] = {
+      {"/sys/fs/cgroup/memory.max", ""}, {"/sys/fs/cgroup/memory/memory.limit_in_bytes", ""}};
+  for (const auto& [max_file, current_file] : cgroups) {
+    // The cgroup's own use counts reclaimable page cache (and every other
+    // process in it): the limit alone is the fairer figure.
+    (void)current_file;
+    std::ifstream in(max_file);
     std::uint64_t limit = 0;
-    if (in >> limit && limit > 0) total = std::min(total, limit);  // "max" fails to parse
+    if (in >> limit && limit > 0) total = std::min(total, limit);  // "max" fails to parse: no limit
+  }
+  const std::pair<int, const char*> rlimits[] = {{RLIMIT_AS, "VmSize"}, {RLIMIT_DATA, "VmData"}};
+  for (const auto& [resource, key] : rlimits) {
+    struct rlimit rl {};
+    if (::getrlimit(resource, &rl) == 0 && rl.rlim_cur != RLIM_INFINITY)
+      total = std::min<std::uint64_t>(total, headroom(rl.rlim_cur, proc_status_bytes(key)));
   }
   return total;
 }
-
-}  // namespace
 
 // ---- option parsing ----------------------------------------------------------
 
@@ -224,13 +267,40 @@ void FileCloser::operator()(std::FILE* f) const {
   if (f) std::fclose(f);
 }
 
+std::string special_file_kind(unsigned mode) {
+  if (S_ISREG(mode)) return "";
+  if (S_ISDIR(mode)) return "a directory";
+  if (S_ISFIFO(mode)) return "a FIFO";
+  if (S_ISCHR(mode)) return "a character device";
+  if (S_ISBLK(mode)) return "a block device";
+  if (S_ISSOCK(mode)) return "a socket";
+  return "not a regular file";
+}
+
 FilePtr open_for_reading(const std::string& path) {
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0) throw input_error(path, "cannot open: " + errno_text(errno));
   // fopen() happily opens a directory for reading; fail here instead.
   if (S_ISDIR(st.st_mode)) throw input_error(path, "cannot open: " + errno_text(EISDIR));
-  FilePtr f(std::fopen(path.c_str(), "rb"));
-  if (!f) throw input_error(path, "cannot open: " + errno_text(errno));
+  // A FIFO or a terminal would block or never end; a device has no size.
+  if (!S_ISREG(st.st_mode))
+    throw input_error(path, "cannot read " + special_file_kind(st.st_mode) + ": only regular files are read");
+  // O_NONBLOCK: if the path was swapped for a FIFO since stat(), open() must
+  // not wait for a writer; fstat() below then refuses it.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_NOCTTY | O_CLOEXEC);
+  if (fd < 0) throw input_error(path, "cannot open: " + errno_text(errno));
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    const std::string kind = special_file_kind(st.st_mode);
+    ::close(fd);
+    throw input_error(path, "cannot read " + (kind.empty() ? std::string("it") : kind) + ": only regular files are read");
+  }
+  ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
+  FilePtr f(::fdopen(fd, "rb"));
+  if (!f) {
+    const int err = errno;
+    ::close(fd);
+    throw input_error(path, "cannot open: " + errno_text(err));
+  }
   return f;
 }
 
@@ -246,6 +316,36 @@ std::size_t read_up_to(std::FILE* f, void* data, std::size_t n, const std::strin
   return got;
 }
 
+std::string resolve_data_file(const std::string& header, const std::string& name) {
+  const auto fail = [&](const std::string& problem) {
+    return input_error(header, "data file " + name + ": " + problem);
+  };
+  if (name.empty()) throw input_error(header, "the data file name is empty");
+  if (name == "-") throw fail("standard input is not read (name the data file)");
+  const fs::path rel(name);
+  const bool here = !fs::path(header).has_parent_path();
+  const fs::path dir = here ? fs::path(".") : fs::path(header).parent_path();
+  const fs::path full = rel.is_absolute() || here ? rel : dir / rel;
+  struct stat st {};
+  if (::stat(full.c_str(), &st) != 0) throw fail("cannot open: " + errno_text(errno));
+  if (!S_ISREG(st.st_mode)) throw fail("is " + special_file_kind(st.st_mode) + ", not a regular file");
+  const char* policy = std::getenv("SOFTSHELL_DATA_FILES");
+  if (!(policy && std::string(policy) == "any")) {
+    // Inside the header's directory tree, links followed: a header cannot
+    // make softshell read /etc/shadow or another user's files as voxels.
+    std::error_code e1, e2;
+    const fs::path real_dir = fs::canonical(dir, e1), real = fs::canonical(full, e2);
+    if (e1 || e2) throw fail("cannot resolve: " + (e1 ? e1 : e2).message());
+    const auto mismatch = std::mismatch(real_dir.begin(), real_dir.end(), real.begin(), real.end());
+    if (mismatch.first != real_dir.end())
+      throw fail("lies outside the header's directory (" + real.string() +
+                 "); set SOFTSHELL_DATA_FILES=any to allow it");
+  }
+  return full.string();
+}
+
+// ---- temporary files ---------------------------------------------------------
+
 namespace {
 
 mode_t current_umask() {
@@ -259,7 +359,171 @@ mode_t current_umask() {
   return 022;
 }
 
+// The temporaries a signal handler must remove: fixed storage, written
+// before a slot is marked used, so the handler only reads complete paths
+// and calls nothing but unlink() and raise() (async-signal-safe).
+constexpr int kTempSlots = 64;
+struct TempSlot {
+  std::atomic<bool> used{false};
+  char path[PATH_MAX + 1] = {};
+};
+TempSlot g_temps[kTempSlots];
+std::mutex g_temps_mutex;
+// The signal being acted on (0: none), and how many threads are in a
+// critical section: creating and registering a temporary, or renaming
+// temporaries onto their targets. A signal waits for those (the thread
+// leaving the section dies of it), so no temporary is created unseen and a
+// .mhd pair is never left half replaced.
+std::atomic<int> g_signal{0};
+std::atomic<int> g_critical{0};
+// The actions we replaced (the default, or a handler of a library: LLVM,
+// inside PoCL, installs its own to remove its temporary files), restored
+// and re-raised after ours ran, so both clean up.
+struct sigaction g_previous[NSIG];
+[[noreturn]] void remove_temporaries_and_die(int sig) {
+  for (TempSlot& t : g_temps)
+    if (t.used.load()) ::unlink(t.path);
+  // Die of the same signal, so the parent sees what happened (inside the
+  // handler the signal is blocked: unblock it for the previous action).
+  ::sigaction(sig, &g_previous[sig], nullptr);
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, sig);
+  ::pthread_sigmask(SIG_UNBLOCK, &set, nullptr);
+  std::raise(sig);
+  ::_exit(128 + sig);
+}
+
+extern "C" void on_fatal_signal(int sig) {
+  // The handler may run in any thread while others go on. Signal first,
+  // then the count; a thread enters a section count first, then checks the
+  // signal (both sequentially consistent): so either the handler sees the
+  // thread in its section and leaves the dying to it, or the thread sees
+  // the signal before it creates or renames anything.
+  g_signal.store(sig);
+  if (g_critical.load() == 0) remove_temporaries_and_die(sig);
+}
+
+// Dies of a signal that arrived while this thread could not act on it.
+void die_if_signalled() {
+  if (const int sig = g_signal.load()) remove_temporaries_and_die(sig);
+}
+
+// Brackets a critical section (see g_critical).
+class CriticalSection {
+ public:
+  CriticalSection() {
+    g_critical.fetch_add(1);
+    if (g_signal.load() != 0) {
+      g_critical.fetch_sub(1);
+      die_if_signalled();
+    }
+  }
+  ~CriticalSection() {
+    g_critical.fetch_sub(1);
+    die_if_signalled();
+  }
+  CriticalSection(const CriticalSection&) = delete;
+  CriticalSection& operator=(const CriticalSection&) = delete;
+};
+
+void install_signal_cleanup() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    // A write that exceeds RLIMIT_FSIZE then fails with EFBIG (one line,
+    // exit 2) instead of killing the process with SIGXFSZ (LLVM replaces
+    // main's SIG_IGN with a handler that lets the next one kill).
+    std::signal(SIGXFSZ, SIG_IGN);
+    for (int sig : {SIGINT, SIGTERM, SIGHUP}) {
+      // An ignored signal stays ignored (nohup, a background job's SIGINT).
+      if (::sigaction(sig, nullptr, &g_previous[sig]) != 0 || g_previous[sig].sa_handler == SIG_IGN) continue;
+      struct sigaction sa {};
+      sa.sa_handler = on_fatal_signal;
+      sigemptyset(&sa.sa_mask);
+      for (int other : {SIGINT, SIGTERM, SIGHUP}) sigaddset(&sa.sa_mask, other);
+      ::sigaction(sig, &sa, nullptr);
+    }
+  });
+}
+
+int register_temp(const std::string& path) {
+  if (path.size() > PATH_MAX) return -1;
+  const std::lock_guard<std::mutex> lock(g_temps_mutex);
+  for (int i = 0; i < kTempSlots; ++i) {
+    if (g_temps[i].used.load(std::memory_order_relaxed)) continue;
+    std::memcpy(g_temps[i].path, path.c_str(), path.size() + 1);
+    g_temps[i].used.store(true);
+    return i;
+  }
+  return -1;  // more than 64 at once: still removed by the destructor or the next run
+}
+
+void unregister_temp(int slot) {
+  if (slot < 0) return;
+  const std::lock_guard<std::mutex> lock(g_temps_mutex);
+  g_temps[slot].used.store(false);
+}
+
+// ".<name>.tmp-" followed by exactly mkstemp's six characters.
+bool is_our_temp_name(const std::string& entry, const std::string& name) {
+  const std::string prefix = "." + name + ".tmp-";
+  if (entry.size() != prefix.size() + 6 || entry.compare(0, prefix.size(), prefix) != 0) return false;
+  return std::all_of(entry.begin() + long(prefix.size()), entry.end(),
+                     [](unsigned char c) { return std::isalnum(c) != 0; });
+}
+
+// Holds an flock() on a directory (released by the destructor).
+class DirectoryLock {
+ public:
+  explicit DirectoryLock(const std::string& dir) : fd_(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC)) {
+    if (fd_ < 0) throw input_error(dir, "cannot lock the directory: " + errno_text(errno));
+    while (::flock(fd_, LOCK_EX) != 0) {
+      if (errno == EINTR) continue;
+      const int err = errno;
+      ::close(fd_);
+      throw input_error(dir, "cannot lock the directory: " + errno_text(err));
+    }
+  }
+  ~DirectoryLock() { ::close(fd_); }
+  DirectoryLock(const DirectoryLock&) = delete;
+  DirectoryLock& operator=(const DirectoryLock&) = delete;
+
+ private:
+  int fd_;
+};
+
+std::string directory_of(const std::string& target) {
+  const fs::path t(target);
+  return t.has_parent_path() ? t.parent_path().string() : std::string(".");
+}
+
 }  // namespace
+
+std::size_t remove_stale_temporaries(const std::string& target, long max_age_seconds) {
+  if (max_age_seconds < 0) max_age_seconds = AtomicFile::kStaleTempSeconds;
+  const std::string dir = directory_of(target), name = fs::path(target).filename().string();
+  DIR* d = ::opendir(dir.c_str());
+  if (!d) return 0;
+  std::size_t removed = 0;
+  const std::time_t now = std::time(nullptr);
+  while (const dirent* e = ::readdir(d)) {
+    const std::string entry = e->d_name;
+    if (!is_our_temp_name(entry, name)) continue;
+    const std::string path = (fs::path(dir) / entry).string();
+    // Our own (same owner), a regular file, not a link, and old.
+    const int fd = ::open(path.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);
+    if (fd < 0) continue;
+    struct stat st {};
+    const bool candidate = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && st.st_uid == ::geteuid() &&
+                           now - st.st_mtime > max_age_seconds;
+    // Unlocked: the writer that made it is gone (a live one holds its lock
+    // until the rename, whatever its age).
+    if (candidate && ::flock(fd, LOCK_EX | LOCK_NB) == 0 && ::unlink(path.c_str()) == 0) ++removed;
+    ::close(fd);
+  }
+  ::closedir(d);
+  return removed;
+}
 
 AtomicFile::AtomicFile(std::string target) : target_(std::move(target)) {
   const fs::path t(target_);
@@ -269,22 +533,51 @@ AtomicFile::AtomicFile(std::string target) : target_(std::move(target)) {
       (::stat(target_.c_str(), &st) == 0 && S_ISDIR(st.st_mode))) {
     throw input_error(target_, "cannot write: " + errno_text(EISDIR));
   }
+  // Replacing /dev/full or a FIFO by a regular file (as root) would be
+  // wrong, and writing into them is not what an output is.
+  if (::stat(target_.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
+    throw input_error(target_, "cannot write: it is " + special_file_kind(st.st_mode) +
+                                   "; outputs are regular files");
+  }
+  install_signal_cleanup();
+  remove_stale_temporaries(target_);
   // Same directory as the target, so the final rename() cannot cross devices.
-  const fs::path dir = t.has_parent_path() ? t.parent_path() : fs::path(".");
+  const fs::path dir = directory_of(target_);
   std::string pattern = (dir / ("." + name + ".tmp-XXXXXX")).string();
   std::vector<char> buf(pattern.begin(), pattern.end());
   buf.push_back('\0');
-  const int fd = ::mkstemp(buf.data());
-  if (fd < 0) throw input_error(target_, "cannot create file: " + errno_text(errno));
-  temp_ = buf.data();
+  // Signals that clean up wait until the temporary is registered, so none
+  // is left between its creation and its registration (in this thread they
+  // are blocked; in the others, the handler defers to the section).
+  int fd = -1, err = 0;
+  {
+    sigset_t block, old;
+    sigemptyset(&block);
+    for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaddset(&block, sig);
+    ::pthread_sigmask(SIG_BLOCK, &block, &old);
+    {
+      const CriticalSection section;
+      fd = ::mkostemp(buf.data(), O_CLOEXEC);
+      err = errno;
+      if (fd >= 0) {
+        temp_ = buf.data();
+        slot_ = register_temp(temp_);
+      }
+      ::pthread_sigmask(SIG_SETMASK, &old, nullptr);
+    }
+  }
+  if (fd < 0) throw input_error(target_, "cannot create file: " + errno_text(err));
+  // Held until the fd closes: tells remove_stale_temporaries() we are alive.
+  ::flock(fd, LOCK_EX | LOCK_NB);
   // mkstemp() makes the file 0600; give the output the usual permissions.
   ::fchmod(fd, 0666 & ~current_umask());
   file_.reset(::fdopen(fd, "wb"));
   if (!file_) {
-    const int err = errno;
+    const int e = errno;
     ::close(fd);
     ::unlink(temp_.c_str());
-    throw input_error(target_, "cannot create file: " + errno_text(err));
+    unregister_temp(slot_);
+    throw input_error(target_, "cannot create file: " + errno_text(e));
   }
 }
 
@@ -293,6 +586,7 @@ AtomicFile::~AtomicFile() {
     file_.reset();
     ::unlink(temp_.c_str());
   }
+  unregister_temp(slot_);
 }
 
 void AtomicFile::write(const void* data, std::size_t n) {
@@ -302,18 +596,41 @@ void AtomicFile::write(const void* data, std::size_t n) {
     throw input_error(target_, "cannot write: " + errno_text(errno ? errno : EIO));
 }
 
-void AtomicFile::commit() {
+void AtomicFile::finish() {
   if (!file_) throw input_error(target_, "cannot write: file already closed");
   // Buffered data hits the disk only here, so ENOSPC usually shows up here.
+  errno = 0;
   if (std::fflush(file_.get()) != 0 || std::ferror(file_.get()))
     throw input_error(target_, "cannot write: " + errno_text(errno ? errno : EIO));
   if (::fsync(fileno(file_.get())) != 0 && errno != EINVAL && errno != EROFS)
     throw input_error(target_, "cannot write: " + errno_text(errno));
+  // The flock() goes with the close; the file is complete by now.
   if (std::fclose(file_.release()) != 0)
     throw input_error(target_, "cannot write: " + errno_text(errno));
+}
+
+void AtomicFile::publish() {
   if (::rename(temp_.c_str(), target_.c_str()) != 0)
     throw input_error(target_, "cannot write: " + errno_text(errno));
   committed_ = true;
+  unregister_temp(slot_);
+  slot_ = -1;
+}
+
+void AtomicFile::commit() {
+  finish();
+  const CriticalSection section;
+  publish();
+}
+
+void AtomicFile::commit_together(const std::vector<AtomicFile*>& files) {
+  for (AtomicFile* f : files) f->finish();
+  if (files.empty()) return;
+  const DirectoryLock lock(directory_of(files.front()->target_));
+  // SIGINT / SIGTERM wait until every file is renamed (or, if one came
+  // before, none is).
+  const CriticalSection section;
+  for (AtomicFile* f : files) f->publish();
 }
 
 }  // namespace io_detail
@@ -322,36 +639,40 @@ void AtomicFile::commit() {
 
 namespace {
 
+void check_raw_size(const std::string& path, const RawSpec& spec, std::uint64_t have) {
+  const std::size_t voxels = io_detail::checked_voxels(path, spec.dims, spec.type);
+  const std::uint64_t need = static_cast<std::uint64_t>(voxels) * scalar_type_size(spec.type);  // checked above
+  if (have != need) {
+    throw input_error(path, "file has " + std::to_string(have) + " bytes, but " + dims_text(spec.dims) + " " +
+                                scalar_type_name(spec.type) + " needs " + std::to_string(need) + " bytes");
+  }
+}
+
 Volume read_raw(const std::string& path, const RawSpec& spec) {
   io_detail::FilePtr f = io_detail::open_for_reading(path);
-  const std::size_t voxels = io_detail::checked_voxels(path, spec.dims, spec.type);
-  const std::size_t elem = scalar_type_size(spec.type);
-  const std::uint64_t need = static_cast<std::uint64_t>(voxels) * elem;  // checked above
-  const std::uint64_t have = io_detail::file_size(f.get());
-  if (have != need) {
-    throw input_error(path, "file has " + std::to_string(have) + " bytes, but " +
-                                dims_text(spec.dims) + " " + scalar_type_name(spec.type) +
-                                " needs " + std::to_string(need) + " bytes");
-  }
-  std::vector<unsigned char> bytes(static_cast<std::size_t>(need));
-  const std::size_t got = io_detail::read_up_to(f.get(), bytes.data(), bytes.size(), path);
-  if (got != bytes.size()) {
-    throw input_error(path, "data truncated: expected " + std::to_string(need) +
-                                " bytes, found " + std::to_string(got));
-  }
+  check_raw_size(path, spec, io_detail::file_size(f.get()));
+  check_geometry(path, spec.spacing, {0.0, 0.0, 0.0});
   Volume v(spec.dims, spec.spacing, spec.type);
-  io_detail::decode_samples(bytes.data(), voxels, spec.type,
-                            spec.big_endian != io_detail::host_is_big_endian(), v.data.data());
+  // Decoded a chunk at a time: no second copy of the volume in file bytes.
+  const std::size_t elem = scalar_type_size(spec.type), chunk = (std::size_t(1) << 20);
+  const bool swap = spec.big_endian != io_detail::host_is_big_endian();
+  std::vector<unsigned char> bytes(std::min(v.voxels(), chunk) * elem);
+  for (std::size_t done = 0; done < v.voxels();) {
+    const std::size_t n = std::min(chunk, v.voxels() - done);
+    const std::size_t got = io_detail::read_up_to(f.get(), bytes.data(), n * elem, path);
+    if (got != n * elem) {
+      throw input_error(path, "data truncated: expected " + std::to_string(v.voxels() * elem) + " bytes, found " +
+                                  std::to_string(done * elem + got));
+    }
+    io_detail::decode_samples(bytes.data(), n, spec.type, swap, v.data.data() + done);
+    done += n;
+  }
   return v;
 }
 
-}  // namespace
-
-// ---- dispatch ----------------------------------------------------------------
-
-Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw) {
-  if (raw) return read_raw(path, *raw);
-
+// NRRD by content (its magic) or extension, MetaImage by extension.
+enum class Format { Nrrd, MetaImage };
+Format format_of(const std::string& path) {
   char magic[8] = {};
   {
     io_detail::FilePtr f = io_detail::open_for_reading(path);
@@ -359,11 +680,83 @@ Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw) {
   }
   const std::string ext = extension_of(path);
   // Content first: a NRRD file is a NRRD file whatever it is called.
-  if (std::memcmp(magic, "NRRD000", 7) == 0 || ext == ".nrrd" || ext == ".nhdr")
-    return io_detail::read_nrrd(path);
-  if (ext == ".mha" || ext == ".mhd") return io_detail::read_metaimage(path);
+  if (std::memcmp(magic, "NRRD000", 7) == 0 || ext == ".nrrd" || ext == ".nhdr") return Format::Nrrd;
+  if (ext == ".mha" || ext == ".mhd") return Format::MetaImage;
   throw input_error(path,
                     "unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, or --raw X,Y,Z --type T)");
+}
+
+}  // namespace
+
+// ---- geometry and samples ------------------------------------------------------
+
+void check_geometry(const std::string& path, const Vec3d& spacing, const Vec3d& origin) {
+  for (int a = 0; a < 3; ++a) {
+    const double h = spacing[a];
+    if (!(h >= kMinSpacingMm && h <= kMaxSpacingMm)) {
+      std::ostringstream m;
+      m << "spacing " << h << " mm along " << "xyz"[a] << " is outside [" << kMinSpacingMm << ", " << kMaxSpacingMm
+        << "] mm (a wrong unit in the header?)";
+      throw input_error(path, m.str());
+    }
+    if (!(std::fabs(origin[a]) <= kMaxOriginMm)) {
+      std::ostringstream m;
+      m << "origin " << origin[a] << " mm along " << "xyz"[a] << " is not within " << kMaxOriginMm << " mm of 0";
+      throw input_error(path, m.str());
+    }
+  }
+}
+
+NonFiniteSamples find_non_finite(const Volume& v) {
+  NonFiniteSamples r;
+  for (std::size_t i = 0; i < v.data.size(); ++i) {
+    if (std::isfinite(v.data[i])) continue;
+    if (r.count++ == 0) r.first = i;
+  }
+  return r;
+}
+
+void require_finite(const Volume& v, const std::string& path, const std::string& remedy) {
+  const NonFiniteSamples nf = find_non_finite(v);
+  if (nf.count == 0) return;
+  const std::size_t i = nf.first, nx = v.dims[0], ny = v.dims[1];
+  const float x = v.data[i];
+  std::ostringstream m;
+  m << "sample " << i << " (x " << i % nx << ", y " << (i / nx) % ny << ", z " << i / (nx * ny) << ") is "
+    << (std::isnan(x) ? "NaN" : (x > 0 ? "+Inf" : "-Inf")) << "; " << nf.count << " of " << v.data.size()
+    << " samples are not finite";
+  if (!remedy.empty()) m << "; " << remedy;
+  throw input_error(path, m.str());
+}
+
+std::size_t replace_non_finite(Volume& v, float value) {
+  std::size_t n = 0;
+  for (float& x : v.data)
+    if (!std::isfinite(x)) x = value, ++n;
+  return n;
+}
+
+// ---- dispatch ----------------------------------------------------------------
+
+Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw) {
+  if (raw) return read_raw(path, *raw);
+  return format_of(path) == Format::Nrrd ? io_detail::read_nrrd(path) : io_detail::read_metaimage(path);
+}
+
+VolumeHeader read_volume_header(const std::string& path, const std::optional<RawSpec>& raw) {
+  if (raw) {
+    io_detail::FilePtr f = io_detail::open_for_reading(path);
+    check_raw_size(path, *raw, io_detail::file_size(f.get()));
+    check_geometry(path, raw->spacing, {0.0, 0.0, 0.0});
+    VolumeHeader h;
+    h.dims = raw->dims;
+    h.type = raw->type;
+    h.spacing = raw->spacing;
+    h.files = {path};
+    return h;
+  }
+  return format_of(path) == Format::Nrrd ? io_detail::read_nrrd_header(path)
+                                         : io_detail::read_metaimage_header(path);
 }
 
 void write_volume(const std::string& path, const Volume& v, const WriteOptions& opt) {
@@ -382,32 +775,67 @@ void write_volume(const std::string& path, const Volume& v, const WriteOptions& 
   }
 }
 
+// ---- input / output identity ---------------------------------------------------
+
+std::vector<std::string> output_files(const std::string& path) {
+  std::vector<std::string> files{path};
+  // A .mhd output also writes "<stem>.raw" or "<stem>.zraw" beside it.
+  if (extension_of(path) == ".mhd")
+    for (const char* ext : {".raw", ".zraw"}) files.push_back(fs::path(path).replace_extension(ext).string());
+  return files;
+}
+
 namespace {
+
+// The files a read of `input` opens: its header's list when the header
+// parses, else the path alone (the read itself will then fail, before any
+// output is written).
+std::vector<std::string> input_files(const std::string& input) {
+  try {
+    return read_volume_header(input).files;
+  } catch (const InputError&) {
+    return {input};
+  }
+}
 
 bool same_file(const std::string& a, const std::string& b) {
   struct stat sa {}, sb {};
-  if (::stat(a.c_str(), &sa) == 0 && ::stat(b.c_str(), &sb) == 0)
-    return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
-  std::error_code ea, eb;
-  const fs::path ca = fs::weakly_canonical(a, ea);
-  const fs::path cb = fs::weakly_canonical(b, eb);
-  if (ea || eb) return fs::path(a).lexically_normal() == fs::path(b).lexically_normal();
+  const bool ea = ::stat(a.c_str(), &sa) == 0, eb = ::stat(b.c_str(), &sb) == 0;
+  if (ea && eb) return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+  if (ea != eb) return false;  // one exists, the other not: different files
+  std::error_code ca_err, cb_err;
+  const fs::path ca = fs::weakly_canonical(a, ca_err);
+  const fs::path cb = fs::weakly_canonical(b, cb_err);
+  if (ca_err || cb_err) return fs::path(a).lexically_normal() == fs::path(b).lexically_normal();
   return ca == cb;
 }
 
 }  // namespace
 
-void ensure_distinct_output(const std::string& input, const std::string& output) {
-  if (same_file(input, output)) throw input_error(output, "output would overwrite the input file");
-  // A .mhd output also writes "<stem>.raw" or "<stem>.zraw" beside it.
-  if (extension_of(output) == ".mhd") {
-    for (const char* ext : {".raw", ".zraw"}) {
-      const std::string data = fs::path(output).replace_extension(ext).string();
-      if (same_file(input, data)) {
-        throw input_error(output, "output's data file " + data + " would overwrite the input file");
+void ensure_distinct_outputs(const std::vector<std::string>& inputs, const std::vector<std::string>& outputs) {
+  for (const std::string& input : inputs) {
+    struct stat st {};
+    if (input.empty() || ::stat(input.c_str(), &st) != 0) continue;
+    const std::vector<std::string> read = input_files(input);
+    for (const std::string& output : outputs) {
+      for (const std::string& in : read) {
+        for (const std::string& out : output_files(output)) {
+          if (!same_file(in, out)) continue;
+          if (in == input && out == output) throw input_error(output, "output would overwrite the input file");
+          if (in == input)
+            throw input_error(output, "output's data file " + out + " would overwrite the input file " + input);
+          if (out == output)
+            throw input_error(output, "output would overwrite " + in + ", the data file of the input " + input);
+          throw input_error(output, "output's data file " + out + " would overwrite " + in +
+                                        ", the data file of the input " + input);
+        }
       }
     }
   }
+}
+
+void ensure_distinct_output(const std::string& input, const std::string& output) {
+  ensure_distinct_outputs({input}, {output});
 }
 
 }  // namespace softshell

@@ -5,6 +5,14 @@
 // Every failure throws InputError with a one-line "<path>: <problem>" message.
 // Writes go to a temporary file in the target directory and are renamed into
 // place only when complete, so a failed write leaves nothing behind.
+//
+// Hostile or careless input (docs/formats.md, "What the readers refuse"):
+// only regular files are read (no FIFO, device or standard input, which would
+// block or never end); a header's detached data file must lie in the header's
+// own directory tree unless SOFTSHELL_DATA_FILES=any; every size a header
+// declares is checked against the bytes the file holds before anything that
+// size is allocated, and decompression never produces more than the header
+// declares.
 #pragma once
 
 #include <cstdint>
@@ -34,8 +42,44 @@ Vec3d parse_vec3(const std::string& text, const std::string& what);
 // Reads a 3-D scalar volume. With `raw`, the file is read as headerless raw
 // data; otherwise the format is chosen by content (NRRD magic) and extension
 // (.nrrd/.nhdr, .mha/.mhd). Checks, before allocating, that the voxel count
-// does not overflow and that the samples fit in this machine's memory.
+// does not overflow, that the samples fit in this machine's memory and that
+// the file holds the bytes its header declares.
 Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw = std::nullopt);
+
+// A volume file's header: what read_volume() would return, without the
+// samples, and the files a read opens.
+struct VolumeHeader {
+  Dims3 dims{0, 0, 0};
+  ScalarType type = ScalarType::UInt8;
+  Vec3d spacing{1.0, 1.0, 1.0};
+  Vec3d origin{0.0, 0.0, 0.0};
+  std::vector<std::string> files;  // the header itself, then its detached data file(s)
+};
+// Parses the header only (and checks that its data files are acceptable);
+// allocates nothing of the volume's size. Throws InputError like read_volume.
+VolumeHeader read_volume_header(const std::string& path, const std::optional<RawSpec>& raw = std::nullopt);
+
+// Voxel spacing softshell accepts, in mm: 1 nm to 1 km. Outside it the
+// header's unit is wrong (or the file is corrupt), and the float32 grid
+// arithmetic on the device would over- or underflow. The origin must lie
+// within 1e9 mm of 0 for the same reason.
+inline constexpr double kMinSpacingMm = 1e-6, kMaxSpacingMm = 1e6, kMaxOriginMm = 1e9;
+// Throws InputError naming `path` when spacing or origin is outside those
+// limits or not finite.
+void check_geometry(const std::string& path, const Vec3d& spacing, const Vec3d& origin);
+
+// Non-finite samples (NaN, +-Inf): how many, and the first one's index.
+struct NonFiniteSamples {
+  std::size_t count = 0;
+  std::size_t first = 0;  // valid when count > 0
+};
+NonFiniteSamples find_non_finite(const Volume& v);
+// Throws InputError "<path>: sample N (x, y, z) is nan; ..." when `v` holds a
+// non-finite sample; `remedy` ends the message (e.g. the option that
+// replaces them).
+void require_finite(const Volume& v, const std::string& path, const std::string& remedy);
+// Replaces every non-finite sample by `value`; returns how many.
+std::size_t replace_non_finite(Volume& v, float value);
 
 struct WriteOptions {
   std::optional<ScalarType> type;  // default: the volume's source_type
@@ -48,12 +92,24 @@ struct WriteOptions {
 // unknown extension or an unwritable place.
 void write_volume(const std::string& path, const Volume& v, const WriteOptions& opt = {});
 
-// Throws InputError if `output` names the same file as `input` (so a run
-// can never clobber its own input).
-void ensure_distinct_output(const std::string& input, const std::string& output);
+// The files write_volume(path) creates or replaces: `path`, and for .mhd its
+// data file ("<stem>.raw", or "<stem>.zraw" when compressed: both listed).
+std::vector<std::string> output_files(const std::string& path);
 
-// True if the memory needed for `voxels` samples (as float on the host) is
-// available on this machine; used by the readers before allocating.
+// Throws InputError if writing `output` would replace any file that reading
+// `input` opens: the input itself and its detached data files, compared by
+// device and inode (any spelling, hard and symbolic links), against every
+// file the output writes (output_files). So a run never clobbers its input.
+void ensure_distinct_output(const std::string& input, const std::string& output);
+// The same for several inputs (volume, mask, initial guess, ...) and several
+// outputs (turntable frames, ...). Inputs that do not exist are skipped.
+void ensure_distinct_outputs(const std::vector<std::string>& inputs, const std::vector<std::string>& outputs);
+
+// Memory this process may use: physical memory, lowered to the cgroup limit
+// and to RLIMIT_AS / RLIMIT_DATA when set.
+std::uint64_t usable_memory_bytes();
+// True if `voxels` x `bytes_per_voxel` bytes fit in 75 % of
+// usable_memory_bytes() (a quarter left for the OS and the device runtime).
 bool fits_in_memory(std::size_t voxels, std::size_t bytes_per_voxel);
 
 // ---- Internal to the I/O layer (io.cpp, io_nrrd.cpp, io_metaimage.cpp) ----
@@ -77,8 +133,20 @@ struct FileCloser {
 };
 using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
 // Opens an existing regular file for reading; throws InputError
-// "<path>: cannot open: <strerror>" (a directory reads as EISDIR).
+// "<path>: cannot open: <strerror>" (a directory reads as EISDIR) or
+// "<path>: not a regular file (a FIFO)" for FIFOs, devices and sockets,
+// which are refused without blocking.
 FilePtr open_for_reading(const std::string& path);
+// The kind of a non-regular file for messages ("a FIFO", "a character
+// device", ...); empty for a regular file.
+std::string special_file_kind(unsigned mode);
+
+// The path of a detached data file named `name` in the header `header`,
+// resolved against the header's directory, under the data-file policy:
+// not "-" (standard input), inside the header's directory tree (after
+// following links) unless SOFTSHELL_DATA_FILES=any, an existing regular
+// file. Throws InputError "<header>: data file <name>: <problem>".
+std::string resolve_data_file(const std::string& header, const std::string& name);
 // Size in bytes of an open file.
 std::uint64_t file_size(std::FILE* f);
 // Reads up to `n` bytes; returns how many were read (fewer only at EOF).
@@ -87,9 +155,23 @@ std::size_t read_up_to(std::FILE* f, void* data, std::size_t n, const std::strin
 
 // A temporary file ".<name>.tmp-XXXXXX" in the directory of `target`,
 // renamed onto `target` by commit(); removed by the destructor if commit()
-// was not reached, so a failed write leaves nothing behind.
+// was not reached, so a failed write leaves nothing behind. More:
+//  - the target, when it exists, must be a regular file (never replace a
+//    device such as /dev/full, a FIFO or a directory);
+//  - SIGINT, SIGTERM and SIGHUP (unless ignored) remove every temporary
+//    file still open, then take their previous action (the default: the
+//    process dies of the signal; or a library's handler, such as LLVM's);
+//  - the writer holds an flock() on its temporary file, and the constructor
+//    removes stale temporaries of the same target: our own name pattern,
+//    older than kStaleTempSeconds, and unlocked (their writer is gone: a
+//    SIGKILL, a power cut);
+//  - commit_together() publishes several files (a .mhd header and its data)
+//    under a lock on their directory, so concurrent writers of the same
+//    output never leave a header of one run beside the data of another.
 class AtomicFile {
  public:
+  static constexpr long kStaleTempSeconds = 600;
+
   explicit AtomicFile(std::string target);
   ~AtomicFile();
   AtomicFile(const AtomicFile&) = delete;
@@ -97,20 +179,34 @@ class AtomicFile {
 
   std::FILE* file() const { return file_.get(); }
   const std::string& target() const { return target_; }
+  const std::string& temp_path() const { return temp_; }
   // Writes all of `data`; throws InputError on a short write (e.g. ENOSPC).
   void write(const void* data, std::size_t n);
-  // Flushes, syncs and closes the file, checking each step, then renames it.
+  // Flushes, syncs and closes the file, checking each step (where a full
+  // disk shows), then renames it onto the target.
   void commit();
+  // finish() then, under one lock of the directory, the renames, in order:
+  // all files are complete before any replaces its target.
+  static void commit_together(const std::vector<AtomicFile*>& files);
 
  private:
+  void finish();   // flush, fsync, close
+  void publish();  // rename onto the target
   std::string target_, temp_;
   FilePtr file_;
+  int slot_ = -1;  // in the signal handler's list of temporaries
   bool committed_ = false;
 };
 
+// Removes stale temporaries of `target` (see AtomicFile); returns how many.
+// `max_age_seconds` < 0: AtomicFile::kStaleTempSeconds.
+std::size_t remove_stale_temporaries(const std::string& target, long max_age_seconds = -1);
+
 Volume read_nrrd(const std::string& path);
+VolumeHeader read_nrrd_header(const std::string& path);
 void write_nrrd(const std::string& path, const Volume& v, const WriteOptions& opt);
 Volume read_metaimage(const std::string& path);
+VolumeHeader read_metaimage_header(const std::string& path);
 // `detached`: .mhd header plus "<stem>.raw" (".zraw" when compressed).
 void write_metaimage(const std::string& path, const Volume& v, const WriteOptions& opt,
                      bool detached);

@@ -183,34 +183,34 @@ class Parser {
   std::string path_;
 };
 
-// Inflates all of `in` (zlib or gzip stream) into `out`, which has exactly
-// the expected size. Returns the number of bytes produced.
-std::size_t inflate_into(const std::string& path, const std::vector<unsigned char>& in,
-                         std::vector<unsigned char>& out) {
+// Inflates `in` (zlib or gzip stream) into `out`, producing at most `cap`
+// bytes (extra data is ignored). `out` grows with what the stream really
+// produces, never to `cap` on the header's word alone.
+void inflate_capped(const std::string& path, const std::vector<unsigned char>& in, std::size_t cap,
+                    std::vector<unsigned char>& out) {
   z_stream zs{};
   if (inflateInit2(&zs, 15 + 32) != Z_OK) throw input_error(path, "zlib initialisation failed");
   struct End {
     z_stream* z;
     ~End() { inflateEnd(z); }
   } end{&zs};
+  out.clear();
+  out.resize(std::min<std::size_t>(cap, std::max<std::size_t>(std::size_t(1) << 20, 4 * in.size())));
   std::size_t in_pos = 0, out_pos = 0;
-  int rc = Z_OK;
   // avail_in/avail_out are 32-bit: feed > 4 GiB buffers in pieces.
-  while (true) {
+  while (out_pos < cap) {
     if (zs.avail_in == 0 && in_pos < in.size()) {
       const std::size_t chunk = std::min<std::size_t>(in.size() - in_pos, UINT_MAX);
       zs.next_in = const_cast<Bytef*>(in.data() + in_pos);
       zs.avail_in = static_cast<uInt>(chunk);
       in_pos += chunk;
     }
-    if (zs.avail_out == 0 && out_pos < out.size()) {
-      const std::size_t chunk = std::min<std::size_t>(out.size() - out_pos, UINT_MAX);
-      zs.next_out = out.data() + out_pos;
-      zs.avail_out = static_cast<uInt>(chunk);
-      out_pos += chunk;
-    }
-    if (zs.avail_out == 0) break;  // got everything we need; extra data is ignored
-    rc = inflate(&zs, Z_NO_FLUSH);
+    if (out_pos == out.size()) out.resize(std::min(cap, 2 * out.size()));
+    const std::size_t room = std::min<std::size_t>(out.size() - out_pos, UINT_MAX);
+    zs.next_out = out.data() + out_pos;
+    zs.avail_out = static_cast<uInt>(room);
+    const int rc = inflate(&zs, Z_NO_FLUSH);
+    out_pos += room - zs.avail_out;
     if (rc == Z_STREAM_END) break;
     if (rc == Z_NEED_DICT || rc == Z_DATA_ERROR || rc == Z_MEM_ERROR) {
       throw input_error(path, std::string("corrupt compressed data: ") +
@@ -218,7 +218,7 @@ std::size_t inflate_into(const std::string& path, const std::vector<unsigned cha
     }
     if (rc == Z_BUF_ERROR && zs.avail_in == 0 && in_pos == in.size()) break;  // input ran out
   }
-  return out_pos - zs.avail_out;
+  out.resize(out_pos);
 }
 
 // Deflates `in` to a zlib stream, as MetaIO (ITK, VTK, PLUS) writes it.
@@ -264,10 +264,29 @@ std::string three(const Vec3d& v) { return exact(v[0]) + " " + exact(v[1]) + " "
 
 }  // namespace
 
-Volume read_metaimage(const std::string& path) {
+namespace {
+
+// Deflate's largest expansion (zlib's technical details), plus slack for
+// the stream's header: data that claims more cannot be what it says.
+constexpr std::uint64_t kMaxInflateRatio = 1032;
+
+// Everything the header says, checked, and where the samples are.
+struct MetaImage {
+  VolumeHeader header;
+  bool msb = false, compressed = false;
+  std::optional<std::uint64_t> compressed_size;
+  FilePtr header_file, data_holder;
+  std::FILE* data = nullptr;    // positioned at the first byte of the samples
+  std::string data_name;        // for messages
+  std::uint64_t available = 0;  // bytes from there to the end of the file
+  std::size_t expected = 0;     // bytes of samples (uncompressed)
+};
+
+MetaImage open_metaimage(const std::string& path) {
   Parser p(path);
-  FilePtr f = open_for_reading(path);
-  const Header h = p.read_header(f.get());
+  MetaImage m;
+  m.header_file = open_for_reading(path);
+  const Header h = p.read_header(m.header_file.get());
 
   if (const std::string* ot = p.find(h, "ObjectType"); ot && *ot != "Image")
     p.fail("ObjectType = " + excerpt(*ot) + " is not supported (expected Image)");
@@ -326,24 +345,22 @@ Volume read_metaimage(const std::string& path) {
       break;
     }
   }
+  check_geometry(path, spacing, origin);
   // TransformMatrix (orientation) is accepted but not applied: softshell
   // works on the voxel grid; only spacing and origin matter.
   if (const std::string* tm = p.find(h, "TransformMatrix")) p.reals("TransformMatrix", *tm, 9);
 
-  bool msb = false;
   for (const char* key : {"BinaryDataByteOrderMSB", "ElementByteOrderMSB"}) {
     if (const std::string* b = p.find(h, key)) {
-      msb = p.boolean(key, *b);
+      m.msb = p.boolean(key, *b);
       break;
     }
   }
-  bool compressed = false;
-  if (const std::string* c = p.find(h, "CompressedData")) compressed = p.boolean("CompressedData", *c);
-  std::optional<std::uint64_t> compressed_size;
-  if (const std::string* cs = p.find(h, "CompressedDataSize"); cs && compressed) {
+  if (const std::string* c = p.find(h, "CompressedData")) m.compressed = p.boolean("CompressedData", *c);
+  if (const std::string* cs = p.find(h, "CompressedDataSize"); cs && m.compressed) {
     const long long n = p.integer("CompressedDataSize", *cs);
     if (n < 0) p.fail("CompressedDataSize = " + std::to_string(n) + " is negative");
-    compressed_size = static_cast<std::uint64_t>(n);
+    m.compressed_size = static_cast<std::uint64_t>(n);
   }
   long long header_size = 0;
   if (const std::string* hs = p.find(h, "HeaderSize")) {
@@ -357,94 +374,123 @@ Volume read_metaimage(const std::string& path) {
     p.fail("ElementDataFile LIST/pattern not supported ('" + excerpt(df) + "')");
 
   const std::size_t voxels = checked_voxels(path, dims, *type);
-  const std::size_t elem = scalar_type_size(*type);
-  const std::size_t expected = voxels * elem;  // checked_voxels ruled out overflow
+  m.expected = voxels * scalar_type_size(*type);  // checked_voxels ruled out overflow
+  m.header.dims = dims;
+  m.header.type = *type;
+  m.header.spacing = spacing;
+  m.header.origin = origin;
+  m.header.files = {path};
 
   // Where the samples live: after the header (LOCAL) or in another file.
-  FilePtr data_holder;
-  std::FILE* data = f.get();
-  std::string data_name = path;  // for messages
+  m.data = m.header_file.get();
+  m.data_name = path;
   std::uint64_t begin = h.data_offset;
-  std::uint64_t total = file_size(f.get());
-  const bool local = df == "LOCAL";
-  if (!local) {
-    const fs::path rel(df);
-    const fs::path full = rel.is_absolute() ? rel : fs::path(path).parent_path() / rel;
-    data_name = full.string();
-    try {
-      data_holder = open_for_reading(data_name);
-    } catch (const InputError& e) {
-      p.fail(std::string("data file ") + e.what());  // "<data file>: cannot open: <why>"
-    }
-    data = data_holder.get();
-    total = file_size(data);
+  std::uint64_t total = file_size(m.data);
+  if (df != "LOCAL") {
+    m.data_name = resolve_data_file(path, df);
+    m.header.files.push_back(m.data_name);
+    m.data_holder = open_for_reading(m.data_name);
+    m.data = m.data_holder.get();
+    total = file_size(m.data);
     if (header_size == -1) {
       // Data at the end of the file: skip whatever precedes it.
-      if (compressed) p.fail("HeaderSize = -1 cannot be used with CompressedData");
-      if (total < expected) {
+      if (m.compressed) p.fail("HeaderSize = -1 cannot be used with CompressedData");
+      if (total < m.expected) {
         p.fail("data file " + df + " has " + std::to_string(total) + " bytes, expected at least " +
-               std::to_string(expected));
+               std::to_string(m.expected));
       }
-      begin = total - expected;
+      begin = total - m.expected;
     } else {
       begin = static_cast<std::uint64_t>(header_size);
-      if (!compressed && header_size == 0 && total != expected) {
+      if (!m.compressed && header_size == 0 && total != m.expected) {
         p.fail("data file " + df + " has " + std::to_string(total) + " bytes, expected " +
-               std::to_string(expected));
+               std::to_string(m.expected));
       }
     }
-    if (std::fseek(data, static_cast<long>(std::min<std::uint64_t>(begin, LONG_MAX)), SEEK_SET) != 0)
-      p.fail("cannot seek in data file " + df + ": " + std::strerror(errno));
   }
-  const std::uint64_t available = total > begin ? total - begin : 0;
+  if (std::fseek(m.data, static_cast<long>(std::min<std::uint64_t>(begin, LONG_MAX)), SEEK_SET) != 0)
+    p.fail("cannot seek in data file " + df + ": " + std::strerror(errno));
+  m.available = total > begin ? total - begin : 0;
 
-  if (!compressed && available < expected) {
-    // Fail before allocating what a lying header asks for.
-    p.fail("data truncated: expected " + std::to_string(expected) + " bytes, found " + std::to_string(available));
+  // Sizes against the file, before anything of the declared size exists.
+  if (!m.compressed && m.available < m.expected) {
+    p.fail("data truncated: expected " + std::to_string(m.expected) + " bytes, found " + std::to_string(m.available));
   }
-  std::vector<unsigned char> bytes(expected);
-  if (!compressed) {
-    const std::size_t got = read_up_to(data, bytes.data(), expected, data_name);
-    if (got < expected) {
-      p.fail("data truncated: expected " + std::to_string(expected) + " bytes, found " + std::to_string(got));
+  if (m.compressed) {
+    std::uint64_t packed = m.available;
+    if (m.compressed_size) {
+      if (*m.compressed_size > m.available) {
+        p.fail("compressed data truncated: CompressedDataSize = " + std::to_string(*m.compressed_size) +
+               " bytes, found " + std::to_string(m.available));
+      }
+      packed = *m.compressed_size;
+    }
+    if (m.expected > kMaxInflateRatio * packed + 1024) {
+      p.fail("data truncated: " + std::to_string(packed) + " bytes of compressed data cannot hold the " +
+             std::to_string(m.expected) + " bytes declared (zlib expands at most 1032-fold)");
+    }
+  }
+  return m;
+}
+
+}  // namespace
+
+VolumeHeader read_metaimage_header(const std::string& path) { return open_metaimage(path).header; }
+
+Volume read_metaimage(const std::string& path) {
+  MetaImage m = open_metaimage(path);
+  const Parser p(path);
+  std::vector<unsigned char> bytes;
+  if (!m.compressed) {
+    bytes.resize(m.expected);
+    const std::size_t got = read_up_to(m.data, bytes.data(), m.expected, m.data_name);
+    if (got < m.expected) {
+      p.fail("data truncated: expected " + std::to_string(m.expected) + " bytes, found " + std::to_string(got));
     }
   } else {
-    std::uint64_t want = available;
-    if (compressed_size) {
-      if (*compressed_size > available) {
-        p.fail("compressed data truncated: CompressedDataSize = " + std::to_string(*compressed_size) +
-               " bytes, found " + std::to_string(available));
-      }
-      want = *compressed_size;
-    }
+    const std::uint64_t want = m.compressed_size.value_or(m.available);
     if (want > SIZE_MAX || !fits_in_memory(static_cast<std::size_t>(want), 1))
       p.fail("compressed data of " + std::to_string(want) + " bytes does not fit in memory");
     std::vector<unsigned char> packed(static_cast<std::size_t>(want));
-    const std::size_t got = read_up_to(data, packed.data(), packed.size(), data_name);
+    const std::size_t got = read_up_to(m.data, packed.data(), packed.size(), m.data_name);
     packed.resize(got);
-    const std::size_t produced = inflate_into(path, packed, bytes);
-    if (produced < expected) {
-      p.fail("data truncated: expected " + std::to_string(expected) +
-             " bytes after decompression, found " + std::to_string(produced));
+    inflate_capped(path, packed, m.expected, bytes);
+    if (bytes.size() < m.expected) {
+      p.fail("data truncated: expected " + std::to_string(m.expected) + " bytes after decompression, found " +
+             std::to_string(bytes.size()));
     }
   }
 
-  Volume v(dims, spacing, *type);
-  v.origin = origin;
-  decode_samples(bytes.data(), voxels, *type, msb != host_is_big_endian(), v.data.data());
+  Volume v(m.header.dims, m.header.spacing, m.header.type);
+  v.origin = m.header.origin;
+  decode_samples(bytes.data(), v.voxels(), m.header.type, m.msb != host_is_big_endian(), v.data.data());
   return v;
 }
 
 void write_metaimage(const std::string& path, const Volume& v, const WriteOptions& opt,
                      bool detached) {
   const ScalarType type = opt.type.value_or(v.source_type);
-  std::vector<unsigned char> bytes = encode_samples(v.data, type);
-  if (host_is_big_endian()) {
-    // MetaImage files here are always little-endian (MSB = False).
-    const std::size_t e = scalar_type_size(type);
-    for (std::size_t i = 0; i + e <= bytes.size(); i += e) std::reverse(&bytes[i], &bytes[i] + e);
-  }
-  if (opt.compress) bytes = deflate_all(path, bytes);
+  const std::size_t elem = scalar_type_size(type);
+  // MetaImage files here are always little-endian (MSB = False).
+  const auto encode = [&](std::size_t begin, std::size_t count) {
+    const std::vector<float> part(v.data.begin() + long(begin), v.data.begin() + long(begin + count));
+    std::vector<unsigned char> bytes = encode_samples(part, type);
+    if (host_is_big_endian())
+      for (std::size_t i = 0; i + elem <= bytes.size(); i += elem) std::reverse(&bytes[i], &bytes[i] + elem);
+    return bytes;
+  };
+  // Compressed data is needed whole (its size goes in the header); plain
+  // data is encoded and written a chunk at a time, no copy of the volume.
+  std::vector<unsigned char> packed;
+  if (opt.compress) packed = deflate_all(path, encode(0, v.data.size()));
+  const auto write_samples = [&](AtomicFile& out) {
+    if (opt.compress) return out.write(packed.data(), packed.size());
+    constexpr std::size_t kChunk = std::size_t(1) << 20;
+    for (std::size_t i = 0; i < v.data.size(); i += kChunk) {
+      const auto bytes = encode(i, std::min(kChunk, v.data.size() - i));
+      out.write(bytes.data(), bytes.size());
+    }
+  };
 
   std::string data_file = "LOCAL";
   if (detached) data_file = fs::path(path).stem().string() + (opt.compress ? ".zraw" : ".raw");
@@ -455,7 +501,7 @@ void write_metaimage(const std::string& path, const Volume& v, const WriteOption
       << "BinaryData = True\n"
       << "BinaryDataByteOrderMSB = False\n"
       << "CompressedData = " << (opt.compress ? "True" : "False") << "\n";
-  if (opt.compress) hdr << "CompressedDataSize = " << bytes.size() << "\n";
+  if (opt.compress) hdr << "CompressedDataSize = " << packed.size() << "\n";
   hdr << "TransformMatrix = 1 0 0 0 1 0 0 0 1\n"
       << "Offset = " << three(v.origin) << "\n"
       << "ElementSpacing = " << three(v.spacing) << "\n"
@@ -467,17 +513,18 @@ void write_metaimage(const std::string& path, const Volume& v, const WriteOption
   if (!detached) {
     AtomicFile out(path);
     out.write(header.data(), header.size());
-    out.write(bytes.data(), bytes.size());
+    write_samples(out);
     out.commit();
     return;
   }
-  // Data first: a header never points at a data file that is not there yet.
+  // Both complete before either replaces its target, and published under
+  // one directory lock (data first: a header never points at a data file
+  // that is not there yet), so concurrent writers never mix them.
   AtomicFile data_out((fs::path(path).parent_path() / data_file).string());
   AtomicFile header_out(path);
-  data_out.write(bytes.data(), bytes.size());
+  write_samples(data_out);
   header_out.write(header.data(), header.size());
-  data_out.commit();
-  header_out.commit();
+  AtomicFile::commit_together({&data_out, &header_out});
 }
 
 }  // namespace softshell::io_detail

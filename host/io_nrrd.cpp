@@ -2,18 +2,30 @@
 // implementation: every encoding Teem knows (raw, gzip, bzip2, ascii, hex)
 // and detached headers (.nhdr) come for free. Teem reports errors through
 // biff; they are turned into one-line InputErrors here.
+//
+// Teem trusts its input more than softshell can: it opens a header's data
+// file (standard input for "-", a FIFO that blocks, any absolute path),
+// formats data file names with a printf pattern from the header, and
+// allocates what the header declares before reading a byte. So the header is
+// scanned here first (scan_header) and every data file and size checked
+// before Teem sees the file; see docs/formats.md.
+#include <bzlib.h>
 #include <teem/nrrd.h>
+#include <zlib.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <memory>
 #include <mutex>
 #include <sstream>
 
 #include "error.hpp"
 #include "io.hpp"
+#include "text.hpp"
 
 namespace softshell::io_detail {
 
@@ -124,12 +136,77 @@ std::string sizes_text(const Nrrd* n) {
   return s;
 }
 
+// ---- the header, scanned before Teem reads it -------------------------------------
+
+constexpr std::size_t kMaxHeaderLine = 64 * 1024;
+constexpr int kMaxHeaderLines = 100000;
+
+struct HeaderScan {
+  std::uint64_t data_offset = 0;  // first byte after the header (attached data)
+  std::string data_file;          // resolved detached data file; empty: attached
+};
+
+// Reads the header up to its blank line, checks the magic and applies the
+// data-file policy to every "data file" field.
+HeaderScan scan_header(const std::string& path) {
+  FilePtr f = open_for_reading(path);
+  HeaderScan scan;
+  std::string line;
+  auto next_line = [&]() -> bool {
+    line.clear();
+    int c;
+    while ((c = std::fgetc(f.get())) != EOF && c != '\n') {
+      line += static_cast<char>(c);
+      if (line.size() > kMaxHeaderLine) throw input_error(path, "header line longer than 64 KiB: not a NRRD header");
+    }
+    if (std::ferror(f.get())) throw input_error(path, "read error: " + std::string(std::strerror(errno)));
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    return c != EOF || !line.empty();
+  };
+  // Without the magic Teem would try its other formats (plain text tables,
+  // PNM, VTK), none of which is a volume softshell means to read.
+  if (!next_line() || line.rfind("NRRD000", 0) != 0 || line.size() < 8)
+    throw input_error(path, "not a NRRD file (the first line is not NRRD000x)");
+  for (int n = 2; next_line(); ++n) {
+    if (n > kMaxHeaderLines) throw input_error(path, "header longer than 100000 lines");
+    if (line.empty()) break;  // end of the header
+    if (line[0] == '#' || line.find(":=") != std::string::npos) continue;  // comment, key/value pair
+    const auto colon = line.find(':');
+    if (colon == std::string::npos) continue;  // Teem reports it
+    std::string key;
+    for (char c : line.substr(0, colon))
+      if (c != ' ' && c != '\t') key += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    if (key != "datafile") continue;
+    std::string value = line.substr(colon + 1);
+    value.erase(0, value.find_first_not_of(" \t"));
+    // Teem formats a name containing %d with the header's own pattern (a
+    // printf format from the file) and reads further header lines after
+    // LIST; softshell reads one data file per volume.
+    if (value.rfind("LIST", 0) == 0 || value.find('%') != std::string::npos)
+      throw input_error(path, "data file '" + value.substr(0, 40) +
+                                  "': lists and numbered patterns of data files are not supported (one data file per volume)");
+    scan.data_file = resolve_data_file(path, value);
+  }
+  const long pos = std::ftell(f.get());
+  scan.data_offset = pos > 0 ? static_cast<std::uint64_t>(pos) : 0;
+  return scan;
+}
+
+// ---- Teem ------------------------------------------------------------------------
+
+struct LoadInfo {
+  const NrrdEncoding* encoding = nullptr;
+  long byte_skip = 0;
+  unsigned line_skip = 0;
+};
+
 // Loads `path` into `n`; header only when `header_only`.
-void load(Nrrd* n, const std::string& path, bool header_only) {
+LoadInfo load(Nrrd* n, const std::string& path, bool header_only) {
   IoStatePtr nio(nrrdIoStateNew());
   if (!nio) throw input_error(path, "out of memory");
   if (header_only) nrrdIoStateSet(nio.get(), nrrdIoStateSkipData, AIR_TRUE);
   if (nrrdLoad(n, path.c_str(), nio.get()) != 0) throw input_error(path, take_biff_message());
+  return {nio->encoding, nio->byteSkip, nio->lineSkip};
 }
 
 // Positive spacing of axis `ax` from "spacings" or "space directions"; 1 mm
@@ -142,70 +219,210 @@ double axis_spacing(const Nrrd* n, unsigned ax) {
   return std::isfinite(sp) && sp > 0.0 ? sp : 1.0;
 }
 
-}  // namespace
-
-Volume read_nrrd(const std::string& path) {
-  const std::lock_guard<std::mutex> lock(teem_mutex());
-  nrrdStateVerboseIO = 0;  // Teem would otherwise chat on stderr
-
-  // Pass 1, header only: validate before Teem allocates anything.
-  Dims3 dims{};
-  ScalarType type{};
-  {
-    const NrrdOwned head(nrrdNew());
-    load(head.get(), path, true);
-    if (head->dim != 3) {
-      throw input_error(path, "expected a 3-D scalar volume, found " + std::to_string(head->dim) +
-                                  "-D data (sizes " + sizes_text(head.get()) + ")");
-    }
-    const auto t = scalar_type_of(head->type);
-    if (!t) {
-      throw input_error(path, std::string("unsupported NRRD type '") +
-                                  airEnumStr(nrrdType, head->type) +
-                                  "' (expected a scalar integer or floating-point type)");
-    }
-    type = *t;
-    dims = {head->axis[0].size, head->axis[1].size, head->axis[2].size};
-    checked_voxels(path, dims, type);
+// Dims, type, spacing and origin of a loaded header, validated.
+VolumeHeader geometry(const Nrrd* n, const std::string& path) {
+  if (n->dim != 3) {
+    throw input_error(path, "expected a 3-D scalar volume, found " + std::to_string(n->dim) + "-D data (sizes " +
+                                sizes_text(n) + ")");
   }
-
-  // Pass 2: the real thing.
-  const NrrdOwned n(nrrdNew());
-  load(n.get(), path, false);
-  if (n->dim != 3 || n->type != nrrd_type_of(type) || n->axis[0].size != dims[0] ||
-      n->axis[1].size != dims[1] || n->axis[2].size != dims[2] || !n->data) {
-    throw input_error(path, "file changed while being read");
+  const auto t = scalar_type_of(n->type);
+  if (!t) {
+    throw input_error(path, std::string("unsupported NRRD type '") + airEnumStr(nrrdType, n->type) +
+                                "' (expected a scalar integer or floating-point type)");
   }
-
-  Volume v;
-  v.dims = dims;
-  v.source_type = type;
-  for (unsigned ax = 0; ax < 3; ++ax) v.spacing[ax] = axis_spacing(n.get(), ax);
-
+  VolumeHeader h;
+  h.type = *t;
+  h.dims = {n->axis[0].size, n->axis[1].size, n->axis[2].size};
+  for (unsigned ax = 0; ax < 3; ++ax) h.spacing[ax] = axis_spacing(n, ax);
   double origin[NRRD_SPACE_DIM_MAX];
-  const unsigned sdim = nrrdSpaceOriginGet(n.get(), origin);
+  const unsigned sdim = nrrdSpaceOriginGet(n, origin);
   if (sdim > 0 && nrrdSpaceVecExists(sdim, origin)) {
-    for (unsigned i = 0; i < 3; ++i) v.origin[i] = i < sdim ? origin[i] : 0.0;
+    for (unsigned i = 0; i < 3; ++i) h.origin[i] = i < sdim ? origin[i] : 0.0;
   } else if (n->spaceDim == 0) {
     // No "space": fall back on per-axis mins, which for cell-centred axes
     // are the edge of the first voxel, not its centre.
     for (unsigned ax = 0; ax < 3; ++ax) {
       const double mn = n->axis[ax].min;
       if (!std::isfinite(mn)) continue;
-      v.origin[ax] = n->axis[ax].center == nrrdCenterCell ? mn + v.spacing[ax] / 2 : mn;
+      h.origin[ax] = n->axis[ax].center == nrrdCenterCell ? mn + h.spacing[ax] / 2 : mn;
     }
   }
+  check_geometry(path, h.spacing, h.origin);
+  return h;
+}
 
+// ---- sizes, checked before Teem allocates ------------------------------------------
+
+// Deflate's largest expansion is 1032:1 (zlib's technical details: a
+// 258-byte match costs at least 2 bits); 1024 bytes of slack cover the gzip
+// header and trailer.
+constexpr std::uint64_t kMaxInflateRatio = 1032;
+// Compressed data that claims to expand more than this is decompressed once
+// without storing the output, to see whether it really does, before any
+// buffer of the declared size exists.
+constexpr std::uint64_t kTrustedRatio = 16;
+
+// Bytes that the compressed stream at the current position of `f` expands
+// to, counting at most `cap` (decompression output capped: nothing is kept).
+// Concatenated streams (several gzip members) are followed.
+std::uint64_t count_inflated(std::FILE* f, std::uint64_t cap) {
+  z_stream zs{};
+  if (inflateInit2(&zs, 15 + 32) != Z_OK) return 0;
+  std::vector<unsigned char> in(1 << 16), out(1 << 16);
+  std::uint64_t produced = 0;
+  bool done = false;
+  while (!done && produced < cap) {
+    zs.avail_in = static_cast<uInt>(std::fread(in.data(), 1, in.size(), f));
+    zs.next_in = in.data();
+    if (zs.avail_in == 0) break;
+    while (zs.avail_in > 0 && produced < cap) {
+      zs.next_out = out.data();
+      zs.avail_out = static_cast<uInt>(out.size());
+      const int rc = inflate(&zs, Z_NO_FLUSH);
+      produced += out.size() - zs.avail_out;
+      if (rc == Z_STREAM_END) {
+        if (inflateReset(&zs) != Z_OK) done = true;
+      } else if (rc != Z_OK && rc != Z_BUF_ERROR) {
+        done = true;  // corrupt: what came out so far is all there is
+        break;
+      }
+    }
+  }
+  inflateEnd(&zs);
+  return std::min(produced, cap);
+}
+
+// The same for bzip2; like Teem's reader (BZ2_bzRead), the first stream only.
+std::uint64_t count_bunzipped(std::FILE* f, std::uint64_t cap) {
+  bz_stream bz{};
+  if (BZ2_bzDecompressInit(&bz, 0, 0) != BZ_OK) return 0;
+  std::vector<char> in(1 << 16), out(1 << 16);
+  std::uint64_t produced = 0;
+  bool done = false;
+  while (!done && produced < cap) {
+    bz.avail_in = static_cast<unsigned>(std::fread(in.data(), 1, in.size(), f));
+    bz.next_in = in.data();
+    if (bz.avail_in == 0) break;
+    while (bz.avail_in > 0 && produced < cap) {
+      bz.next_out = out.data();
+      bz.avail_out = static_cast<unsigned>(out.size());
+      const int rc = BZ2_bzDecompress(&bz);
+      produced += out.size() - bz.avail_out;
+      if (rc != BZ_OK) {  // the end of the stream, or corrupt data
+        done = true;
+        break;
+      }
+    }
+  }
+  BZ2_bzDecompressEnd(&bz);
+  return std::min(produced, cap);
+}
+
+// Throws when the data cannot hold what the header declares: raw, hex and
+// ascii against the bytes present, gzip against deflate's largest ratio, and
+// compressed data that claims a high ratio by decompressing it once.
+void check_data_size(const std::string& path, const HeaderScan& scan, const LoadInfo& info, const VolumeHeader& h) {
+  const std::string& data = scan.data_file.empty() ? path : scan.data_file;
+  FilePtr f = open_for_reading(data);
+  const std::uint64_t total = file_size(f.get());
+  const std::uint64_t start = scan.data_file.empty() ? scan.data_offset : 0;
+  std::uint64_t avail = total > start ? total - start : 0;
+  if (info.byte_skip > 0) avail = avail > std::uint64_t(info.byte_skip) ? avail - std::uint64_t(info.byte_skip) : 0;
+  const std::uint64_t voxels = std::uint64_t(h.dims[0]) * h.dims[1] * h.dims[2];  // checked_voxels() ran
+  const std::uint64_t expected = voxels * scalar_type_size(h.type);
+  const std::string where = scan.data_file.empty() ? " after the header" : " in " + scan.data_file;
+  const NrrdEncoding* e = info.encoding;
+  auto truncated = [&](const std::string& what) { return input_error(path, "data truncated: " + what); };
+  if (e == nrrdEncodingRaw) {
+    if (avail < expected)
+      throw truncated("expected " + std::to_string(expected) + " bytes of raw data, found " + std::to_string(avail) + where);
+  } else if (e == nrrdEncodingHex) {
+    if (avail / 2 < expected)
+      throw truncated("expected " + std::to_string(expected) + " bytes as hex digits, found " + std::to_string(avail) +
+                      " characters" + where);
+  } else if (e == nrrdEncodingAscii) {
+    if (avail < 2 * voxels - 1)  // a digit and a separator per sample at least
+      throw truncated(std::to_string(voxels) + " ascii samples need at least " + std::to_string(2 * voxels - 1) +
+                      " characters, found " + std::to_string(avail) + where);
+  } else if (e == nrrdEncodingGzip || e == nrrdEncodingBzip2) {
+    const bool gzip = e == nrrdEncodingGzip;
+    if (gzip && expected > kMaxInflateRatio * avail + 1024)
+      throw truncated(std::to_string(avail) + " bytes of gzip data" + where + " cannot hold the " +
+                      std::to_string(expected) + " bytes declared (gzip expands at most 1032-fold)");
+    if (expected > kTrustedRatio * avail) {
+      if (std::fseek(f.get(), static_cast<long>(start), SEEK_SET) != 0)
+        throw input_error(path, "cannot seek in " + data + ": " + std::strerror(errno));
+      for (unsigned l = 0; l < info.line_skip; ++l) {
+        int c;
+        while ((c = std::fgetc(f.get())) != EOF && c != '\n') {
+        }
+      }
+      if (info.byte_skip > 0) std::fseek(f.get(), info.byte_skip, SEEK_CUR);
+      const std::uint64_t got = gzip ? count_inflated(f.get(), expected) : count_bunzipped(f.get(), expected);
+      if (got < expected)
+        throw input_error(path, "data truncated or corrupt: expected " + std::to_string(expected) +
+                                    " bytes after decompression, found " + std::to_string(got));
+    }
+  } else {
+    throw input_error(path, std::string("unsupported NRRD encoding '") + (e ? e->name : "unknown") +
+                                "' (softshell reads raw, gzip, bzip2, ascii and hex)");
+  }
+}
+
+// Header checks shared by read_nrrd and read_nrrd_header: everything but
+// the samples. Call with the Teem mutex held.
+VolumeHeader checked_header(const std::string& path) {
+  const HeaderScan scan = scan_header(path);
+  // Pass 1, header only: validate before Teem allocates anything.
+  const NrrdOwned head(nrrdNew());
+  const LoadInfo info = load(head.get(), path, true);
+  VolumeHeader h = geometry(head.get(), path);
+  checked_voxels(path, h.dims, h.type);
+  check_data_size(path, scan, info, h);
+  h.files = {path};
+  if (!scan.data_file.empty()) h.files.push_back(scan.data_file);
+  return h;
+}
+
+}  // namespace
+
+VolumeHeader read_nrrd_header(const std::string& path) {
+  const std::lock_guard<std::mutex> lock(teem_mutex());
+  nrrdStateVerboseIO = 0;  // Teem would otherwise chat on stderr
+  return checked_header(path);
+}
+
+Volume read_nrrd(const std::string& path) {
+  const std::lock_guard<std::mutex> lock(teem_mutex());
+  nrrdStateVerboseIO = 0;  // Teem would otherwise chat on stderr
+  const VolumeHeader h = checked_header(path);
+
+  // Pass 2: the real thing.
+  const NrrdOwned n(nrrdNew());
+  load(n.get(), path, false);
+  if (n->dim != 3 || n->type != nrrd_type_of(h.type) || n->axis[0].size != h.dims[0] ||
+      n->axis[1].size != h.dims[1] || n->axis[2].size != h.dims[2] || !n->data) {
+    throw input_error(path, "file changed while being read");
+  }
+
+  Volume v;
+  v.dims = h.dims;
+  v.source_type = h.type;
+  v.spacing = h.spacing;
+  v.origin = h.origin;
   v.data.resize(v.voxels());
   // After nrrdLoad the data is in host byte order.
-  decode_samples(static_cast<const unsigned char*>(n->data), v.voxels(), type, false,
-                 v.data.data());
+  decode_samples(static_cast<const unsigned char*>(n->data), v.voxels(), h.type, false, v.data.data());
   return v;
 }
 
 void write_nrrd(const std::string& path, const Volume& v, const WriteOptions& opt) {
   const ScalarType type = opt.type.value_or(v.source_type);
-  std::vector<unsigned char> bytes = encode_samples(v.data, type);
+  // Float samples are written as they are (Teem only reads the wrapped
+  // data): no second copy of the volume.
+  std::vector<unsigned char> bytes;
+  if (type != ScalarType::Float32) bytes = encode_samples(v.data, type);
+  void* samples = type == ScalarType::Float32 ? const_cast<float*>(v.data.data()) : static_cast<void*>(bytes.data());
 
   AtomicFile out(path);
   {
@@ -214,7 +431,7 @@ void write_nrrd(const std::string& path, const Volume& v, const WriteOptions& op
     const NrrdWrapper n(nrrdNew());
     const IoStatePtr nio(nrrdIoStateNew());
     if (!n || !nio) throw input_error(path, "out of memory");
-    if (nrrdWrap_va(n.get(), bytes.data(), nrrd_type_of(type), 3u, v.dims[0], v.dims[1],
+    if (nrrdWrap_va(n.get(), samples, nrrd_type_of(type), 3u, v.dims[0], v.dims[1],
                     v.dims[2]) != 0) {
       throw input_error(path, "cannot write: " + take_biff_message());
     }

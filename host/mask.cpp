@@ -212,10 +212,15 @@ void grow_unscanned(std::vector<std::uint8_t>& mask, const Dims3& d, int voxels,
 }
 
 Volume fill_unscanned(const Volume& v, const std::vector<std::uint8_t>& mask, int depth) {
-  const Dims3& d = v.dims;
-  const std::size_t n = v.voxels();
-  if (mask.size() != n) throw std::invalid_argument("fill_unscanned: mask size differs from the volume");
   Volume out = v;
+  fill_unscanned_in_place(out, mask, depth);
+  return out;
+}
+
+void fill_unscanned_in_place(Volume& out, const std::vector<std::uint8_t>& mask, int depth) {
+  const Dims3& d = out.dims;
+  const std::size_t n = out.voxels();
+  if (mask.size() != n) throw std::invalid_argument("fill_unscanned: mask size differs from the volume");
   // done: scanned or filled in an earlier layer.
   std::vector<std::uint8_t> done(mask);
   std::vector<std::size_t> layer, next;
@@ -247,7 +252,6 @@ Volume fill_unscanned(const Volume& v, const std::vector<std::uint8_t>& mask, in
     for (std::size_t j : next) done[j] = 0;
     layer.swap(next);
   }
-  return out;
 }
 
 std::vector<std::uint8_t> read_mask(const std::string& path, const Dims3& dims) {

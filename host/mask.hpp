@@ -114,6 +114,8 @@ std::vector<std::uint8_t> read_mask(const std::string& path, const Dims3& dims);
 // scan); the classifiers still hold u = 0 there. `depth` > 0 stops after
 // that many layers (the rest keeps its samples).
 Volume fill_unscanned(const Volume& v, const std::vector<std::uint8_t>& mask, int depth = 0);
+// The same, in place: no second copy of the volume (the CLI's classify).
+void fill_unscanned_in_place(Volume& v, const std::vector<std::uint8_t>& mask, int depth = 0);
 
 // Number of unscanned (0) entries.
 std::size_t count_unscanned(const std::vector<std::uint8_t>& mask);

@@ -290,6 +290,15 @@ std::string describe_volume(const Volume& v, const std::string& path) {
   os << "type:               " << scalar_type_name(v.source_type) << " ("
      << scalar_type_size(v.source_type) << " byte" << (scalar_type_size(v.source_type) > 1 ? "s" : "")
      << " per voxel)\n";
+  std::size_t non_finite = 0, first = 0;
+  for (std::size_t i = 0; i < v.data.size(); ++i)
+    if (!std::isfinite(v.data[i]) && non_finite++ == 0) first = i;
+  if (non_finite > 0) {
+    // Commands that compute refuse these (or replace them on request).
+    os << "non-finite samples: " << group_thousands(non_finite) << " (NaN or infinite; the first is sample " << first
+       << ", x " << first % v.dims[0] << " y " << (first / v.dims[0]) % v.dims[1] << " z "
+       << first / (v.dims[0] * v.dims[1]) << "), left out of the statistics below\n";
+  }
   os << "value range:        " << format_number(st.min) << " .. " << format_number(st.max) << "\n";
   os << "mean / std:         " << format_number(st.mean) << " / " << format_number(st.stddev) << "\n";
 

@@ -10,7 +10,7 @@ BUILD_DIR="${SOFTSHELL_BUILD_DIR:-$ROOT/build}"
 SOFTSHELL_PACKAGES=(
   pkg-config
   ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers pocl-opencl-icd clinfo
-  libteem-dev zlib1g-dev libpng-dev
+  libteem-dev zlib1g-dev libbz2-dev libpng-dev
   libcli11-dev libgtest-dev libeigen3-dev
   libglfw3-dev libglm-dev libgl-dev
   libepoxy-dev libimgui-dev libstb-dev

@@ -6,10 +6,12 @@
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <spawn.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
@@ -32,7 +34,10 @@ inline std::string slurp(const std::string& path) {
 
 struct RunResult {
   int status = -1;  // exit status, or -1 if the process did not exit normally
+  int signal = 0;   // the signal that ended it, if one did
   std::string out, err;
+  long max_rss_kb = 0;  // peak resident memory of the process
+  double seconds = 0;   // wall time
 };
 
 class CliTest : public ::testing::Test {
@@ -52,6 +57,7 @@ class CliTest : public ::testing::Test {
   }
   void TearDown() override {
     std::error_code ec;
+    fs::permissions(dir_, fs::perms::owner_all, fs::perm_options::add, ec);
     fs::remove_all(dir_, ec);
     fs::remove_all(capture_, ec);
   }
@@ -71,20 +77,34 @@ class CliTest : public ::testing::Test {
     return names;
   }
 
-  // Runs softshell with `args`, stdout and stderr captured to files; `env`
-  // entries ("NAME=value") are added to (or override) this process's environment.
-  RunResult run(const std::vector<std::string>& args, const std::vector<std::string>& env = {}) const {
-    const std::string out_path = capture_ + "/stdout", err_path = capture_ + "/stderr";
+  // A running softshell (see start()); wait() collects it.
+  struct Child {
+    pid_t pid = -1;
+    std::string out_path, err_path;
+    std::chrono::steady_clock::time_point t0;
+  };
+
+  // Starts softshell with `args`, stdout and stderr captured to files; `env`
+  // entries ("NAME=value") are added to (or override) this process's
+  // environment; `program` replaces the softshell binary (then args[0] is
+  // its first argument). `tag` keeps the captures of concurrent children
+  // apart; `stdin_path` (optional) is opened as standard input.
+  Child start(const std::vector<std::string>& args, const std::vector<std::string>& env = {},
+              const std::string& tag = "", const std::string& program = SOFTSHELL_EXE,
+              const std::string& stdin_path = "") const {
+    Child c;
+    c.out_path = capture_ + "/stdout" + tag;
+    c.err_path = capture_ + "/stderr" + tag;
     posix_spawn_file_actions_t actions;
     posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 1, out_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&actions, 2, err_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    std::vector<std::string> argv_s{SOFTSHELL_EXE};
+    posix_spawn_file_actions_addopen(&actions, 1, c.out_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_addopen(&actions, 2, c.err_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (!stdin_path.empty()) posix_spawn_file_actions_addopen(&actions, 0, stdin_path.c_str(), O_RDONLY, 0);
+    std::vector<std::string> argv_s{program};
     argv_s.insert(argv_s.end(), args.begin(), args.end());
     std::vector<char*> argv;
     for (std::string& a : argv_s) argv.push_back(a.data());
     argv.push_back(nullptr);
-    pid_t pid = 0;
     std::vector<std::string> env_s;
     for (char** e = environ; *e; ++e) {
       const std::string entry = *e;
@@ -97,20 +117,35 @@ class CliTest : public ::testing::Test {
     std::vector<char*> envp;
     for (std::string& e : env_s) envp.push_back(e.data());
     envp.push_back(nullptr);
-    const int rc = posix_spawn(&pid, SOFTSHELL_EXE, &actions, nullptr, argv.data(), envp.data());
+    c.t0 = std::chrono::steady_clock::now();
+    const int rc = posix_spawnp(&c.pid, program.c_str(), &actions, nullptr, argv.data(), envp.data());
     posix_spawn_file_actions_destroy(&actions);
-    RunResult r;
     if (rc != 0) {
-      r.err = std::string("posix_spawn failed: ") + std::strerror(rc);
-      return r;
+      c.pid = -1;
+      std::ofstream(c.err_path) << "posix_spawn failed: " << std::strerror(rc);
     }
-    int ws = 0;
-    while (::waitpid(pid, &ws, 0) < 0 && errno == EINTR) {
+    return c;
+  }
+
+  static RunResult wait(const Child& c) {
+    RunResult r;
+    if (c.pid > 0) {
+      int ws = 0;
+      struct rusage ru {};
+      while (::wait4(c.pid, &ws, 0, &ru) < 0 && errno == EINTR) {
+      }
+      r.status = WIFEXITED(ws) ? WEXITSTATUS(ws) : -1;
+      r.signal = WIFSIGNALED(ws) ? WTERMSIG(ws) : 0;
+      r.max_rss_kb = ru.ru_maxrss;
+      r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - c.t0).count();
     }
-    r.status = WIFEXITED(ws) ? WEXITSTATUS(ws) : -1;
-    r.out = slurp(out_path);
-    r.err = slurp(err_path);
+    r.out = slurp(c.out_path);
+    r.err = slurp(c.err_path);
     return r;
+  }
+
+  RunResult run(const std::vector<std::string>& args, const std::vector<std::string>& env = {}) const {
+    return wait(start(args, env));
   }
 
   // Exit status 2 and one line "softshell: error: ..." containing `parts`.

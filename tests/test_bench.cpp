@@ -189,7 +189,7 @@ TEST(BenchPieces, HostApplyIsTheOracleMatrix) {
   hs.b = sys.download_b();
   hs.fixed = d.fixed;
   const test::OracleSystem o = test::assemble_oracle(d);
-  std::mt19937 rng(unsigned(test::seed()));
+  std::mt19937 rng{unsigned(test::seed())};
   std::uniform_real_distribution<float> U(-1.0f, 1.0f);
   std::vector<float> x(hs.voxels());
   for (std::size_t i = 0; i < x.size(); ++i) x[i] = d.fixed[i] ? 0.0f : U(rng);

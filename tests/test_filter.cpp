@@ -1,8 +1,10 @@
 // Gaussian lowpass kernels against an independent float64 CPU reference, on
 // odd sizes and anisotropic spacing; guard bands; run-to-run determinism.
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 
+#include "error.hpp"
 #include "filter.hpp"
 #include "reference.hpp"
 #include "test_support.hpp"
@@ -116,10 +118,48 @@ TEST(Lowpass, BitIdenticalAcrossRuns) {
 TEST(Lowpass, RejectsAliasingAndBadSigma) {
   Runtime& rt = runtime();
   const GridDesc g = make_grid({8, 8, 8}, {1, 1, 1});
-  EXPECT_THROW(Lowpass(rt, g, {-1.0, 3.0}), std::invalid_argument);
+  EXPECT_THROW(Lowpass(rt, g, {-1.0, 3.0}), InputError);
   Lowpass f(rt, g, {1.0, 3.0});
   cl::Buffer b = rt.buffer(512 * sizeof(float));
   EXPECT_THROW(f.apply(b, b), std::invalid_argument);
+}
+
+// A sigma whose radius exceeds the kernel's limit is refused with the
+// numbers (it used to overflow ceil(3 sigma) into a 3-tap filter, or to
+// allocate gigabytes of weights first).
+TEST(Lowpass, RefusesTooWideASigmaWithTheNumbers) {
+  Runtime& rt = runtime();
+  const GridDesc g = make_grid({8, 8, 8}, {1e-3, 1, 1});
+  for (double sigma : {1.0, 1e8, 1e9, 1e300}) {
+    SCOPED_TRACE(sigma);
+    try {
+      Lowpass(rt, g, {sigma, 3.0});
+      ADD_FAILURE() << "accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("voxels along x (spacing 0.001 mm)"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_NO_THROW(Lowpass(rt, g, {0.03, 3.0}));  // 30 voxels along x, radius 90
+  EXPECT_THROW(check_lowpass_sigma(std::nan(""), {1, 1, 1}, "--sigma"), InputError);
+  EXPECT_THROW(check_lowpass_sigma(HUGE_VAL, {1, 1, 1}, "--sigma"), InputError);
+  EXPECT_NO_THROW(check_lowpass_sigma(33.3, {1, 1, 1}, "--sigma"));
+  EXPECT_THROW(check_lowpass_sigma(33.4, {1, 1, 1}, "--sigma"), InputError);
+}
+
+// Weights of a wide Gaussian (radius 60000: k * k passes INT_MAX) are the
+// definition's, and a radius beyond kMaxWeightsRadius is refused.
+TEST(Lowpass, WideWeightsAreExactAndHugeOnesRefused) {
+  const double sigma = 20000;
+  const std::vector<float> w = gaussian_weights(sigma, 3.0);
+  ASSERT_EQ(w.size(), 2 * 60000u + 1);
+  double sum = 0;
+  for (float x : w) sum += x;
+  EXPECT_NEAR(sum, 1.0, 1e-4);
+  const double centre = w[60000];
+  EXPECT_NEAR(w[0] / centre, std::exp(-4.5), 1e-5);      // k = -60000
+  EXPECT_NEAR(w[110000] / centre, std::exp(-0.5 * 50000.0 * 50000.0 / (sigma * sigma)), 1e-5);
+  EXPECT_THROW(gaussian_weights(1e9, 3.0), std::invalid_argument);
+  EXPECT_THROW(gaussian_weights(HUGE_VAL, 3.0), std::invalid_argument);
 }
 
 }  // namespace

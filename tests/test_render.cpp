@@ -226,7 +226,8 @@ TEST(Render, BackToFrontNearRedOverFarBlue) {
       cam.azimuth = az;
       s.order = order;
       r.render(cam, s);
-      const std::uint8_t* p = r.read().pixel(50, 50);
+      const RgbaImage img = r.read();  // kept: pixel() points into it
+      const std::uint8_t* p = img.pixel(50, 50);
       const bool red_near = std::cos(glm::radians(az)) > 0;  // camera on the -z side
       SCOPED_TRACE(std::string(order == viewer::DrawOrder::Lists ? "lists" : "sort") + ", azimuth " +
                    std::to_string(az));

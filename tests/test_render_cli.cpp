@@ -110,6 +110,31 @@ TEST_F(RenderCli, ViewerStartsInEachRendererAndTheyLineUp) {
   }
 }
 
+// The output path is a pattern expanded by softshell, never a printf
+// format (`-o 'f%s%s%s%s.png'` used to crash), and no frame may replace the
+// input (a NRRD named r-000.png used to be overwritten by frame 0).
+TEST_F(RenderCli, TurntablePatternsAreSafe) {
+  const std::string in = file("u.nrrd");
+  write_volume(in, shell_volume(16));
+  for (const char* bad : {"f%s%s%s%s.png", "f%n.png", "f%d%d.png", "f%x.png", "f%.png", "f%-3d.png", "f%999d.png"}) {
+    SCOPED_TRACE(bad);
+    expect_one_line_error(run({"render", in, "--turntable", "2", "--size", "32x32", "-o", file(bad)}),
+                          {"a turntable pattern takes exactly one %d"});
+  }
+  const RunResult r = run({"render", in, "--turntable", "2", "--size", "32x32", "-q", "-o", file("f%%-%03d.png")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_TRUE(fs::exists(file("f%-000.png")));
+  EXPECT_TRUE(fs::exists(file("f%-001.png")));
+  // A volume named like frame 0 (NRRD by content).
+  write_volume(file("r.nrrd"), shell_volume(16));
+  fs::rename(file("r.nrrd"), file("r-000.png"));
+  const std::string before = slurp(file("r-000.png"));
+  expect_one_line_error(run({"render", file("r-000.png"), "--turntable", "2", "--size", "32x32", "-o", file("r.png")}),
+                        {file("r-000.png") + ": output would overwrite the input file"});
+  EXPECT_EQ(slurp(file("r-000.png")), before);
+  EXPECT_FALSE(fs::exists(file("r-001.png")));
+}
+
 TEST_F(RenderCli, BadInputIsOneLineExit2) {
   const std::string junk = write("junk.nrrd", "this is not a volume\n");
   expect_one_line_error(run({"render", junk, "-o", file("a.png")}), {"junk.nrrd"});

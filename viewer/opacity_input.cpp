@@ -10,7 +10,9 @@
 #include "auto_iso.hpp"
 #include "error.hpp"
 #include "io.hpp"
+#include "filter.hpp"
 #include "mask.hpp"
+#include "memory_need.hpp"
 
 namespace softshell::viewer {
 
@@ -22,6 +24,7 @@ bool looks_like_opacity(const Volume& v) {
 OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, const std::string& iso_text) {
   OpacityInput in;
   Volume v = read_volume(path);
+  require_finite(v, path, "replace them first (e.g. softshell lowpass IN --sigma 0 --replace-non-finite 0 -o OUT)");
   const bool opacity = kind == InputKind::Opacity || (kind == InputKind::Auto && looks_like_opacity(v));
   if (opacity) {
     if (!looks_like_opacity(v))
@@ -31,8 +34,13 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
     in.note = "opacity volume " + path;
     return in;
   }
-  // As `softshell classify IN --iso auto` does: auto mask, near field removed, auto isovalue,
-  // unscanned voxels filled for the lowpass and held at u = 0.
+  // As `softshell classify IN --iso auto` does: auto mask, near field
+  // removed, auto isovalue, unscanned voxels filled for the lowpass and held
+  // at u = 0; too wide a lowpass or too large a volume refused first.
+  const VariationalParams defaults;
+  check_lowpass_sigma(1.0, v.spacing, "the classifier's lowpass sigma");
+  check_lowpass_sigma(defaults.grad_sigma_mm, v.spacing, "the classifier's --grad-sigma");
+  check_classify_memory(rt, path, v.dims, Classifier::Variational, true);
   MaskReport mr;
   in.mask = scanned_mask(v, MaskParams{}, &mr);
   if (mr.unscanned == 0) in.mask.clear();

@@ -1,6 +1,8 @@
 // Shared pieces of the CLI's commands (see cli_common.hpp).
 #include "cli_common.hpp"
 
+#include <cmath>
+
 #include "error.hpp"
 
 namespace softshell::cli {
@@ -27,6 +29,18 @@ std::optional<RawSpec> RawOptions::spec() const {
   if (!spacing.empty()) r.spacing = parse_vec3(spacing, "--spacing");
   r.big_endian = big_endian;
   return r;
+}
+
+void NonFiniteOption::add_to(CLI::App* app) {
+  app->add_option("--replace-non-finite", value,
+                  "Replace NaN and infinite samples by this value (file units); without it they are refused")
+      ->type_name("V");
+}
+
+void NonFiniteOption::apply(Volume& v, const std::string& path) const {
+  if (!value) return require_finite(v, path, "give --replace-non-finite V to replace them");
+  if (!std::isfinite(*value)) throw InputError("--replace-non-finite: expected a finite number");
+  replace_non_finite(v, static_cast<float>(*value));
 }
 
 void add_device_option(CLI::App* app, std::string& device) {

@@ -73,6 +73,18 @@ struct RawOptions {
   std::optional<RawSpec> spec() const;
 };
 
+// --replace-non-finite V: what a command does with NaN and infinite samples.
+// By default they are refused (exit 2, the first one named): every stage
+// downstream (lowpass, normalisation, the solver) would turn one of them
+// into NaN everywhere. With V they become V (in the file's units).
+struct NonFiniteOption {
+  std::optional<double> value;
+
+  void add_to(CLI::App* app);
+  // Refuses or replaces; `path` names the file in the message.
+  void apply(Volume& v, const std::string& path) const;
+};
+
 // --device I|NAME, documented the same way everywhere.
 void add_device_option(CLI::App* app, std::string& device);
 

@@ -17,6 +17,8 @@
 #include "levoy.hpp"
 #include "mask.hpp"
 #include "metrics.hpp"
+#include "memory_need.hpp"
+#include "filter.hpp"
 #include "variational.hpp"
 #include "text.hpp"
 
@@ -34,6 +36,7 @@ struct ClassifyOptions {
   bool compress = false, quiet = false, stats = false, no_fmg = false, literal = false, no_iso_field = false;
   std::set<std::string> given;  // long option names given on the command line
   RawOptions raw;
+  NonFiniteOption non_finite;
 };
 
 // A number, or nullopt for "auto".
@@ -45,6 +48,12 @@ std::optional<double> parse_iso(const std::string& text) {
     throw InputError("--iso: expected a number in the input's intensity units, auto, auto-local, auto-ridge or auto-edge, got '" +
                      text + "'");
   return v;
+}
+
+std::string format_iso(double iso) {
+  std::ostringstream s;
+  s << iso;
+  return s.str();
 }
 
 // The data region (host/mask.hpp): derived from the zero fill, read from a
@@ -97,6 +106,61 @@ void write_opacity(const ClassifyOptions& o, const Volume& u) {
   write_volume(o.out, u, w);
 }
 
+// The variational parameters of the options, checked (all but v_iso):
+// refused before anything is read.
+VariationalParams variational_params(const ClassifyOptions& o) {
+  VariationalParams p = o.vp;
+  p.sigma_mm = o.sigma < 0 ? 1.0 : o.sigma;
+  const auto finite = [](double x) { return std::isfinite(x); };
+  if (!finite(p.alpha) || !finite(p.beta) || !finite(p.gamma) || !finite(p.omega) || !finite(p.delta) ||
+      !finite(p.epsilon) || !finite(p.u_ind) || !finite(p.kappa) || !finite(p.grad_sigma_mm) || !finite(p.sigma_mm))
+    throw InputError("--alpha, --beta, --gamma, --omega, --delta, --epsilon, --u-ind, --kappa, --sigma and "
+                     "--grad-sigma must be finite numbers");
+  if (!(p.gamma * p.delta > 0)) throw InputError("--gamma and --delta must be > 0 (the system is singular otherwise)");
+  if (p.alpha < 0 || p.beta < 0) throw InputError("--alpha and --beta must be >= 0");
+  if (!(p.epsilon > 0)) throw InputError("--epsilon must be > 0");
+  if (!(p.grad_sigma_mm >= 0)) throw InputError("--grad-sigma must be >= 0");
+  if (!(p.kappa >= 0)) throw InputError("--kappa must be >= 0");
+  if (o.literal) {
+    // The paper's terms exactly; weights not given on the command line take
+    // the values the earlier study chose for the literal functional.
+    const VariationalParams lit = VariationalParams::literal_defaults();
+    const auto given = [&](const char* name) { return o.given.count(name) > 0; };
+    if (!given("--alpha")) p.alpha = lit.alpha;
+    if (!given("--beta")) p.beta = lit.beta;
+    if (!given("--gamma")) p.gamma = lit.gamma;
+    if (!given("--omega")) p.omega = lit.omega;
+    if (!given("--delta")) p.delta = lit.delta;
+    if (!given("--epsilon")) p.epsilon = lit.epsilon;
+    p.grad_sigma_mm = 0, p.kappa = 0, p.thickness_mm = 0, p.edge_share = 0, p.sharpen_iterations = 0, p.max_gain = 0;
+  }
+  if (!(p.thickness_mm >= 0) || !std::isfinite(p.thickness_mm) || p.thickness_mm > 1e3)
+    throw InputError("--shell must be a finite number in [0, 1000] (mm)");
+  if (!(p.profile_power >= 1 && p.profile_power <= 4)) throw InputError("--profile-power must be in [1, 4]");
+  if (!(p.edge_share >= 0 && p.edge_share <= 0.5)) throw InputError("--edge-share must be in [0, 0.5]");
+  if (!(p.edge_power >= 0 && p.edge_power <= 8)) throw InputError("--edge-power must be in [0, 8]");
+  if (p.omega < 0 || p.omega > 1 || p.delta > 1) throw InputError("--omega and --delta must be in [0, 1]");
+  // float32 on the device: parameters beyond 1e6 overflow the system's
+  // coefficients (u_ind: its square), and below 1e-6 epsilon is 0.
+  if (p.alpha > 1e6 || p.beta > 1e6 || p.gamma > 1e6 || p.kappa > 1e6 || std::fabs(p.u_ind) > 1e6 ||
+      p.epsilon > 1e6 || p.epsilon < 1e-6)
+    throw InputError("--alpha, --beta, --gamma, --kappa and |--u-ind| must be at most 1e6, --epsilon in [1e-6, 1e6]");
+  return p;
+}
+
+SolverParams solver_params(const ClassifyOptions& o) {
+  SolverParams sp = o.sp;
+  if (o.cycle != "pcg" && o.cycle != "v") throw InputError("--cycle must be pcg or v");
+  if (o.smoother != "gs" && o.smoother != "jacobi") throw InputError("--smoother must be gs or jacobi");
+  if (!(sp.tol > 0) || sp.tol >= 1) throw InputError("--tol must be in (0, 1)");
+  if (sp.max_cycles < 1 || sp.max_levels < 1) throw InputError("--max-cycles and --levels must be >= 1");
+  if (sp.max_cycles > 100000 || sp.max_levels > 64) throw InputError("--max-cycles must be at most 100000, --levels 64");
+  sp.krylov = o.cycle == "pcg";
+  sp.jacobi = o.smoother == "jacobi";
+  sp.full_multigrid = !o.no_fmg;
+  return sp;
+}
+
 int run_levoy(const ClassifyOptions& o, Runtime& rt, const Volume& in, double iso, const std::string& iso_text,
               const DataMask& mask, Clock::time_point t0) {
   LevoyParams p;
@@ -130,46 +194,20 @@ int run_levoy(const ClassifyOptions& o, Runtime& rt, const Volume& in, double is
 
 int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, double iso, const std::string& iso_text,
                     const DataMask& mask, Clock::time_point t0) {
-  VariationalParams p = o.vp;
   const IntensityMap map = in.intensity_map();
+  VariationalParams p = variational_params(o);
   p.v_iso = map.to_unit(iso);
-  p.sigma_mm = o.sigma < 0 ? 1.0 : o.sigma;
-  if (!(p.gamma * p.delta > 0)) throw InputError("--gamma and --delta must be > 0 (the system is singular otherwise)");
-  if (p.alpha < 0 || p.beta < 0) throw InputError("--alpha and --beta must be >= 0");
-  if (!(p.epsilon > 0)) throw InputError("--epsilon must be > 0");
-  if (!(p.grad_sigma_mm >= 0)) throw InputError("--grad-sigma must be >= 0");
-  if (!(p.kappa >= 0)) throw InputError("--kappa must be >= 0");
-  if (o.literal) {
-    // The paper's terms exactly; weights not given on the command line take
-    // the values the earlier study chose for the literal functional.
-    const VariationalParams lit = VariationalParams::literal_defaults();
-    const auto given = [&](const char* name) { return o.given.count(name) > 0; };
-    if (!given("--alpha")) p.alpha = lit.alpha;
-    if (!given("--beta")) p.beta = lit.beta;
-    if (!given("--gamma")) p.gamma = lit.gamma;
-    if (!given("--omega")) p.omega = lit.omega;
-    if (!given("--delta")) p.delta = lit.delta;
-    if (!given("--epsilon")) p.epsilon = lit.epsilon;
-    p.grad_sigma_mm = 0, p.kappa = 0, p.thickness_mm = 0, p.edge_share = 0, p.sharpen_iterations = 0, p.max_gain = 0;
-  }
-  if (!(p.thickness_mm >= 0) || !std::isfinite(p.thickness_mm)) throw InputError("--shell must be a finite number >= 0 (mm)");
-  if (!(p.profile_power >= 1 && p.profile_power <= 4)) throw InputError("--profile-power must be in [1, 4]");
-  if (!(p.edge_share >= 0 && p.edge_share <= 0.5)) throw InputError("--edge-share must be in [0, 0.5]");
-  if (!(p.edge_power >= 0 && p.edge_power <= 8)) throw InputError("--edge-power must be in [0, 8]");
-  if (p.omega < 0 || p.omega > 1 || p.delta > 1) throw InputError("--omega and --delta must be in [0, 1]");
-  SolverParams sp = o.sp;
-  if (o.cycle != "pcg" && o.cycle != "v") throw InputError("--cycle must be pcg or v");
-  if (o.smoother != "gs" && o.smoother != "jacobi") throw InputError("--smoother must be gs or jacobi");
-  if (!(sp.tol > 0) || sp.tol >= 1) throw InputError("--tol must be in (0, 1)");
-  if (sp.max_cycles < 1 || sp.max_levels < 1) throw InputError("--max-cycles and --levels must be >= 1");
-  sp.krylov = o.cycle == "pcg";
-  sp.jacobi = o.smoother == "jacobi";
-  sp.full_multigrid = !o.no_fmg;
+  // The normalised data lies in [0, 1]: an isovalue a thousand ranges away
+  // is a typo, and would overflow the system's float32 coefficients.
+  if (!(std::fabs(p.v_iso) <= 1e3))
+    throw InputError("--iso " + format_iso(iso) + " is far outside the data's intensity range (" + map.describe() + ")");
+  const SolverParams sp = solver_params(o);
   std::optional<Volume> init;
   if (!o.init.empty()) {
     init = read_volume(o.init);
     if (init->dims != in.dims)
       throw InputError(o.init + ": --init has dims " + dims_text(init->dims) + ", the volume " + dims_text(in.dims));
+    require_finite(*init, o.init, "an initial opacity must be finite");
   }
   SolveReport report;
   ClassifyTiming timing;
@@ -223,13 +261,32 @@ int run_classify(const ClassifyOptions& o) {
   const auto t0 = Clock::now();
   if (o.method != "levoy" && o.method != "variational")
     throw InputError("--method " + o.method + ": unknown (methods: variational, levoy)");
+  const bool variational = o.method == "variational";
   const std::optional<double> given_iso = parse_iso(o.iso);
   if (o.mask.empty()) throw InputError("--mask: expected FILE, auto or none");
-  ensure_distinct_output(o.in, o.out);
-  if (o.mask != "auto" && o.mask != "none") ensure_distinct_output(o.mask, o.out);
+  if (o.near_field != "remove" && o.near_field != "keep")
+    throw InputError("--near-field: expected remove or keep, got '" + o.near_field + "'");
+  // Every parameter before any file is read.
+  const VariationalParams vp = variational ? variational_params(o) : VariationalParams{};
+  if (variational) solver_params(o);
+  if (!variational && (!(o.thickness > 0) || o.thickness > 100)) throw InputError("--thickness must be in (0, 100] voxels");
+  const std::string mask_file = o.mask != "auto" && o.mask != "none" ? o.mask : "";
+  ensure_distinct_outputs({o.in, mask_file, o.init}, {o.out});
   const auto raw = o.raw.spec();
+  // The header first: sizes, data files, the lowpasses' widths and the
+  // memory the classifier needs are all checked before a sample is read.
+  const VolumeHeader head = read_volume_header(o.in, raw);
+  if (variational) {
+    check_lowpass_sigma(vp.sigma_mm, head.spacing, "--sigma");
+    check_lowpass_sigma(vp.grad_sigma_mm, head.spacing, "--grad-sigma");
+  } else {
+    check_lowpass_sigma(o.sigma < 0 ? 0.0 : o.sigma, head.spacing, "--sigma");
+  }
   Runtime rt(o.device);
-  const Volume in = read_volume(o.in, raw);
+  check_classify_memory(rt, o.in, head.dims, variational ? Classifier::Variational : Classifier::Levoy,
+                        o.mask != "none");
+  Volume in = read_volume(o.in, raw);
+  o.non_finite.apply(in, o.in);
   DataMask mask = make_mask(o.mask, in);
   if (o.near_field == "remove") {
     // The bright near field under the probe is an occluder, not the object
@@ -243,8 +300,6 @@ int run_classify(const ClassifyOptions& o) {
     else
       t << "; no bright near field (beam along " << "xyz"[nf.axis] << ")";
     mask.text += t.str();
-  } else if (o.near_field != "keep") {
-    throw InputError("--near-field: expected remove or keep, got '" + o.near_field + "'");
   }
   double iso = 0;
   std::string iso_text;
@@ -272,15 +327,17 @@ int run_classify(const ClassifyOptions& o) {
                : ap.rule == AutoIsoRule::EchoRidge ? " (auto: echo ridge)"
                                                    : " (auto: edge)";
   }
+  // Levoy's kernel takes the isovalue as a float.
+  if (!variational && !(std::fabs(iso) <= 3.0e38)) throw InputError("--iso " + format_iso(iso) + " does not fit a float");
   // Unscanned samples continue the scanned data, so the lowpass and the
-  // gradients see no step at the edge of the sweep (host/mask.hpp).
-  Volume filled = mask.scanned.empty() ? Volume() : fill_unscanned(in, mask.scanned);
+  // gradients see no step at the edge of the sweep (host/mask.hpp); in
+  // place, the unfilled samples are not needed any more.
+  if (!mask.scanned.empty()) fill_unscanned_in_place(in, mask.scanned);
   // The local isovalue field levelled out: the classifier then works at one
   // isovalue on data whose brightness no longer drifts (host/auto_iso.hpp).
-  if (!iso_field.empty()) filled = level_isovalue(mask.scanned.empty() ? in : filled, iso_field, iso);
-  const Volume& data = filled.voxels() > 0 ? filled : in;
-  return o.method == "levoy" ? run_levoy(o, rt, data, iso, iso_text, mask, t0)
-                             : run_variational(o, rt, data, iso, iso_text, mask, t0);
+  if (!iso_field.empty()) in = level_isovalue(in, iso_field, iso);
+  return o.method == "levoy" ? run_levoy(o, rt, in, iso, iso_text, mask, t0)
+                             : run_variational(o, rt, in, iso, iso_text, mask, t0);
 }
 
 }  // namespace
@@ -390,6 +447,7 @@ void add_classify_command(CLI::App& app, Action& action) {
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   add_device_option(sub, o->device);
   o->raw.add_to(sub);
+  o->non_finite.add_to(sub);
   sub->callback([&action, o, sub] {
     for (const CLI::Option* opt : sub->get_options())
       if (opt->count() > 0) o->given.insert("--" + opt->get_single_name());

@@ -74,6 +74,8 @@ int run_evaluate(EvaluateOptions o) {
   check_options(o);
   const Volume u = read_volume(o.opacity);
   const Volume sdf = read_volume(o.truth);
+  require_finite(u, o.opacity, "an opacity volume must be finite");
+  require_finite(sdf, o.truth, "a signed distance volume must be finite");
   if (u.dims != sdf.dims)
     throw InputError("dims differ: " + dims_text(u.dims) + " (" + o.opacity + ") vs " + dims_text(sdf.dims) + " (" +
                      o.truth + ")");

@@ -51,6 +51,7 @@ struct Figure2Options {
   double levoy_sigma = 0;  // mm; 0: the raw volume, as in the paper
   bool quiet = false;
   RawOptions raw;
+  NonFiniteOption non_finite;
 };
 
 struct SliceSpec {
@@ -264,7 +265,8 @@ int run_figure2(const Figure2Options& o) {
   ensure_distinct_output(o.in, o.out);
 
   Runtime rt(o.device);
-  const Volume in = read_volume(o.in, o.raw.spec());
+  Volume in = read_volume(o.in, o.raw.spec());
+  o.non_finite.apply(in, o.in);
   if (spec.index >= 0 && std::size_t(spec.index) >= in.dims[spec.axis])
     throw InputError("--slice " + o.slice + ": index out of range, the volume has " +
                      std::to_string(in.dims[spec.axis]) + " slices along " + "xyz"[spec.axis]);
@@ -405,6 +407,7 @@ void add_figure2_command(CLI::App& app, Action& action) {
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   add_device_option(sub, o->device);
   o->raw.add_to(sub);
+  o->non_finite.add_to(sub);
   sub->callback([&action, o] { action = [o] { return run_figure2(*o); }; });
 }
 

@@ -21,6 +21,7 @@ struct LowpassOptions {
   double truncate = 3.0;
   bool as_float = false, compress = false, quiet = false;
   RawOptions raw;
+  NonFiniteOption non_finite;
 };
 
 int run_lowpass(const LowpassOptions& o) {
@@ -29,10 +30,13 @@ int run_lowpass(const LowpassOptions& o) {
   if (!(o.truncate > 0) || o.truncate > 10) throw InputError("--truncate must be in (0, 10]");
   ensure_distinct_output(o.in, o.out);
   const auto raw = o.raw.spec();
+  // The kernel's width from the header, before the samples are read.
+  check_lowpass_sigma(o.sigma, read_volume_header(o.in, raw).spacing, "--sigma", o.truncate);
   Runtime rt(o.device);  // fail fast on the device before reading a large input
   const double t_device = seconds_since(t0);
   const auto t_read0 = Clock::now();
-  const Volume in = read_volume(o.in, raw);
+  Volume in = read_volume(o.in, raw);
+  o.non_finite.apply(in, o.in);
   const double t_read = seconds_since(t_read0);
 
   const auto t1 = Clock::now();
@@ -85,6 +89,7 @@ void add_lowpass_command(CLI::App& app, Action& action) {
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   add_device_option(sub, o->device);
   o->raw.add_to(sub);
+  o->non_finite.add_to(sub);
   sub->callback([&action, o] { action = [o] { return run_lowpass(*o); }; });
 }
 

@@ -21,6 +21,7 @@ struct MeshOptions {
   double level = std::nan("");
   bool quiet = false;
   RawOptions raw;
+  NonFiniteOption non_finite;
 };
 
 int run_mesh(const MeshOptions& o) {
@@ -29,7 +30,8 @@ int run_mesh(const MeshOptions& o) {
   if (o.out.size() < 4 || o.out.substr(o.out.size() - 4) != ".ply")
     throw InputError("-o " + o.out + ": expected a .ply file");
   ensure_distinct_output(o.in, o.out);
-  const Volume v = read_volume(o.in, o.raw.spec());
+  Volume v = read_volume(o.in, o.raw.spec());
+  o.non_finite.apply(v, o.in);
   for (int a = 0; a < 3; ++a)
     if (v.dims[a] < 2) throw input_error(o.in, "Marching Cubes needs at least 2 samples along every axis");
 
@@ -84,6 +86,7 @@ void add_mesh_command(CLI::App& app, Action& action) {
   sub->add_option("-o,--output", o->out, "Output mesh (.ply, binary little-endian)")->required();
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   o->raw.add_to(sub);
+  o->non_finite.add_to(sub);
   add_device_option(sub, o->device);
   sub->callback([&action, o] { action = [o] { return run_mesh(*o); }; });
 }

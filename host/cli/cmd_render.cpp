@@ -3,6 +3,7 @@
 // window (headless under `xvfb-run -a`). Built into the viewer library; the
 // CLI registers it only when the viewer is built (SOFTSHELL_HAVE_VIEWER).
 #include <array>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <iomanip>
@@ -30,13 +31,41 @@ struct RenderOptions {
   double level = 0.2;                             // --method mc (cmd_render_methods.cpp)
 };
 
-// OUT.png -> OUT-007.png for turntable frame 7 (or printf-style when OUT has
-// a %d conversion).
+// OUT.png -> OUT-007.png for turntable frame 7, or OUT's own pattern: one
+// %d conversion (an optional 0 flag and width, e.g. %03d) and %% for a
+// literal %. The pattern is expanded here, never handed to printf: a path
+// is not a format string.
 std::string frame_path(const std::string& out, int i) {
   if (out.find('%') != std::string::npos) {
-    char buf[4096];
-    std::snprintf(buf, sizeof buf, out.c_str(), i);
-    return buf;
+    const auto bad = [&] {
+      return InputError("-o " + out + ": a turntable pattern takes exactly one %d (e.g. frame-%03d.png; %% for a %)");
+    };
+    std::string path;
+    int conversions = 0;
+    for (std::size_t k = 0; k < out.size(); ++k) {
+      if (out[k] != '%') {
+        path += out[k];
+        continue;
+      }
+      if (k + 1 < out.size() && out[k + 1] == '%') {
+        path += '%';
+        ++k;
+        continue;
+      }
+      std::size_t j = k + 1;
+      const bool zero = j < out.size() && out[j] == '0';
+      if (zero) ++j;
+      int width = 0;
+      while (j < out.size() && std::isdigit(static_cast<unsigned char>(out[j])) && width < 100)
+        width = 10 * width + (out[j++] - '0');
+      if (j >= out.size() || out[j] != 'd' || width > 32 || ++conversions > 1) throw bad();
+      std::string number = std::to_string(i);
+      if (int(number.size()) < width) number.insert(0, std::size_t(width) - number.size(), zero ? '0' : ' ');
+      path += number;
+      k = j;
+    }
+    if (conversions != 1) throw bad();
+    return path;
   }
   const std::size_t dot = out.rfind('.'), slash = out.rfind('/');
   const std::size_t cut = dot == std::string::npos || (slash != std::string::npos && dot < slash) ? out.size() : dot;
@@ -80,7 +109,11 @@ int run_render(const RenderOptions& o) {
     throw InputError("-o " + o.out + ": a %d pattern needs --turntable");
   viewer::RenderSettings settings = o.splat.settings();
   if (!o.crop.empty()) parse_crop(o.crop, settings);
-  ensure_distinct_output(o.in, o.out);
+  // Every file this run writes, checked against the input before anything
+  // is drawn (a turntable frame may be named like the input).
+  std::vector<std::string> outputs;
+  for (int i = 0; i < std::max(o.turntable, 1); ++i) outputs.push_back(o.turntable ? frame_path(o.out, i) : o.out);
+  ensure_distinct_outputs({o.in}, outputs);
 
   Runtime rt(o.device);
   const viewer::OpacityInput input = viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso);
@@ -103,7 +136,7 @@ int run_render(const RenderOptions& o) {
   for (int i = 0; i < frames; ++i) {
     cam.azimuth = az + 360.0f * float(i) / float(frames);
     stats = r.render(cam, settings);
-    write_png(o.turntable ? frame_path(o.out, i) : o.out, r.read().rgb());
+    write_png(outputs[std::size_t(i)], r.read().rgb());
   }
 
   double ms = 0, sort_ms = 0;

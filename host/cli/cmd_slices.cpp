@@ -17,14 +17,18 @@ struct SlicesOptions {
   int height = 0;
   bool quiet = false;
   RawOptions raw;
+  NonFiniteOption non_finite;
 };
 
 int run_slices(const std::vector<std::string>& inputs, const std::string& out, int height, const RawOptions& raw,
-               bool quiet) {
+               const NonFiniteOption& non_finite, bool quiet) {
   if (height < 0 || height > 4096) throw InputError("--height must be in [0, 4096]");
-  for (const auto& in : inputs) ensure_distinct_output(in, out);
+  ensure_distinct_outputs(inputs, {out});
   std::vector<Volume> volumes;
-  for (const auto& in : inputs) volumes.push_back(read_volume(in, raw.spec()));
+  for (const auto& in : inputs) {
+    volumes.push_back(read_volume(in, raw.spec()));
+    non_finite.apply(volumes.back(), in);
+  }
   std::vector<const Volume*> ptrs;
   for (const auto& v : volumes) ptrs.push_back(&v);
   const Image img = slice_montage(ptrs, height);
@@ -45,7 +49,8 @@ void add_slices_command(CLI::App& app, Action& action) {
   sub->add_option("--height", o->height, "Row height in pixels (default: one pixel per smallest spacing)");
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   o->raw.add_to(sub);
-  sub->callback([&action, o] { action = [o] { return run_slices(o->inputs, o->out, o->height, o->raw, o->quiet); }; });
+  o->non_finite.add_to(sub);
+  sub->callback([&action, o] { action = [o] { return run_slices(o->inputs, o->out, o->height, o->raw, o->non_finite, o->quiet); }; });
 }
 
 }  // namespace softshell::cli

@@ -2,6 +2,7 @@
 // message and a documented exit status:
 //   0 success, 2 bad input / usage / no device, 3 solver did not converge,
 //   1 internal or device runtime failure.
+#include <csignal>
 #include <iostream>
 #include <new>
 
@@ -20,6 +21,11 @@ int fail(const std::string& message, int status) {
 
 int main(int argc, char** argv) {
   using namespace softshell;
+  // A write beyond RLIMIT_FSIZE (ulimit -f) then fails with EFBIG, reported
+  // in one line, instead of killing the process; PoCL's kernel cache writes
+  // fail the same way.
+  struct sigaction xfsz {};
+  if (::sigaction(SIGXFSZ, nullptr, &xfsz) == 0 && xfsz.sa_handler == SIG_DFL) std::signal(SIGXFSZ, SIG_IGN);
   try {
     return cli::run(argc, argv);
   } catch (const InputError& e) {

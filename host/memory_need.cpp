@@ -1,0 +1,88 @@
+// Memory a classification needs (host/memory_need.hpp).
+#include "memory_need.hpp"
+
+#include <algorithm>
+#include <sstream>
+
+#include "cl_runtime.hpp"
+#include "error.hpp"
+#include "io.hpp"
+#include "stencil.h"
+#include "text.hpp"
+
+namespace softshell {
+namespace {
+
+// Bytes per fine-level voxel of the variational classifier's device buffers
+// at the solve (the peak): the system (mu, rho, the tensor T, b, dT: 11
+// floats; the stencil: STENCIL_COEFS floats; the fixed flags: 1 byte), the
+// sources kept for re-solving (v, v~, |grad v|^2: 3 floats), the multigrid's
+// fine-level u, rhs, r (3 floats) and the conjugate gradients' x, r, z, p, q
+// (5 floats). Coarse levels add at most 1/7 of the system and level buffers
+// (each level has 1/8 of the voxels of the one above).
+constexpr double kVariationalSystem = (11 + STENCIL_COEFS) * 4.0 + 1.0;
+constexpr double kVariationalFine = kVariationalSystem + 3 * 4.0 + 3 * 4.0 + 5 * 4.0;
+constexpr double kVariationalCoarse = (kVariationalSystem + 3 * 4.0) / 7.0;
+// Levoy: the input, its lowpass and the filter's scratch, three gradient
+// components and the opacity, one float each.
+constexpr double kLevoyDevice = 7 * 4.0;
+// Host: the volume (float), the result downloaded (float), the normalised
+// copy the classifier uploads (float, variational only); with a mask, its
+// bytes.
+constexpr double kHostVolume = 4.0;
+
+std::string per_voxel(double bytes) {
+  std::ostringstream s;
+  s.precision(3);
+  s << bytes << " B per voxel";
+  return s.str();
+}
+
+}  // namespace
+
+MemoryNeed classify_memory_need(const Dims3& dims, Classifier method, bool mask) {
+  const double n = double(dims[0]) * double(dims[1]) * double(dims[2]);
+  MemoryNeed m;
+  if (method == Classifier::Variational) {
+    m.device_per_voxel = kVariationalFine + kVariationalCoarse;
+    m.host_per_voxel = 3 * kHostVolume + (mask ? 1.0 : 0.0);
+    m.largest_buffer = std::uint64_t(n) * STENCIL_COEFS * sizeof(float);
+  } else {
+    m.device_per_voxel = kLevoyDevice;
+    m.host_per_voxel = 2 * kHostVolume + (mask ? 1.0 : 0.0);
+    m.largest_buffer = std::uint64_t(n) * sizeof(float);
+  }
+  m.device = std::uint64_t(n * m.device_per_voxel);
+  m.host = std::uint64_t(n * m.host_per_voxel);
+  return m;
+}
+
+void check_classify_memory(const Runtime& rt, const std::string& path, const Dims3& dims, Classifier method,
+                           bool mask) {
+  const MemoryNeed m = classify_memory_need(dims, method, mask);
+  const DeviceInfo& d = rt.info();
+  const std::string what = "classifying " + dims_text(dims) + " voxels";
+  // PoCL and other CPU devices allocate their buffers in host memory.
+  const bool shared = d.type == "CPU";
+  const double host_need = double(m.host) + (shared ? double(m.device) : 0.0);
+  const double host_have = 0.75 * double(usable_memory_bytes());
+  if (host_need > host_have) {
+    throw input_error(path, what + " needs about " + human_bytes(host_need) + " of host memory (" +
+                                per_voxel(m.host_per_voxel + (shared ? m.device_per_voxel : 0.0)) +
+                                "), more than the " + human_bytes(host_have) +
+                                " usable here (75 % of the memory, cgroup or ulimit); use a smaller volume");
+  }
+  if (double(m.device) > double(d.global_mem)) {
+    throw input_error(path, what + " needs about " + human_bytes(double(m.device)) + " of device memory (" +
+                                per_voxel(m.device_per_voxel) + "), more than the " +
+                                human_bytes(double(d.global_mem)) + " of " + d.device_name +
+                                "; choose another --device or a smaller volume");
+  }
+  if (m.largest_buffer > d.max_alloc) {
+    throw input_error(path, what + " needs a " + human_bytes(double(m.largest_buffer)) + " buffer, but " +
+                                d.device_name + " allows at most " + human_bytes(double(d.max_alloc)) +
+                                " per allocation; choose another --device or a smaller volume");
+  }
+}
+
+}  // namespace softshell

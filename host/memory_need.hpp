@@ -1,0 +1,40 @@
+// Memory a classification needs, known before the volume is read, so a
+// volume too large for this machine or its device is refused up front with
+// the numbers instead of failing (or PoCL aborting) minutes into the run.
+//
+// The per-voxel figures are the classifiers' buffers as allocated today
+// (host/variational.cpp, host/multigrid.cpp, host/levoy.cpp), checked
+// against the peak resident memory measured at 128^3 and 256^3
+// (docs/benchmarks.md, "Memory"). Change them with the buffers.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "volume.hpp"
+
+namespace softshell {
+
+class Runtime;
+
+struct MemoryNeed {
+  std::uint64_t host = 0;            // host memory: the volume, mask and result
+  std::uint64_t device = 0;          // device buffers at their peak
+  std::uint64_t largest_buffer = 0;  // the largest single device buffer
+  double host_per_voxel = 0, device_per_voxel = 0;
+};
+
+enum class Classifier { Variational, Levoy };
+
+// What classifying a volume of `dims` needs; `mask`: a scanned-region mask
+// is in use (its bytes and the filled copy of the volume).
+MemoryNeed classify_memory_need(const Dims3& dims, Classifier method, bool mask);
+
+// Throws InputError (exit 2) naming `path`, the need and the limit, when the
+// need does not fit: host memory (75 % of usable_memory_bytes(); on a CPU
+// device its buffers are host memory too), the device's global memory, or
+// its largest allocation.
+void check_classify_memory(const Runtime& rt, const std::string& path, const Dims3& dims, Classifier method,
+                           bool mask);
+
+}  // namespace softshell
