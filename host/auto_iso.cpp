@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <thread>
 
 #include "error.hpp"
 #include "filter.hpp"
@@ -14,32 +15,43 @@ namespace softshell {
 namespace {
 
 // In-place separable Gaussian along `axis` (clamp-to-edge like the device
-// lowpass) of one or two fields.
+// lowpass) of one or two fields. Lines are split among threads; each line is
+// padded by its edge samples first, so the taps need no clamping, and summed
+// in a fixed order (the result does not depend on the thread count).
 void blur_axis(std::vector<float>& a, std::vector<float>* b, const Dims3& d, int axis, const std::vector<float>& w) {
   const std::size_t stride = axis == 0 ? 1 : (axis == 1 ? d[0] : d[0] * d[1]);
   const std::size_t len = d[axis];
   const long r = static_cast<long>(w.size() / 2);
   if (r == 0 || len < 2) return;
-  std::vector<float> la(len), lb(len);
   const std::size_t lines = a.size() / len;
-  for (std::size_t l = 0; l < lines; ++l) {
-    const std::size_t start =
-        axis == 0 ? l * d[0] : (axis == 1 ? (l % d[0]) + (l / d[0]) * d[0] * d[1] : l);
-    for (std::size_t i = 0; i < len; ++i) {
-      la[i] = a[start + i * stride];
-      if (b) lb[i] = (*b)[start + i * stride];
-    }
-    for (long i = 0; i < long(len); ++i) {
-      double sa = 0, sb = 0;
-      for (long k = -r; k <= r; ++k) {
-        const long j = std::clamp(i + k, 0L, long(len) - 1);
-        sa += w[k + r] * la[j];
-        if (b) sb += w[k + r] * lb[j];
+  auto run = [&](std::size_t l0, std::size_t l1) {
+    std::vector<float> pa(len + 2 * std::size_t(r)), pb(b ? pa.size() : 0);
+    for (std::size_t l = l0; l < l1; ++l) {
+      const std::size_t start = axis == 0 ? l * d[0] : (axis == 1 ? (l % d[0]) + (l / d[0]) * d[0] * d[1] : l);
+      for (long i = -r; i < long(len) + r; ++i) {
+        const std::size_t j = start + std::size_t(std::clamp(i, 0L, long(len) - 1)) * stride;
+        pa[std::size_t(i + r)] = a[j];
+        if (b) pb[std::size_t(i + r)] = (*b)[j];
       }
-      a[start + i * stride] = static_cast<float>(sa);
-      if (b) (*b)[start + i * stride] = static_cast<float>(sb);
+      for (std::size_t i = 0; i < len; ++i) {
+        float sa = 0;
+        for (std::size_t k = 0; k < w.size(); ++k) sa += w[k] * pa[i + k];
+        a[start + i * stride] = sa;
+      }
+      if (b)
+        for (std::size_t i = 0; i < len; ++i) {
+          float sb = 0;
+          for (std::size_t k = 0; k < w.size(); ++k) sb += w[k] * pb[i + k];
+          (*b)[start + i * stride] = sb;
+        }
     }
-  }
+  };
+  const std::size_t threads =
+      std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, std::max<std::size_t>(1, lines / 256));
+  std::vector<std::thread> pool;
+  for (std::size_t t = 1; t < threads; ++t) pool.emplace_back(run, lines * t / threads, lines * (t + 1) / threads);
+  run(0, lines / threads);
+  for (auto& th : pool) th.join();
 }
 
 }  // namespace
