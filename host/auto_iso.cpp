@@ -4,6 +4,7 @@
 #include "auto_iso.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <thread>
@@ -203,22 +204,63 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     if (params.want_field) {
       // Normalised convolution of the edges' isovalues, with the global
       // median as a prior of field_prior edges' weight per Gaussian volume.
-      std::vector<float> fn(n, 0.0f), fd(n, 0.0f);
-      for (std::size_t k = 0; k < locals.size(); ++k) fn[local_at[k]] += locals[k], fd[local_at[k]] += 1.0f;
-      for (int axis = 0; axis < 3; ++axis) {
-        const double sigma_vox = std::max(1.0, params.field_sigma_mm / v.spacing[axis]);
-        // Unnormalised Gaussian: the density of edges per voxel stays comparable to the prior.
-        blur_axis(fn, &fd, d, axis, gaussian_weights(sigma_vox, 3.0));
+      // The field is smooth (sigma of several voxels): it is formed on a grid
+      // coarser by f per axis (cells summing f^3 voxels) where sigma allows,
+      // and interpolated back trilinearly.
+      std::array<std::size_t, 3> f{1, 1, 1}, dc{};
+      std::array<double, 3> sigma_vox{};
+      for (int a = 0; a < 3; ++a) {
+        sigma_vox[a] = std::max(1.0, params.field_sigma_mm / v.spacing[a]);
+        f[a] = sigma_vox[a] >= 3.0 ? 2 : 1;
+        dc[a] = (d[a] + f[a] - 1) / f[a];
       }
-      // fd is now the Gaussian-weighted edge density (weights sum to 1 per
-      // axis); field_prior edges per Gaussian volume of (sqrt(2 pi) sigma)^3.
-      double gauss_volume = 1;
+      const Dims3 dcoarse{dc[0], dc[1], dc[2]};
+      const std::size_t nc = dc[0] * dc[1] * dc[2];
+      std::vector<float> fn(nc, 0.0f), fd(nc, 0.0f);
+      for (std::size_t k = 0; k < locals.size(); ++k) {
+        const std::size_t i = local_at[k];
+        const std::size_t x = i % d[0], y = (i / d[0]) % d[1], z = i / (d[0] * d[1]);
+        const std::size_t c = x / f[0] + dc[0] * (y / f[1] + dc[1] * (z / f[2]));
+        fn[c] += locals[k], fd[c] += 1.0f;
+      }
       for (int axis = 0; axis < 3; ++axis)
-        gauss_volume *= std::sqrt(2 * M_PI) * std::max(1.0, params.field_sigma_mm / v.spacing[axis]);
-      const double prior = params.field_prior / gauss_volume;
+        // Unnormalised Gaussian: the density of edges per cell stays comparable to the prior.
+        blur_axis(fn, &fd, dcoarse, axis, gaussian_weights(std::max(1.0, sigma_vox[axis] / double(f[axis])), 3.0));
+      // fd is now the Gaussian-weighted edge density per cell (weights sum to
+      // 1 per axis); field_prior edges per Gaussian volume of (sqrt(2 pi) sigma)^3 voxels.
+      double gauss_volume = 1;
+      for (int axis = 0; axis < 3; ++axis) gauss_volume *= std::sqrt(2 * M_PI) * sigma_vox[axis];
+      const double prior = params.field_prior / gauss_volume * double(f[0] * f[1] * f[2]);
+      std::vector<float> coarse(nc);
+      for (std::size_t c = 0; c < nc; ++c) coarse[c] = float((double(fn[c]) + prior * local_iso) / (double(fd[c]) + prior));
       field.resize(n);
-      for (std::size_t i = 0; i < n; ++i)
-        field[i] = float((double(fn[i]) + prior * local_iso) / (double(fd[i]) + prior));
+      // Trilinear from cell centres: voxel x sits at (x + 0.5) / f - 0.5 cells.
+      auto weights = [&](int a, std::size_t x, std::size_t& c0, std::size_t& c1, float& t) {
+        const double pos = std::clamp((double(x) + 0.5) / double(f[a]) - 0.5, 0.0, double(dc[a] - 1));
+        c0 = std::size_t(pos), c1 = std::min(c0 + 1, dc[a] - 1), t = float(pos - double(c0));
+      };
+      for (std::size_t z = 0; z < d[2]; ++z) {
+        std::size_t z0, z1;
+        float tz;
+        weights(2, z, z0, z1, tz);
+        for (std::size_t y = 0; y < d[1]; ++y) {
+          std::size_t y0, y1;
+          float ty;
+          weights(1, y, y0, y1, ty);
+          for (std::size_t x = 0; x < d[0]; ++x) {
+            std::size_t x0, x1;
+            float tx;
+            weights(0, x, x0, x1, tx);
+            auto at = [&](std::size_t cx, std::size_t cy, std::size_t cz) { return coarse[cx + dc[0] * (cy + dc[1] * cz)]; };
+            const float a00 = at(x0, y0, z0) + tx * (at(x1, y0, z0) - at(x0, y0, z0));
+            const float a10 = at(x0, y1, z0) + tx * (at(x1, y1, z0) - at(x0, y1, z0));
+            const float a01 = at(x0, y0, z1) + tx * (at(x1, y0, z1) - at(x0, y0, z1));
+            const float a11 = at(x0, y1, z1) + tx * (at(x1, y1, z1) - at(x0, y1, z1));
+            const float b0 = a00 + ty * (a10 - a00), b1 = a01 + ty * (a11 - a01);
+            field[x + d[0] * (y + d[1] * z)] = b0 + tz * (b1 - b0);
+          }
+        }
+      }
     }
   }
   const double iso = params.rule == AutoIsoRule::EchoRidge ? ridge_iso

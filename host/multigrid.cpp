@@ -279,7 +279,7 @@ std::vector<float> solve(Runtime& rt, const Densities& d, const SolverParams& sp
 }
 
 // Relative residual of the intermediate solves of the sharpening iteration.
-constexpr double kSharpenTol = 1e-2;
+constexpr double kSharpenTol = 5e-2;
 
 VariationalClassifier::VariationalClassifier(Runtime& rt, const Volume& v, const VariationalParams& params,
                                              const SolverParams& sp, const std::vector<std::uint8_t>* mask)
