@@ -4,10 +4,12 @@
 #include "auto_iso.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
+#include <thread>
 
 #include "error.hpp"
 #include "filter.hpp"
@@ -17,32 +19,43 @@ namespace softshell {
 namespace {
 
 // In-place separable Gaussian along `axis` (clamp-to-edge like the device
-// lowpass) of one or two fields.
+// lowpass) of one or two fields. Lines are split among threads; each line is
+// padded by its edge samples first, so the taps need no clamping, and summed
+// in a fixed order (the result does not depend on the thread count).
 void blur_axis(std::vector<float>& a, std::vector<float>* b, const Dims3& d, int axis, const std::vector<float>& w) {
   const std::size_t stride = axis == 0 ? 1 : (axis == 1 ? d[0] : d[0] * d[1]);
   const std::size_t len = d[axis];
   const long r = static_cast<long>(w.size() / 2);
   if (r == 0 || len < 2) return;
-  std::vector<float> la(len), lb(len);
   const std::size_t lines = a.size() / len;
-  for (std::size_t l = 0; l < lines; ++l) {
-    const std::size_t start =
-        axis == 0 ? l * d[0] : (axis == 1 ? (l % d[0]) + (l / d[0]) * d[0] * d[1] : l);
-    for (std::size_t i = 0; i < len; ++i) {
-      la[i] = a[start + i * stride];
-      if (b) lb[i] = (*b)[start + i * stride];
-    }
-    for (long i = 0; i < long(len); ++i) {
-      double sa = 0, sb = 0;
-      for (long k = -r; k <= r; ++k) {
-        const long j = std::clamp(i + k, 0L, long(len) - 1);
-        sa += w[k + r] * la[j];
-        if (b) sb += w[k + r] * lb[j];
+  auto run = [&](std::size_t l0, std::size_t l1) {
+    std::vector<float> pa(len + 2 * std::size_t(r)), pb(b ? pa.size() : 0);
+    for (std::size_t l = l0; l < l1; ++l) {
+      const std::size_t start = axis == 0 ? l * d[0] : (axis == 1 ? (l % d[0]) + (l / d[0]) * d[0] * d[1] : l);
+      for (long i = -r; i < long(len) + r; ++i) {
+        const std::size_t j = start + std::size_t(std::clamp(i, 0L, long(len) - 1)) * stride;
+        pa[std::size_t(i + r)] = a[j];
+        if (b) pb[std::size_t(i + r)] = (*b)[j];
       }
-      a[start + i * stride] = static_cast<float>(sa);
-      if (b) (*b)[start + i * stride] = static_cast<float>(sb);
+      for (std::size_t i = 0; i < len; ++i) {
+        float sa = 0;
+        for (std::size_t k = 0; k < w.size(); ++k) sa += w[k] * pa[i + k];
+        a[start + i * stride] = sa;
+      }
+      if (b)
+        for (std::size_t i = 0; i < len; ++i) {
+          float sb = 0;
+          for (std::size_t k = 0; k < w.size(); ++k) sb += w[k] * pb[i + k];
+          (*b)[start + i * stride] = sb;
+        }
     }
-  }
+  };
+  const std::size_t threads =
+      std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, std::max<std::size_t>(1, lines / 256));
+  std::vector<std::thread> pool;
+  for (std::size_t t = 1; t < threads; ++t) pool.emplace_back(run, lines * t / threads, lines * (t + 1) / threads);
+  run(0, lines / threads);
+  for (auto& th : pool) th.join();
 }
 
 }  // namespace
@@ -212,22 +225,63 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     if (params.want_field) {
       // Normalised convolution of the edges' isovalues, with the global
       // median as a prior of field_prior edges' weight per Gaussian volume.
-      std::vector<float> fn(n, 0.0f), fd(n, 0.0f);
-      for (std::size_t k = 0; k < locals.size(); ++k) fn[local_at[k]] += locals[k], fd[local_at[k]] += 1.0f;
-      for (int axis = 0; axis < 3; ++axis) {
-        const double sigma_vox = std::max(1.0, params.field_sigma_mm / v.spacing[axis]);
-        // Unnormalised Gaussian: the density of edges per voxel stays comparable to the prior.
-        blur_axis(fn, &fd, d, axis, gaussian_weights(sigma_vox, 3.0));
+      // The field is smooth (sigma of several voxels): it is formed on a grid
+      // coarser by f per axis (cells summing f^3 voxels) where sigma allows,
+      // and interpolated back trilinearly.
+      std::array<std::size_t, 3> f{1, 1, 1}, dc{};
+      std::array<double, 3> sigma_vox{};
+      for (int a = 0; a < 3; ++a) {
+        sigma_vox[a] = std::max(1.0, params.field_sigma_mm / v.spacing[a]);
+        f[a] = sigma_vox[a] >= 3.0 ? 2 : 1;
+        dc[a] = (d[a] + f[a] - 1) / f[a];
       }
-      // fd is now the Gaussian-weighted edge density (weights sum to 1 per
-      // axis); field_prior edges per Gaussian volume of (sqrt(2 pi) sigma)^3.
-      double gauss_volume = 1;
+      const Dims3 dcoarse{dc[0], dc[1], dc[2]};
+      const std::size_t nc = dc[0] * dc[1] * dc[2];
+      std::vector<float> fn(nc, 0.0f), fd(nc, 0.0f);
+      for (std::size_t k = 0; k < locals.size(); ++k) {
+        const std::size_t i = local_at[k];
+        const std::size_t x = i % d[0], y = (i / d[0]) % d[1], z = i / (d[0] * d[1]);
+        const std::size_t c = x / f[0] + dc[0] * (y / f[1] + dc[1] * (z / f[2]));
+        fn[c] += locals[k], fd[c] += 1.0f;
+      }
       for (int axis = 0; axis < 3; ++axis)
-        gauss_volume *= std::sqrt(2 * M_PI) * std::max(1.0, params.field_sigma_mm / v.spacing[axis]);
-      const double prior = params.field_prior / gauss_volume;
+        // Unnormalised Gaussian: the density of edges per cell stays comparable to the prior.
+        blur_axis(fn, &fd, dcoarse, axis, gaussian_weights(std::max(1.0, sigma_vox[axis] / double(f[axis])), 3.0));
+      // fd is now the Gaussian-weighted edge density per cell (weights sum to
+      // 1 per axis); field_prior edges per Gaussian volume of (sqrt(2 pi) sigma)^3 voxels.
+      double gauss_volume = 1;
+      for (int axis = 0; axis < 3; ++axis) gauss_volume *= std::sqrt(2 * M_PI) * sigma_vox[axis];
+      const double prior = params.field_prior / gauss_volume * double(f[0] * f[1] * f[2]);
+      std::vector<float> coarse(nc);
+      for (std::size_t c = 0; c < nc; ++c) coarse[c] = float((double(fn[c]) + prior * local_iso) / (double(fd[c]) + prior));
       field.resize(n);
-      for (std::size_t i = 0; i < n; ++i)
-        field[i] = float((double(fn[i]) + prior * local_iso) / (double(fd[i]) + prior));
+      // Trilinear from cell centres: voxel x sits at (x + 0.5) / f - 0.5 cells.
+      auto weights = [&](int a, std::size_t x, std::size_t& c0, std::size_t& c1, float& t) {
+        const double pos = std::clamp((double(x) + 0.5) / double(f[a]) - 0.5, 0.0, double(dc[a] - 1));
+        c0 = std::size_t(pos), c1 = std::min(c0 + 1, dc[a] - 1), t = float(pos - double(c0));
+      };
+      for (std::size_t z = 0; z < d[2]; ++z) {
+        std::size_t z0, z1;
+        float tz;
+        weights(2, z, z0, z1, tz);
+        for (std::size_t y = 0; y < d[1]; ++y) {
+          std::size_t y0, y1;
+          float ty;
+          weights(1, y, y0, y1, ty);
+          for (std::size_t x = 0; x < d[0]; ++x) {
+            std::size_t x0, x1;
+            float tx;
+            weights(0, x, x0, x1, tx);
+            auto at = [&](std::size_t cx, std::size_t cy, std::size_t cz) { return coarse[cx + dc[0] * (cy + dc[1] * cz)]; };
+            const float a00 = at(x0, y0, z0) + tx * (at(x1, y0, z0) - at(x0, y0, z0));
+            const float a10 = at(x0, y1, z0) + tx * (at(x1, y1, z0) - at(x0, y1, z0));
+            const float a01 = at(x0, y0, z1) + tx * (at(x1, y0, z1) - at(x0, y0, z1));
+            const float a11 = at(x0, y1, z1) + tx * (at(x1, y1, z1) - at(x0, y1, z1));
+            const float b0 = a00 + ty * (a10 - a00), b1 = a01 + ty * (a11 - a01);
+            field[x + d[0] * (y + d[1] * z)] = b0 + tz * (b1 - b0);
+          }
+        }
+      }
     }
   }
   const double iso = params.rule == AutoIsoRule::EchoRidge ? ridge_iso

@@ -505,16 +505,9 @@ void bench_warm(Runtime& rt, DeviceBench& db, int size, int reps) {
     const double tw = since(t0);
     check(db, rep.converged, "warm start: the re-solve did not converge");
     update.push_back(tu), warm.push_back(tw - tu), warm_total.push_back(tw), db.warm_warm_iterations = rep.cycles;
-    // The default sharpening linearises about solves stopped at a relative
-    // residual of 1e-2, so warm and cold runs end close, not bit-equal.
-    double num = 0, den = 0;
-    for (std::size_t i = 0; i < uw.data.size(); ++i) {
-      const double e = double(uw.data[i]) - double(uc.data[i]);
-      num += e * e, den += double(uc.data[i]) * uc.data[i];
-    }
-    const double rel = den > 0 ? std::sqrt(num / den) : 0.0;
-    check(db, rel < 2e-2, "warm start: the re-solve differs from the cold classification by " + std::to_string(rel) +
-                              " (relative L2)");
+    double worst = 0;
+    for (std::size_t i = 0; i < uw.data.size(); ++i) worst = std::max(worst, double(std::abs(uw.data[i] - uc.data[i])));
+    check(db, worst < 5e-3, "warm start: the re-solve differs from the cold classification by " + std::to_string(worst));
     c.update(p0);  // back to v_iso and its solution for the next repeat (untimed)
     c.solve(&rep, &u0);
   }

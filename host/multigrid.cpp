@@ -279,7 +279,7 @@ std::vector<float> solve(Runtime& rt, const Densities& d, const SolverParams& sp
 }
 
 // Relative residual of the intermediate solves of the sharpening iteration.
-constexpr double kSharpenTol = 1e-2;
+constexpr double kSharpenTol = 5e-2;
 
 VariationalClassifier::VariationalClassifier(Runtime& rt, const Volume& v, const VariationalParams& params,
                                              const SolverParams& sp, const std::vector<std::uint8_t>* mask)
@@ -330,7 +330,11 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
   // give the next linearisation point: solved to kSharpenTol (or the
   // solver's tol, if looser), the last step to the solver's tol.
   const double loose = std::max(kSharpenTol, mg_->params().tol);
-  std::vector<float> u = mg_->solve(report, init ? &init->data : nullptr, warm, steps > 0 ? loose : 0.0);
+  // With sharpening the result depends on where the loose linear solve
+  // stops, so it always starts as a cold one does (FMG), not from `init` or
+  // the last solution: a re-solve then equals a cold classification.
+  std::vector<float> u = steps > 0 ? mg_->solve(report, nullptr, false, loose)
+                                   : mg_->solve(report, init ? &init->data : nullptr, warm);
   double crest = 0;
   if (steps > 0 && params_.sharpen_lambda > 0 && (crest = crest_of(geometry_.with_data(u, ScalarType::Float32))) > 0) {
     // The barrier relative to the linear solution's own crest, in units of

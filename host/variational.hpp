@@ -282,6 +282,8 @@ class VariationalClassifier {
   void update(const VariationalParams& p);
   // The opacity u, clamped to [0, 1], with the volume's geometry: from
   // `init` when given, else from the previous solution when `warm`, else cold.
+  // With sharpening (the default) every solve starts cold: `init` and `warm`
+  // apply to the linear functional only (sharpen_iterations 0).
   Volume solve(SolveReport* report = nullptr, const Volume* init = nullptr, bool warm = false);
   // The factor the last solve scaled u by (u_ind from the data, max_gain).
   double gain() const { return gain_; }
