@@ -439,7 +439,9 @@ void add_classify_command(CLI::App& app, Action& action) {
                 "gs: Gauss-Seidel (4-colour rows on CPUs, 8 colours on GPUs); jacobi: weighted Jacobi")
       ->capture_default_str();
   g->add_flag("--no-fmg", o->no_fmg, "Start from u = 0 instead of a full-multigrid guess");
-  g->add_option("--init", o->init, "Warm start from this opacity volume (e.g. after a parameter change)");
+  g->add_option("--init", o->init,
+                "Warm start from this opacity volume (the linear functional only: with --sharpen > 0, the default, "
+                "every solve starts cold so the result does not depend on the start)");
   g->add_flag("--stats", o->stats, "Print the residual history");
   auto* lg = sub->add_option_group("levoy", "Levoy's classifier");
   lg->add_option("--thickness", o->thickness, "Transition thickness r in voxels")->capture_default_str();
