@@ -63,7 +63,7 @@ struct VariationalParams {
   // sharpen_iterations fixed-point steps, each a pointwise update and a warm
   // re-solve. 0 iterations: the linear functional.
   int sharpen_iterations = 2;
-  double sharpen_lambda = 2.0, sharpen_barrier = 0.6;
+  double sharpen_lambda = 2.0, sharpen_barrier = 0.5;
   // The resolved reference gradient (per mm of normalised intensity): 0
   // until DeviceSystem takes it from the data (edge_share > 0), or given.
   double g_ref = 0;

@@ -406,8 +406,8 @@ TEST(IsoAuto, DefaultsOnTheFacePhantomMeetTheGoals) {
   // shell functional at its defaults, the renderer's structure-tensor
   // orientation) on the face phantom at 64^3, scored by the metrics that see
   // all of u (docs/metrics.md). The bounds sit below what the defaults
-  // score here (seed 1: precision 0.84, mass precision 0.81, recall 0.93,
-  // 3 blobs at 6-connectivity, normal error 9.0, surface peak 0.95, 5.6 %
+  // score here (seed 1: precision 0.83, mass precision 0.81, recall 0.93,
+  // 5 blobs at 6-connectivity, normal error 9.0, surface peak 0.96, 5.8 %
   // opaque) and above the earlier defaults' mass precision and surface peak
   // (0.54 and 0.56 at 96^3); without the sharpening steps the peak is 0.70.
   PhantomParams pp;
