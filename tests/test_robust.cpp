@@ -265,7 +265,7 @@ TEST_F(Robust, ReproFifoAsDataFile) {
 // headers no longer reach Teem.
 TEST_F(Robust, ReproTeemErrorPaths) {
   expect_one_line_error(run({"info", repro("teem_leak.nhdr")}),
-                        {repro("teem_leak.nhdr") + ": not a NRRD file (the first line is not NRRD000x)"});
+                        {repro("teem_leak.nhdr") + ": not a NRRD file (the first line is not NRRD0001 to NRRD0006)"});
   const std::string list = copy_repro("teem_overread_list.nhdr");
   copy_repro("d.raw");
   expect_one_line_error(run({"info", list}),
