@@ -284,6 +284,7 @@ constexpr std::uint64_t kMaxInflateRatio = 1032;
 struct StreamCheck {
   std::uint64_t produced = 0;
   std::string error;  // empty: no error within what was decoded
+  bool ended = false;  // the stream's end was decoded (checksum verified)
 };
 constexpr std::uint64_t kPastNeeded = 1 << 16;
 
@@ -303,7 +304,9 @@ StreamCheck check_gzip(std::FILE* f, std::uint64_t needed) {
       const int rc = inflate(&zs, Z_NO_FLUSH);
       c.produced += out.size() - zs.avail_out;
       if (rc == Z_STREAM_END) {
+        c.ended = true;
         done = c.produced >= needed || inflateReset(&zs) != Z_OK;
+        c.ended = done;  // another member follows: not ended yet
       } else if (rc != Z_OK && rc != Z_BUF_ERROR) {
         c.error = zs.msg ? zs.msg : "zlib error " + std::to_string(rc);
         done = true;
@@ -331,7 +334,7 @@ StreamCheck check_bzip2(std::FILE* f, std::uint64_t needed) {
       const int rc = BZ2_bzDecompress(&bz);
       c.produced += out.size() - bz.avail_out;
       if (rc == BZ_STREAM_END) {
-        done = true;
+        c.ended = done = true;
       } else if (rc != BZ_OK) {
         c.error = "bzip2 error " + std::to_string(rc);
         done = true;
@@ -398,6 +401,11 @@ void check_data_size(const std::string& path, const HeaderScan& scan, const Load
     if (c.produced < needed)
       throw input_error(path, "data truncated or corrupt: expected " + std::to_string(needed) +
                                   " bytes after decompression, found " + std::to_string(c.produced));
+    // The samples are all there but the stream stops short of its end
+    // (Teem's reader fails on that too).
+    if (!c.ended && c.produced < needed + kPastNeeded)
+      throw input_error(path, std::string("data truncated: the ") + (gzip ? "gzip" : "bzip2") +
+                                  " stream ends without its end marker");
   } else {
     throw input_error(path, std::string("unsupported NRRD encoding '") + (e ? e->name : "unknown") +
                                 "' (softshell reads raw, gzip, bzip2, ascii and hex)");
