@@ -1,12 +1,18 @@
-# Shared by scripts/test.sh and scripts/demo.sh: dependency install and build.
-# Source it; it defines ROOT, BUILD_DIR, install_deps and build_release.
+# Shared by scripts/test.sh, demo.sh, sanitize.sh and fuzz.sh: dependency
+# install and builds. Source it; it defines ROOT, BUILD_DIR, ASAN_BUILD_DIR,
+# install_deps, build_release, build_sanitized and sanitizer_env.
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 BUILD_DIR="${SOFTSHELL_BUILD_DIR:-$ROOT/build}"
+# The checking build: clang, AddressSanitizer + UndefinedBehaviorSanitizer,
+# libFuzzer harnesses (docs/robustness.md).
+ASAN_BUILD_DIR="${SOFTSHELL_ASAN_BUILD_DIR:-$ROOT/build-asan}"
 
 # Debian 12 packages: compiler and CMake are assumed present; everything else
 # is installed here. Viewer and test-display packages are included so the
-# optional parts build and the GL tests can run under Xvfb.
+# optional parts build and the GL tests can run under Xvfb; clang with its
+# sanitizer and libFuzzer runtimes (libclang-rt-dev) and llvm (for
+# llvm-symbolizer's readable reports) for the checking build.
 SOFTSHELL_PACKAGES=(
   pkg-config
   ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers pocl-opencl-icd clinfo
@@ -16,6 +22,7 @@ SOFTSHELL_PACKAGES=(
   libepoxy-dev libimgui-dev libstb-dev
   libvolpack1-dev
   xvfb xauth
+  clang libclang-rt-dev llvm
 )
 
 log() { printf 'softshell: %s\n' "$*" >&2; }
@@ -46,4 +53,36 @@ build_release() {
     tail -n 60 "$BUILD_DIR/build.log" >&2
     return 1
   fi
+}
+
+build_sanitized() {
+  log "configuring and building (clang, ASan + UBSan, libFuzzer harnesses) in $ASAN_BUILD_DIR"
+  mkdir -p "$ASAN_BUILD_DIR"
+  CC=clang CXX=clang++ cmake -S "$ROOT" -B "$ASAN_BUILD_DIR" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+    -DSOFTSHELL_SANITIZE=ON -DSOFTSHELL_FUZZ=ON -DSOFTSHELL_BUILD_BENCH=OFF >/dev/null
+  if ! cmake --build "$ASAN_BUILD_DIR" -j "$(nproc)" >"$ASAN_BUILD_DIR/build.log" 2>&1; then
+    log "sanitizer build failed; the end of $ASAN_BUILD_DIR/build.log:"
+    tail -n 60 "$ASAN_BUILD_DIR/build.log" >&2
+    return 1
+  fi
+}
+
+# Sanitizer settings for the checking build: every report stops the program
+# (a test then fails); leaks are checked, with suppressions only for the
+# OpenCL / GL driver stacks (scripts/sanitizer/lsan.supp says why each).
+sanitizer_env() {
+  export ASAN_OPTIONS="detect_leaks=1:abort_on_error=1:halt_on_error=1:strict_string_checks=1:check_initialization_order=1${ASAN_OPTIONS:+:$ASAN_OPTIONS}"
+  export LSAN_OPTIONS="suppressions=$ROOT/scripts/sanitizer/lsan.supp:print_suppressions=0${LSAN_OPTIONS:+:$LSAN_OPTIONS}"
+  export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1${UBSAN_OPTIONS:+:$UBSAN_OPTIONS}"
+  local symbolizer
+  symbolizer="$(command -v llvm-symbolizer || true)"
+  [ -n "$symbolizer" ] && export ASAN_SYMBOLIZER_PATH="$symbolizer"
+  # Shared objects stay loaded until exit, so LSan sees what Mesa's unloaded
+  # driver still references (scripts/sanitizer/keep_modules.c says why).
+  local keep="$ASAN_BUILD_DIR/keep_modules.so"
+  if [ ! -e "$keep" ] || [ "$ROOT/scripts/sanitizer/keep_modules.c" -nt "$keep" ]; then
+    cc -shared -fPIC -O2 -o "$keep" "$ROOT/scripts/sanitizer/keep_modules.c"
+  fi
+  export LD_PRELOAD="$keep${LD_PRELOAD:+:$LD_PRELOAD}"
+  return 0
 }

@@ -265,7 +265,7 @@ TEST_F(Robust, ReproFifoAsDataFile) {
 // headers no longer reach Teem.
 TEST_F(Robust, ReproTeemErrorPaths) {
   expect_one_line_error(run({"info", repro("teem_leak.nhdr")}),
-                        {repro("teem_leak.nhdr") + ": not a NRRD file (the first line is not NRRD000x)"});
+                        {repro("teem_leak.nhdr") + ": not a NRRD file (the first line is not NRRD0001 to NRRD0006)"});
   const std::string list = copy_repro("teem_overread_list.nhdr");
   copy_repro("d.raw");
   expect_one_line_error(run({"info", list}),
@@ -273,6 +273,22 @@ TEST_F(Robust, ReproTeemErrorPaths) {
   write("pattern.nhdr", "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nencoding: raw\n"
                         "data file: f%s%s%s%d.raw 1 4 1\n\n");
   expect_one_line_error(run({"info", file("pattern.nhdr")}), {"lists and numbered patterns of data files"});
+  // Found by fuzzing, each a leak in Teem's error path: a magic with more
+  // on its line (Teem then tries its plain-text reader), a per-axis field
+  // before "dimension", "block size" with another type, a gzip stream that
+  // holds the samples but stops before its end.
+  const std::string tail = "type: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n12345678";
+  expect_one_line_error(run({"info", write("m.nrrd", "NRRD0004tpey\n" + tail)}),
+                        {"not a NRRD file (the first line is not NRRD0001 to NRRD0006)"});
+  expect_one_line_error(run({"info", write("k.nrrd", "NRRD0004\nkinds: space space space\n" + tail)}),
+                        {"field 'kinds' comes before 'dimension'"});
+  expect_one_line_error(run({"info", write("b.nrrd", "NRRD0004\nblock size: 4\n" + tail)}),
+                        {"'block size' given for type 'uchar'"});
+  const unsigned char gz[] = {0x1f, 0x8b, 8, 0, 0, 0, 0, 0, 0, 3, 0x63, 0x65, 0x63, 0x63, 0x67, 0x63, 0x67, 0xe7, 4, 0, 0};
+  write("g.raw", std::string(reinterpret_cast<const char*>(gz), sizeof gz));
+  expect_one_line_error(
+      run({"info", write("g.nhdr", "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: gzip\ndata file: g.raw\n")}),
+      {"data truncated: the gzip stream ends without its end marker"});
 }
 
 // Every file in tests/data/repro has its test above: a new one must get one.

@@ -10,6 +10,7 @@
 #include <set>
 
 #include "auto_iso.hpp"
+#include "classify_checks.hpp"
 #include "cl_runtime.hpp"
 #include "cli_common.hpp"
 #include "error.hpp"
@@ -111,16 +112,6 @@ void write_opacity(const ClassifyOptions& o, const Volume& u) {
 VariationalParams variational_params(const ClassifyOptions& o) {
   VariationalParams p = o.vp;
   p.sigma_mm = o.sigma < 0 ? 1.0 : o.sigma;
-  const auto finite = [](double x) { return std::isfinite(x); };
-  if (!finite(p.alpha) || !finite(p.beta) || !finite(p.gamma) || !finite(p.omega) || !finite(p.delta) ||
-      !finite(p.epsilon) || !finite(p.u_ind) || !finite(p.kappa) || !finite(p.grad_sigma_mm) || !finite(p.sigma_mm))
-    throw InputError("--alpha, --beta, --gamma, --omega, --delta, --epsilon, --u-ind, --kappa, --sigma and "
-                     "--grad-sigma must be finite numbers");
-  if (!(p.gamma * p.delta > 0)) throw InputError("--gamma and --delta must be > 0 (the system is singular otherwise)");
-  if (p.alpha < 0 || p.beta < 0) throw InputError("--alpha and --beta must be >= 0");
-  if (!(p.epsilon > 0)) throw InputError("--epsilon must be > 0");
-  if (!(p.grad_sigma_mm >= 0)) throw InputError("--grad-sigma must be >= 0");
-  if (!(p.kappa >= 0)) throw InputError("--kappa must be >= 0");
   if (o.literal) {
     // The paper's terms exactly; weights not given on the command line take
     // the values the earlier study chose for the literal functional.
@@ -134,17 +125,7 @@ VariationalParams variational_params(const ClassifyOptions& o) {
     if (!given("--epsilon")) p.epsilon = lit.epsilon;
     p.grad_sigma_mm = 0, p.kappa = 0, p.thickness_mm = 0, p.edge_share = 0, p.sharpen_iterations = 0, p.max_gain = 0;
   }
-  if (!(p.thickness_mm >= 0) || !std::isfinite(p.thickness_mm) || p.thickness_mm > 1e3)
-    throw InputError("--shell must be a finite number in [0, 1000] (mm)");
-  if (!(p.profile_power >= 1 && p.profile_power <= 4)) throw InputError("--profile-power must be in [1, 4]");
-  if (!(p.edge_share >= 0 && p.edge_share <= 0.5)) throw InputError("--edge-share must be in [0, 0.5]");
-  if (!(p.edge_power >= 0 && p.edge_power <= 8)) throw InputError("--edge-power must be in [0, 8]");
-  if (p.omega < 0 || p.omega > 1 || p.delta > 1) throw InputError("--omega and --delta must be in [0, 1]");
-  // float32 on the device: parameters beyond 1e6 overflow the system's
-  // coefficients (u_ind: its square), and below 1e-6 epsilon is 0.
-  if (p.alpha > 1e6 || p.beta > 1e6 || p.gamma > 1e6 || p.kappa > 1e6 || std::fabs(p.u_ind) > 1e6 ||
-      p.epsilon > 1e6 || p.epsilon < 1e-6)
-    throw InputError("--alpha, --beta, --gamma, --kappa and |--u-ind| must be at most 1e6, --epsilon in [1e-6, 1e6]");
+  check_variational_params(p);
   return p;
 }
 
@@ -152,9 +133,7 @@ SolverParams solver_params(const ClassifyOptions& o) {
   SolverParams sp = o.sp;
   if (o.cycle != "pcg" && o.cycle != "v") throw InputError("--cycle must be pcg or v");
   if (o.smoother != "gs" && o.smoother != "jacobi") throw InputError("--smoother must be gs or jacobi");
-  if (!(sp.tol > 0) || sp.tol >= 1) throw InputError("--tol must be in (0, 1)");
-  if (sp.max_cycles < 1 || sp.max_levels < 1) throw InputError("--max-cycles and --levels must be >= 1");
-  if (sp.max_cycles > 100000 || sp.max_levels > 64) throw InputError("--max-cycles must be at most 100000, --levels 64");
+  check_solver_params(sp);
   sp.krylov = o.cycle == "pcg";
   sp.jacobi = o.smoother == "jacobi";
   sp.full_multigrid = !o.no_fmg;
@@ -197,10 +176,7 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
   const IntensityMap map = in.intensity_map();
   VariationalParams p = variational_params(o);
   p.v_iso = map.to_unit(iso);
-  // The normalised data lies in [0, 1]: an isovalue a thousand ranges away
-  // is a typo, and would overflow the system's float32 coefficients.
-  if (!(std::fabs(p.v_iso) <= 1e3))
-    throw InputError("--iso " + format_iso(iso) + " is far outside the data's intensity range (" + map.describe() + ")");
+  check_normalised_iso(p.v_iso, format_iso(iso), map.describe());
   const SolverParams sp = solver_params(o);
   std::optional<Volume> init;
   if (!o.init.empty()) {

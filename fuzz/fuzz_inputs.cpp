@@ -1,0 +1,450 @@
+// The fuzz harnesses' bodies and seeds (fuzz/fuzz_inputs.hpp).
+#include "fuzz_inputs.hpp"
+
+#include <bzlib.h>
+#include <dirent.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <limits>
+#include <memory>
+#include <sstream>
+
+#include "auto_iso.hpp"
+#include "cl_runtime.hpp"
+#include "classify_checks.hpp"
+#include "error.hpp"
+#include "filter.hpp"
+#include "io.hpp"
+#include "levoy.hpp"
+#include "mask.hpp"
+#include "variational.hpp"
+
+namespace softshell::fuzz {
+namespace {
+
+namespace fs = std::filesystem;
+
+[[noreturn]] void fail(const std::string& what) {
+  std::cerr << "softshell fuzz: " << what << std::endl;
+  std::abort();
+}
+
+// One scratch directory per process, emptied before every input; on tmpfs
+// when there is one (the writers fsync).
+const std::string& scratch() {
+  // Never destroyed: the exit handler below still needs it.
+  static const std::string* dir = [] {
+    std::string base = "/dev/shm";
+    if (::access(base.c_str(), W_OK) != 0) base = fs::temp_directory_path().string();
+    std::string pattern = base + "/softshell-fuzz-XXXXXX";
+    if (!::mkdtemp(pattern.data())) fail("cannot create a scratch directory in " + base);
+    auto* kept = new std::string(pattern);
+    std::atexit([] {
+      std::error_code ec;
+      fs::remove_all(scratch(), ec);
+    });
+    return kept;
+  }();
+  return *dir;
+}
+
+std::string reset_scratch() {
+  const std::string& dir = scratch();
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir, ec)) fs::remove_all(e.path(), ec);
+  return dir;
+}
+
+void put(const std::string& path, const char* data, std::size_t size) {
+  std::ofstream out(path, std::ios::binary);
+  out.write(data, static_cast<std::streamsize>(size));
+  if (!out) fail("cannot write " + path);
+}
+
+// Writes the input as a header file (and its data file after the
+// separator); returns the header's path.
+std::string place(const std::uint8_t* data, std::size_t size, const char* attached, const char* detached) {
+  const std::string dir = reset_scratch();
+  const char* bytes = reinterpret_cast<const char*>(data);
+  const std::string all(bytes, size);
+  const std::size_t sep = all.find(kDataSeparator, 0, 4);
+  if (sep == std::string::npos) {
+    put(dir + "/" + attached, bytes, size);
+    return dir + "/" + attached;
+  }
+  put(dir + "/" + detached, bytes, sep);
+  put(dir + "/v.raw", bytes + sep + 4, size - sep - 4);
+  return dir + "/" + detached;
+}
+
+bool same_bits(const std::vector<float>& a, const std::vector<float>& b) {
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0);
+}
+
+bool close(double a, double b) { return std::fabs(a - b) <= 1e-5 * std::max(std::fabs(a), std::fabs(b)); }
+
+// What every volume that reads must satisfy, and its round trip through
+// every writer.
+void check_volume(const std::string& path, const Volume& v) {
+  const VolumeHeader h = read_volume_header(path);
+  if (v.voxels() == 0 || v.data.size() != v.voxels()) fail("a volume without samples read from " + path);
+  if (h.dims != v.dims || h.type != v.source_type || h.spacing != v.spacing || h.origin != v.origin)
+    fail("read_volume_header and read_volume disagree on " + path);
+  if (h.files.empty() || h.files.front() != path) fail("the header's file list does not start with it");
+  for (int a = 0; a < 3; ++a)
+    if (!(v.spacing[a] >= kMinSpacingMm && v.spacing[a] <= kMaxSpacingMm) || !std::isfinite(v.origin[a]))
+      fail("implausible geometry passed the checks");
+  // A run can never write over the files it read.
+  for (const std::string& f : h.files) {
+    bool refused = false;
+    try {
+      ensure_distinct_output(path, f);
+    } catch (const InputError&) {
+      refused = true;
+    }
+    if (!refused) fail("ensure_distinct_output let " + f + " overwrite its input " + path);
+  }
+  if (v.voxels() > (1u << 16)) return;
+  const std::string dir = scratch();
+  for (const char* name : {"o.nrrd", "o.mha", "o.mhd", "z.nrrd", "z.mha", "z.mhd"}) {
+    WriteOptions w;
+    w.compress = name[0] == 'z';
+    const std::string out = dir + "/" + name;
+    write_volume(out, v, w);  // an InputError here is a bug: the volume is valid
+    const Volume back = read_volume(out);
+    if (back.dims != v.dims || back.source_type != v.source_type || !same_bits(back.data, v.data))
+      fail(std::string("samples changed through ") + name);
+    for (int a = 0; a < 3; ++a)
+      if (!close(back.spacing[a], v.spacing[a]) || !close(back.origin[a], v.origin[a]))
+        fail(std::string("geometry changed through ") + name);
+  }
+}
+
+// Runs `body`: true when it completes, false for an InputError or
+// NotConvergedError (documented answers); anything else is a bug.
+template <class F>
+bool answered(F&& body) {
+  try {
+    body();
+    return true;
+  } catch (const InputError&) {
+  } catch (const NotConvergedError&) {
+  } catch (const std::exception& e) {
+    fail(std::string("not a documented answer: ") + typeid(e).name() + ": " + e.what());
+  }
+  return false;
+}
+
+bool run_reader(const std::string& path) {
+  return answered([&] {
+    const Volume v = read_volume(path);
+    check_volume(path, v);
+  });
+}
+
+// ---- classify ---------------------------------------------------------------
+
+// A byte as a parameter: mostly a value in [lo, hi], sometimes one of the
+// values a careless user or a bad script gives.
+double param(std::uint8_t b, double lo, double hi) {
+  static const double special[] = {0.0, -1.0, 1e-9, 1e9, std::nan(""), HUGE_VAL, -HUGE_VAL, 1e6, 1e-6,
+                                   1e30, -1e-30, 0.5, 1.0, 2.0, 1e-3, 1e3};
+  if (b < 240) return lo + (hi - lo) * b / 239.0;
+  return special[b - 240];
+}
+
+Runtime& runtime() {
+  static std::unique_ptr<Runtime> rt = std::make_unique<Runtime>();
+  return *rt;
+}
+
+void check_opacity(const Volume& u, const Volume& v) {
+  if (u.dims != v.dims || u.data.size() != v.voxels()) fail("opacity of other dims than the volume");
+  for (float x : u.data)
+    if (!(x >= 0.0f && x <= 1.0f)) fail("opacity outside [0, 1] or not finite: " + std::to_string(x));
+}
+
+}  // namespace
+
+bool run_nrrd(const std::uint8_t* data, std::size_t size) { return run_reader(place(data, size, "v.nrrd", "v.nhdr")); }
+
+bool run_metaimage(const std::uint8_t* data, std::size_t size) {
+  return run_reader(place(data, size, "v.mha", "v.mhd"));
+}
+
+bool run_raw(const std::uint8_t* data, std::size_t size) {
+  // The option parsers on the first line.
+  const std::string text(reinterpret_cast<const char*>(data), std::min<std::size_t>(size, 64));
+  const std::string line = text.substr(0, text.find('\n'));
+  const bool dims_ok = answered([&] { parse_dims(line, "--raw"); });
+  const bool vec_ok = answered([&] { parse_vec3(line, "--spacing"); });
+  if (size < 8) return dims_ok || vec_ok;
+  static const ScalarType types[] = {ScalarType::Int8,   ScalarType::UInt8,  ScalarType::Int16,  ScalarType::UInt16,
+                                     ScalarType::Int32,  ScalarType::UInt32, ScalarType::Int64,  ScalarType::UInt64,
+                                     ScalarType::Float32, ScalarType::Float64};
+  RawSpec spec;
+  spec.type = types[data[0] % 10];
+  spec.big_endian = data[1] & 1;
+  spec.dims = {std::size_t(1 + data[2] % 16), std::size_t(1 + data[3] % 16), std::size_t(1 + data[4] % 16)};
+  // 2^-24 .. 2^23 mm: the middle is plausible, the ends are refused.
+  for (int a = 0; a < 3; ++a) spec.spacing[a] = std::ldexp(1.0, int(data[5 + a] % 48) - 24);
+  const std::string path = reset_scratch() + "/v.raw";
+  put(path, reinterpret_cast<const char*>(data) + 8, size - 8);
+  return answered([&] {
+    const Volume v = read_volume(path, spec);
+    if (v.dims != spec.dims || v.data.size() != v.voxels()) fail("raw volume of the wrong size");
+    const VolumeHeader h = read_volume_header(path, spec);
+    if (h.dims != v.dims || h.files != std::vector<std::string>{path}) fail("raw header disagrees");
+    // Decoding is exact: re-encode and compare with the file.
+    std::vector<unsigned char> bytes = io_detail::encode_samples(v.data, spec.type);
+    const std::size_t e = scalar_type_size(spec.type);
+    if (spec.big_endian != io_detail::host_is_big_endian())
+      for (std::size_t i = 0; i + e <= bytes.size(); i += e) std::reverse(&bytes[i], &bytes[i] + e);
+    const bool integer64 = spec.type == ScalarType::Int64 || spec.type == ScalarType::UInt64;
+    const bool f64 = spec.type == ScalarType::Float64;
+    // float holds 8-, 16- and 32-bit integers and float32 exactly; 64-bit
+    // types and doubles are rounded to float on reading.
+    if (!integer64 && !f64 && spec.type != ScalarType::Int32 && spec.type != ScalarType::UInt32 &&
+        std::memcmp(bytes.data(), data + 8, bytes.size()) != 0) {
+      // Float32 NaNs keep their payload, so even those compare equal.
+      fail("raw samples did not survive decoding and encoding");
+    }
+  });
+}
+
+bool run_classify(const std::uint8_t* data, std::size_t size) {
+  std::uint8_t b[32] = {};
+  std::memcpy(b, data, std::min<std::size_t>(size, 32));
+  const std::uint8_t* samples = data + std::min<std::size_t>(size, 32);
+  const std::size_t nsamples = size > 32 ? size - 32 : 0;
+
+  const Dims3 dims{std::size_t(3 + b[0] % 6), std::size_t(3 + b[1] % 6), std::size_t(3 + b[2] % 6)};
+  const int type = b[3] % 3;  // uint8, uint16, float
+  const double h = std::ldexp(1.0, b[4] % 9 - 4);  // 1/16 .. 16 mm
+  const Vec3d spacing{h, h, h * std::ldexp(1.0, b[5] % 5 - 2)};
+  Volume v(dims, spacing, type == 0 ? ScalarType::UInt8 : type == 1 ? ScalarType::UInt16 : ScalarType::Float32);
+  const std::size_t bytes_per = type == 0 ? 1 : type == 1 ? 2 : 4;
+  for (std::size_t i = 0; i < v.voxels(); ++i) {
+    if (nsamples < bytes_per) break;
+    const std::uint8_t* p = samples + (i * bytes_per) % (nsamples - nsamples % bytes_per);
+    if (type == 0) v.data[i] = p[0];
+    if (type == 1) v.data[i] = float(p[0] | (p[1] << 8));
+    if (type == 2) std::memcpy(&v.data[i], p, 4);
+  }
+  const bool levoy = b[6] & 1;
+  const int mask_rule = b[7] % 3;  // auto, none, zeros
+  const bool auto_iso_value = b[8] < 128;
+
+  VariationalParams p;
+  p.alpha = param(b[11], 0, 2);
+  p.beta = param(b[12], 0, 10);
+  p.gamma = param(b[13], 0, 10);
+  p.omega = param(b[14], 0, 1);
+  p.delta = param(b[15], 0, 1);
+  p.epsilon = param(b[16], 0, 0.1);
+  p.sigma_mm = param(b[17], 0, 4);
+  p.grad_sigma_mm = param(b[18], 0, 4);
+  p.kappa = param(b[19], 0, 4);
+  p.u_ind = param(b[20], 0, 2);
+  SolverParams sp;
+  sp.max_cycles = 1 + b[21] % 20;
+  sp.max_levels = 1 + b[22] % 8;
+  sp.jacobi = b[23] & 1;
+  sp.krylov = !(b[23] & 2);
+  sp.full_multigrid = !(b[23] & 4);
+  sp.tol = std::pow(10.0, -1.0 - b[24] % 6);
+  LevoyParams lp;
+  lp.thickness = param(b[25], 0.5, 5);
+  lp.sigma_mm = param(b[26], 0, 2);
+  const bool replace = b[27] & 1;
+
+  bool solved = false;
+  const bool ok = answered([&] {
+    if (levoy) {
+      if (!(lp.thickness > 0) || lp.thickness > 100) throw InputError("--thickness must be in (0, 100] voxels");
+      check_lowpass_sigma(lp.sigma_mm, spacing, "--sigma");
+    } else {
+      check_variational_params(p);
+      check_solver_params(sp);
+      check_lowpass_sigma(p.sigma_mm, spacing, "--sigma");
+      check_lowpass_sigma(p.grad_sigma_mm, spacing, "--grad-sigma");
+    }
+    if (replace) replace_non_finite(v, 0.0f);
+    require_finite(v, "fuzz", "");
+    std::vector<std::uint8_t> mask;
+    if (mask_rule == 0) {
+      MaskReport r;
+      mask = scanned_mask(v, MaskParams{}, &r);
+      if (r.unscanned == 0) mask.clear();
+    } else if (mask_rule == 2) {
+      mask.resize(v.voxels());
+      for (std::size_t i = 0; i < mask.size(); ++i) mask[i] = v.data[i] != 0.0f;
+    }
+    const std::vector<std::uint8_t>* m = mask.empty() ? nullptr : &mask;
+    double iso;
+    if (auto_iso_value) {
+      AutoIsoParams ap;
+      ap.rule = levoy ? AutoIsoRule::Edge : AutoIsoRule::EchoRidge;
+      iso = auto_iso(v, m, ap);
+      if (!std::isfinite(iso)) fail("automatic isovalue not finite");
+    } else {
+      const IntensityMap map = v.intensity_map();
+      iso = map.from_unit(param(b[9], -0.2, 1.2));
+      if (b[10] >= 240) iso = param(b[10], 0, 1);  // the specials: NaN, huge, ...
+      if (!std::isfinite(iso)) throw InputError("--iso must be a finite number");
+    }
+    if (m) fill_unscanned_in_place(v, mask);
+    if (levoy) {
+      lp.iso = iso;
+      if (!(std::fabs(iso) <= 3.0e38)) throw InputError("--iso does not fit a float");
+      Volume u = classify_levoy(runtime(), v, lp);
+      if (m)
+        for (std::size_t i = 0; i < u.data.size(); ++i)
+          if (!mask[i]) u.data[i] = 0.0f;
+      check_opacity(u, v);
+      solved = true;
+    } else {
+      const IntensityMap map = v.intensity_map();
+      p.v_iso = map.to_unit(iso);
+      check_normalised_iso(p.v_iso, std::to_string(iso), map.describe());
+      SolveReport rep;
+      const Volume u = classify_variational(runtime(), v, p, sp, &rep, nullptr, m);
+      if (rep.converged) check_opacity(u, v);  // not converged: the CLI writes nothing (exit 3)
+      solved = rep.converged;
+    }
+  });
+  return ok && solved;
+}
+
+// ---- seeds ---------------------------------------------------------------------
+
+namespace {
+
+Volume seed_volume(ScalarType t, const Dims3& d, double lo, double hi) {
+  Volume v(d, {0.5, 0.75, 1.25}, t);
+  v.origin = {-3.5, 2.0, 10.25};
+  for (std::size_t z = 0; z < d[2]; ++z)
+    for (std::size_t y = 0; y < d[1]; ++y)
+      for (std::size_t x = 0; x < d[0]; ++x) {
+        const double r = std::hypot(double(x) - d[0] / 2.0, double(y) - d[1] / 2.0, double(z) - d[2] / 2.0);
+        v.at(x, y, z) = float(std::round(lo + (hi - lo) * std::exp(-0.2 * r * r)));
+      }
+  return v;
+}
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+std::string written(const Volume& v, const std::string& name, bool compress) {
+  const std::string path = reset_scratch() + "/" + name;
+  WriteOptions w;
+  w.compress = compress;
+  write_volume(path, v, w);
+  std::string bytes = slurp(path);
+  if (name.size() > 4 && name.substr(name.size() - 4) == ".mhd") {
+    const std::string data = slurp(fs::path(path).replace_extension(compress ? ".zraw" : ".raw").string());
+    // The harness names the data file v.raw.
+    const std::string key = "ElementDataFile = ";
+    bytes = bytes.substr(0, bytes.find(key)) + key + "v.raw\n" + std::string(kDataSeparator, 4) + data;
+  }
+  return bytes;
+}
+
+std::string bzip2(const std::string& in) {
+  std::vector<char> out(in.size() + in.size() / 100 + 700);
+  unsigned int n = static_cast<unsigned int>(out.size());
+  if (BZ2_bzBuffToBuffCompress(out.data(), &n, const_cast<char*>(in.data()), static_cast<unsigned int>(in.size()), 9,
+                               0, 0) != BZ_OK)
+    fail("bzip2 failed");
+  return std::string(out.data(), n);
+}
+
+}  // namespace
+
+std::vector<Seed> seeds(const std::string& harness) {
+  std::vector<Seed> s;
+  const Dims3 d{5, 4, 3};
+  if (harness == "nrrd") {
+    s.push_back({"uint8.nrrd", written(seed_volume(ScalarType::UInt8, d, 10, 250), "v.nrrd", false)});
+    s.push_back({"int16.nrrd", written(seed_volume(ScalarType::Int16, d, -900, 3000), "v.nrrd", false)});
+    s.push_back({"float-gzip.nrrd", written(seed_volume(ScalarType::Float32, d, -1, 1), "v.nrrd", true)});
+    s.push_back({"double.nrrd", written(seed_volume(ScalarType::Float64, d, 0, 1e6), "v.nrrd", false)});
+    const std::string head = "NRRD0004\ntype: unsigned short\ndimension: 3\nsizes: 3 2 2\nspacings: 0.5 0.5 2\n";
+    std::string raw;
+    for (int i = 0; i < 12; ++i) raw += char(i * 17), raw += char(i);
+    s.push_back({"big-endian.nrrd", head + "endian: big\nencoding: raw\n\n" + raw});
+    s.push_back({"ascii.nrrd", "NRRD0004\ntype: float\ndimension: 3\nsizes: 2 2 2\nencoding: ascii\n"
+                               "space: right-anterior-superior\nspace directions: (0.5,0,0) (0,0.5,0) (0,0,1)\n"
+                               "space origin: (1,2,3)\n\n"
+                               "0 1.5 -2 3e2\n4 5 6 7\n"});
+    s.push_back({"hex.nrrd", "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: hex\n\n0102030405060708\n"});
+    s.push_back({"bzip2.nrrd", head + "endian: little\nencoding: bzip2\n\n" + bzip2(raw)});
+    s.push_back({"skips.nrrd", "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 1\nencoding: raw\nline skip: 1\n"
+                               "byte skip: 2\n\nskip me\nxxABCD"});
+    s.push_back({"detached.nhdr", "NRRD0004\ntype: int\ndimension: 3\nsizes: 2 1 2\nencoding: raw\nendian: little\n"
+                                  "data file: v.raw\n" + std::string(kDataSeparator, 4) + std::string(16, '\x03')});
+    const std::string gz = written(seed_volume(ScalarType::UInt8, {2, 2, 2}, 0, 9), "v.nrrd", true);
+    s.push_back({"detached-gzip.nhdr", "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: gzip\n"
+                                       "data file: v.raw\n" + std::string(kDataSeparator, 4) +
+                                       gz.substr(gz.find("\n\n") + 2)});
+  } else if (harness == "metaimage") {
+    s.push_back({"uint8.mha", written(seed_volume(ScalarType::UInt8, d, 10, 250), "v.mha", false)});
+    s.push_back({"uint16-zlib.mha", written(seed_volume(ScalarType::UInt16, d, 0, 60000), "v.mha", true)});
+    s.push_back({"float.mhd", written(seed_volume(ScalarType::Float32, d, -1, 1), "v.mhd", false)});
+    s.push_back({"int32-zlib.mhd", written(seed_volume(ScalarType::Int32, d, -5, 5), "v.mhd", true)});
+    s.push_back({"msb-headersize.mhd", "ObjectType = Image\nNDims = 3\nDimSize = 2 2 1\nElementSpacing = 1 2 3\n"
+                                       "ElementByteOrderMSB = True\nHeaderSize = -1\nElementType = MET_SHORT\n"
+                                       "ElementDataFile = v.raw\n" + std::string(kDataSeparator, 4) + "garbage" +
+                                       std::string("\x01\x02\x03\x04\x05\x06\x07\x08", 8)});
+    s.push_back({"elementsize.mha", "NDims = 3\nDimSize = 2 2 2\nElementSize = 0.3 0.3 0.6\nOffset = 1 2 3\n"
+                                    "TransformMatrix = 1 0 0 0 1 0 0 0 1\nElementType = MET_CHAR\nElementDataFile = LOCAL\n"
+                                    "ABCDEFGH"});
+  } else if (harness == "raw") {
+    for (int t = 0; t < 10; ++t) {
+      std::string b(8, '\0');
+      b[0] = char(t);
+      b[1] = char(t & 1);
+      b[2] = 2, b[3] = 1, b[4] = 0;  // 3 x 2 x 1
+      b[5] = b[6] = b[7] = char(128);  // 1 mm
+      static const int size[] = {1, 1, 2, 2, 4, 4, 8, 8, 4, 8};
+      for (int i = 0; i < 6 * size[t]; ++i) b += char(i * 37 + t);
+      s.push_back({"type" + std::to_string(t) + ".raw", b});
+    }
+    s.push_back({"dims.txt", "9,9,9\n"});
+  } else if (harness == "classify") {
+    for (int k = 0; k < 4; ++k) {
+      std::string b(32, '\0');
+      b[0] = b[1] = b[2] = 5;  // 8^3
+      b[3] = char(k % 3);      // uint8, uint16, float
+      b[4] = 4;                // 1 mm
+      b[5] = 2;
+      b[6] = char(k == 3);     // levoy once
+      b[7] = char(k % 2);      // mask auto / none
+      b[8] = char(k == 1 ? 200 : 0);
+      b[9] = 120;
+      for (int i = 11; i <= 20; ++i) b[i] = char(100);
+      b[21] = 19, b[22] = 7, b[24] = 3;
+      b[25] = 60, b[26] = 50;
+      const Volume v = seed_volume(ScalarType::Float32, {8, 8, 8}, 5, 200);
+      for (float x : v.data) {
+        if (k % 3 == 0) b += char(int(x));
+        if (k % 3 == 1) b += char(int(x * 100) & 255), b += char(int(x * 100) >> 8);
+        if (k % 3 == 2) b.append(reinterpret_cast<const char*>(&x), 4);
+      }
+      s.push_back({"classify" + std::to_string(k), b});
+    }
+  }
+  return s;
+}
+
+}  // namespace softshell::fuzz

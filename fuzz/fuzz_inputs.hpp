@@ -1,0 +1,55 @@
+// The fuzz harnesses' bodies (docs/robustness.md, "Fuzzing"), in a library
+// so the test suite runs the same code on the seeds and the regression
+// inputs (tests/test_fuzz_inputs.cpp) that libFuzzer starts from
+// (fuzz/fuzz_*.cpp, scripts/fuzz.sh).
+//
+// Each run_*() takes one fuzzer input, feeds it to softshell's own code as
+// a user's file or parameters would, and returns normally when softshell
+// answered as documented: a result that passes the checks below (returns
+// true), or an InputError / NotConvergedError (exit 2 / 3 in the CLI;
+// returns false). Anything else -- another exception (exit 1, "internal
+// error"), a broken invariant -- calls std::abort(), which libFuzzer reports
+// as a crash with the input saved.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace softshell::fuzz {
+
+// Splits an input at the first kDataSeparator: the header file, and (when
+// present) its detached data file "v.raw" beside it.
+inline constexpr char kDataSeparator[] = "\xff" "DAT";
+
+// NRRD: without a separator the input is "v.nrrd"; with one, "v.nhdr" and
+// "v.raw". Reads the header and the volume; a volume that reads is checked
+// (dims, spacing, header agreement) and written back as .nrrd, .mha and
+// .mhd (plain and compressed) and read again: the samples must survive.
+bool run_nrrd(const std::uint8_t* data, std::size_t size);
+// MetaImage: "v.mha", or "v.mhd" + "v.raw"; the same checks.
+bool run_metaimage(const std::uint8_t* data, std::size_t size);
+// Headerless raw data: the first 8 bytes choose the sample type, byte
+// order, dims (1..16 each) and spacing; the rest is the file. The first
+// line (up to 64 bytes) is also given to the --raw / --spacing parsers.
+bool run_raw(const std::uint8_t* data, std::size_t size);
+// The classify pipeline on a tiny volume (dims 3..8 per axis): the first
+// 32 bytes choose dims, spacing, sample type, the method, the mask rule,
+// the isovalue (auto or a value) and the parameters, the rest are the
+// samples. Runs what `softshell classify` runs (checks, mask, automatic
+// isovalue, unscanned fill, the variational or Levoy classifier with at
+// most 20 iterations) on one OpenCL runtime per process; the opacity must
+// be finite and in [0, 1].
+bool run_classify(const std::uint8_t* data, std::size_t size);
+
+// Seed inputs per harness, as files: name -> bytes. Valid files of every
+// kind each reader takes (every NRRD encoding, attached and detached,
+// MetaImage plain and compressed, each raw type) and a few classify setups.
+struct Seed {
+  std::string name;
+  std::string bytes;
+};
+std::vector<Seed> seeds(const std::string& harness);  // "nrrd", "metaimage", "raw", "classify"
+
+}  // namespace softshell::fuzz
