@@ -599,7 +599,8 @@ void AtomicFile::write(const void* data, std::size_t n) {
 void AtomicFile::finish() {
   if (!file_) throw input_error(target_, "cannot write: file already closed");
   // Buffered data hits the disk only here, so ENOSPC usually shows up here.
-  errno = 0;
+  // errno is not cleared first: when an earlier fwrite failed (ferror),
+  // its errno (ENOSPC, EFBIG) is the one to report.
   if (std::fflush(file_.get()) != 0 || std::ferror(file_.get()))
     throw input_error(target_, "cannot write: " + errno_text(errno ? errno : EIO));
   if (::fsync(fileno(file_.get())) != 0 && errno != EINVAL && errno != EROFS)
