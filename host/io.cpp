@@ -427,12 +427,15 @@ class CriticalSection {
   CriticalSection& operator=(const CriticalSection&) = delete;
 };
 
+}  // namespace
+
 void install_signal_cleanup() {
   static std::once_flag once;
   std::call_once(once, [] {
     // A write that exceeds RLIMIT_FSIZE then fails with EFBIG (one line,
-    // exit 2) instead of killing the process with SIGXFSZ (LLVM replaces
-    // main's SIG_IGN with a handler that lets the next one kill).
+    // exit 2) instead of killing the process with SIGXFSZ. (LLVM, inside
+    // PoCL, may install a handler over it later; when it runs, it restores
+    // this and returns, so the write still fails with EFBIG.)
     std::signal(SIGXFSZ, SIG_IGN);
     for (int sig : {SIGINT, SIGTERM, SIGHUP}) {
       // An ignored signal stays ignored (nohup, a background job's SIGINT).
@@ -445,6 +448,8 @@ void install_signal_cleanup() {
     }
   });
 }
+
+namespace {
 
 int register_temp(const std::string& path) {
   if (path.size() > PATH_MAX) return -1;
@@ -599,7 +604,8 @@ void AtomicFile::write(const void* data, std::size_t n) {
 void AtomicFile::finish() {
   if (!file_) throw input_error(target_, "cannot write: file already closed");
   // Buffered data hits the disk only here, so ENOSPC usually shows up here.
-  errno = 0;
+  // errno is not cleared first: when an earlier fwrite failed (ferror),
+  // its errno (ENOSPC, EFBIG) is the one to report.
   if (std::fflush(file_.get()) != 0 || std::ferror(file_.get()))
     throw input_error(target_, "cannot write: " + errno_text(errno ? errno : EIO));
   if (::fsync(fileno(file_.get())) != 0 && errno != EINVAL && errno != EROFS)

@@ -14,21 +14,23 @@ namespace softshell {
 namespace {
 
 // Bytes per fine-level voxel of the variational classifier's device buffers
-// at the solve (the peak): the system (mu, rho, the tensor T, b, dT: 11
-// floats; the stencil: STENCIL_COEFS floats; the fixed flags: 1 byte), the
-// sources kept for re-solving (v, v~, |grad v|^2: 3 floats), the multigrid's
-// fine-level u, rhs, r (3 floats) and the conjugate gradients' x, r, z, p, q
-// (5 floats). Coarse levels add at most 1/7 of the system and level buffers
-// (each level has 1/8 of the voxels of the one above).
-constexpr double kVariationalSystem = (11 + STENCIL_COEFS) * 4.0 + 1.0;
-constexpr double kVariationalFine = kVariationalSystem + 3 * 4.0 + 3 * 4.0 + 5 * 4.0;
+// at their peak, the end of the hierarchy build: the system (mu, rho, b, dT:
+// 4 floats; the tangential tensor T: 6 floats, freed right after; the
+// stencil: STENCIL_COEFS floats; the fixed flags: 1 byte), the sources kept
+// for re-solving (v, v~, |grad v|^2: 3 floats) and the multigrid's fine-level
+// u, rhs, r (3 floats); the coarse levels add at most 1/7 of a level's
+// system and buffers (each has 1/8 of the voxels of the one above). In the
+// solve T is gone and the conjugate gradients' x, r, z, p, q (5 floats) are
+// there: 8 bytes less. Measured: 120.7 bytes per voxel in all between 128^3
+// and 256^3 (docs/benchmarks.md, "Memory").
+constexpr double kVariationalSystem = (4 + 6 + STENCIL_COEFS) * 4.0 + 1.0;
+constexpr double kVariationalFine = kVariationalSystem + 3 * 4.0 + 3 * 4.0;
 constexpr double kVariationalCoarse = (kVariationalSystem + 3 * 4.0) / 7.0;
 // Levoy: the input, its lowpass and the filter's scratch, three gradient
 // components and the opacity, one float each.
 constexpr double kLevoyDevice = 7 * 4.0;
-// Host: the volume (float), the result downloaded (float), the normalised
-// copy the classifier uploads (float, variational only); with a mask, its
-// bytes.
+// Host: the volume (float) and the result downloaded (float); with a mask,
+// its bytes (the unscanned fill works in place).
 constexpr double kHostVolume = 4.0;
 
 std::string per_voxel(double bytes) {
@@ -45,7 +47,7 @@ MemoryNeed classify_memory_need(const Dims3& dims, Classifier method, bool mask)
   MemoryNeed m;
   if (method == Classifier::Variational) {
     m.device_per_voxel = kVariationalFine + kVariationalCoarse;
-    m.host_per_voxel = 3 * kHostVolume + (mask ? 1.0 : 0.0);
+    m.host_per_voxel = 2 * kHostVolume + (mask ? 1.0 : 0.0);
     m.largest_buffer = std::uint64_t(n) * STENCIL_COEFS * sizeof(float);
   } else {
     m.device_per_voxel = kLevoyDevice;

@@ -31,9 +31,12 @@ class Multigrid {
       const GridDesc& g = levels_.back().sys->grid();
       if (std::min({g.nx, g.ny, g.nz}) <= 5) break;
       auto coarse = DeviceSystem::coarsen(*levels_.back().sys);
+      // An owned level's tensor has served its assembly and this coarsening.
+      if (levels_.back().owned) levels_.back().sys->release_tensor();
       DeviceSystem* raw = coarse.get();
       add_level(std::move(coarse), raw);
     }
+    if (levels_.back().owned) levels_.back().sys->release_tensor();
   }
 
   int levels() const { return int(levels_.size()); }
@@ -288,10 +291,14 @@ VariationalClassifier::VariationalClassifier(Runtime& rt, const Volume& v, const
   Volume vn = v;
   for (float& f : vn.data) f = static_cast<float>(map_.to_unit(f));
   sys_ = std::make_unique<DeviceSystem>(rt, vn, params, mask);
-  mg_ = std::make_unique<MultigridSolver>(*sys_, sp);
-  rt.queue().finish();  // vn is uploaded without waiting
+  // The upload was blocking: the normalised copy is not needed any more.
   vn.data.clear();
   vn.data.shrink_to_fit();
+  mg_ = std::make_unique<MultigridSolver>(*sys_, sp);
+  // The hierarchy is built: the fine level's tensor is not read again
+  // (re-solves update mu, rho, the diagonal and b only).
+  sys_->release_tensor();
+  rt.queue().finish();
   geometry_ = std::move(vn);
   setup_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }

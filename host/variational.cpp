@@ -222,6 +222,7 @@ void DeviceSystem::restrict_point(const DeviceSystem& fine) {
 }
 
 std::unique_ptr<DeviceSystem> DeviceSystem::coarsen(const DeviceSystem& fine) {
+  if (!fine.has_tensor()) throw std::logic_error("DeviceSystem::coarsen: the tensor T was released");
   const GridDesc& gf = fine.grid_;
   GridDesc gc = gf;
   gc.nx = gf.nx / 2 + 1, gc.ny = gf.ny / 2 + 1, gc.nz = gf.nz / 2 + 1;
@@ -340,7 +341,12 @@ void DeviceSystem::axpby(float a, const cl::Buffer& x, float b, const cl::Buffer
   rt_.enqueue_1d(axpby_, voxels());
 }
 
+void DeviceSystem::release_tensor() {
+  for (auto& t : T_) t = cl::Buffer();  // enqueued kernels keep their own reference
+}
+
 Densities DeviceSystem::download_densities() const {
+  if (!has_tensor()) throw std::logic_error("DeviceSystem::download_densities: the tensor T was released");
   Densities d;
   d.dims = {std::size_t(grid_.nx), std::size_t(grid_.ny), std::size_t(grid_.nz)};
   d.spacing = {grid_.hx, grid_.hy, grid_.hz};
@@ -359,8 +365,8 @@ std::vector<float> DeviceSystem::download_coefficients() const {
 std::vector<float> DeviceSystem::download_b() const { return download<float>(rt_, b_, voxels()); }
 
 std::size_t DeviceSystem::memory_bytes() const {
-  // mu, rho, b, dT, T (6), the stencil, fixed; v, v~, |grad v|^2 when updatable
-  return voxels() * ((4 + 6 + STENCIL_COEFS + (updatable() ? 3 : 0)) * sizeof(float) + 1);
+  // mu, rho, b, dT, T (6, until released), the stencil, fixed; v, v~, |grad v|^2 when updatable
+  return voxels() * ((4 + (has_tensor() ? 6 : 0) + STENCIL_COEFS + (updatable() ? 3 : 0)) * sizeof(float) + 1);
 }
 
 }  // namespace softshell

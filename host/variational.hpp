@@ -176,6 +176,12 @@ class DeviceSystem {
   void set_strided_dot(bool strided);
   void axpby(float a, const cl::Buffer& x, float b, const cl::Buffer& y) const;  // y = a x + b y
 
+  // Frees the tangential tensor T (6 floats per voxel): only the assembly
+  // and coarsen() read it, so a built hierarchy needs it no more. Then
+  // download_densities() and coarsen() throw std::logic_error.
+  void release_tensor();
+  bool has_tensor() const { return bool(T_[0]()); }
+
   Densities download_densities() const;
   std::vector<float> download_coefficients() const;  // STENCIL_COEFS * N, SoA
   std::vector<float> download_b() const;

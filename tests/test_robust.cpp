@@ -453,6 +453,18 @@ TEST_F(Robust, WriteErrorsLeaveTheOldOutput) {
   expect_one_line_error(r, {file("out.nrrd") + ": cannot write: File too large"});
   EXPECT_EQ(slurp(file("out.nrrd")), "the previous output");
   EXPECT_TRUE(temporaries().empty());
+  // 64^3 floats, 1 MiB: the samples fit, the header puts the file over the
+  // limit at the final flush (the error must still be EFBIG).
+  const std::string in64 = synthetic("in64.nrrd", 64);
+  ASSERT_EQ(run({"lowpass", in64, "--sigma", "1", "--float", "-q", "-o", file("warm.nrrd")}).status, 0);
+  fs::remove(file("warm.nrrd"));
+  const RunResult f = wait_at_most(
+      start({"--fsize=1048576", "--", SOFTSHELL_EXE, "lowpass", in64, "--sigma", "1", "--float", "-o", file("out.nrrd")},
+            {}, "", "prlimit"),
+      60);
+  expect_one_line_error(f, {file("out.nrrd") + ": cannot write: File too large"});
+  EXPECT_EQ(slurp(file("out.nrrd")), "the previous output");
+  EXPECT_TRUE(temporaries().empty());
 }
 
 bool user_namespaces_work() {
