@@ -359,6 +359,16 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
       report->residuals.push_back(step_report.residuals.back());
     }
   }
+  if (steps > 0 && !sharpened_ && linear_ok) {
+    // No sharpening after all (nothing drawn): finish the loose linear
+    // solve to the solver's tol.
+    SolveReport finish;
+    u = mg_->solve(&finish, nullptr, true);
+    report->cycles += finish.cycles;
+    report->seconds += finish.seconds;
+    report->converged = finish.converged;
+    report->residuals.push_back(finish.residuals.back());
+  }
   Volume out = geometry_.with_data(std::move(u), ScalarType::Float32);
   gain_ = 1.0;
   if (params_.max_gain > 0) {
