@@ -340,10 +340,16 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
   // With sharpening the result depends on where the loose linear solve
   // stops, so it always starts as a cold one does (FMG), not from `init` or
   // the last solution: a re-solve then equals a cold classification.
+  SolveReport local;
+  if (!report) report = &local;
   std::vector<float> u = steps > 0 ? mg_->solve(report, nullptr, false, loose)
                                    : mg_->solve(report, init ? &init->data : nullptr, warm);
   double crest = 0;
-  if (steps > 0 && params_.sharpen_lambda > 0 && (crest = crest_of(geometry_.with_data(u, ScalarType::Float32))) > 0) {
+  // A linear solve that did not converge is reported as it is: sharpening
+  // would only spend more cycles on it.
+  const bool linear_ok = report->converged;
+  if (steps > 0 && linear_ok && params_.sharpen_lambda > 0 &&
+      (crest = crest_of(geometry_.with_data(u, ScalarType::Float32))) > 0) {
     // The barrier relative to the linear solution's own crest, in units of
     // u_ind: ratio = (1 - barrier) / barrier puts the unstable point there.
     const double barrier = std::clamp(params_.sharpen_barrier * crest / params_.u_ind, 0.05, 0.95);
@@ -354,13 +360,21 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
       mg_->update_point();
       sharpened_ = true;
       u = mg_->solve(&step_report, nullptr, true, s + 1 < steps ? loose : 0.0);
-      if (report) {
-        report->cycles += step_report.cycles;
-        report->seconds += step_report.seconds;
-        report->converged = step_report.converged;  // the last step's, to the solver's tol
-        report->residuals.push_back(step_report.residuals.back());
-      }
+      report->cycles += step_report.cycles;
+      report->seconds += step_report.seconds;
+      report->converged = step_report.converged;  // the last step's, to the solver's tol
+      report->residuals.push_back(step_report.residuals.back());
     }
+  }
+  if (steps > 0 && !sharpened_ && linear_ok) {
+    // No sharpening after all (nothing drawn): finish the loose linear
+    // solve to the solver's tol.
+    SolveReport finish;
+    u = mg_->solve(&finish, nullptr, true);
+    report->cycles += finish.cycles;
+    report->seconds += finish.seconds;
+    report->converged = finish.converged;
+    report->residuals.push_back(finish.residuals.back());
   }
   Volume out = geometry_.with_data(std::move(u), ScalarType::Float32);
   gain_ = 1.0;
