@@ -380,6 +380,7 @@ std::atomic<int> g_critical{0};
 // inside PoCL, installs its own to remove its temporary files), restored
 // and re-raised after ours ran, so both clean up.
 struct sigaction g_previous[NSIG];
+
 [[noreturn]] void remove_temporaries_and_die(int sig) {
   for (TempSlot& t : g_temps)
     if (t.used.load()) ::unlink(t.path);
@@ -427,12 +428,15 @@ class CriticalSection {
   CriticalSection& operator=(const CriticalSection&) = delete;
 };
 
+}  // namespace
+
 void install_signal_cleanup() {
   static std::once_flag once;
   std::call_once(once, [] {
     // A write that exceeds RLIMIT_FSIZE then fails with EFBIG (one line,
-    // exit 2) instead of killing the process with SIGXFSZ (LLVM replaces
-    // main's SIG_IGN with a handler that lets the next one kill).
+    // exit 2) instead of killing the process with SIGXFSZ. (LLVM, inside
+    // PoCL, may install a handler over it later; when it runs, it restores
+    // this and returns, so the write still fails with EFBIG.)
     std::signal(SIGXFSZ, SIG_IGN);
     for (int sig : {SIGINT, SIGTERM, SIGHUP}) {
       // An ignored signal stays ignored (nohup, a background job's SIGINT).
@@ -445,6 +449,8 @@ void install_signal_cleanup() {
     }
   });
 }
+
+namespace {
 
 int register_temp(const std::string& path) {
   if (path.size() > PATH_MAX) return -1;

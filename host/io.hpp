@@ -198,6 +198,12 @@ class AtomicFile {
   bool committed_ = false;
 };
 
+// Installs AtomicFile's signal handling (once; AtomicFile calls it too).
+// Call it first thing in main(): what it keeps is the signal dispositions
+// it finds, and libraries installed later (LLVM inside PoCL) replace an
+// ignored SIGINT with a handler of their own.
+void install_signal_cleanup();
+
 // Removes stale temporaries of `target` (see AtomicFile); returns how many.
 // `max_age_seconds` < 0: AtomicFile::kStaleTempSeconds.
 std::size_t remove_stale_temporaries(const std::string& target, long max_age_seconds = -1);

@@ -9,6 +9,7 @@
 #include "cl_runtime.hpp"
 #include "commands.hpp"
 #include "error.hpp"
+#include "io.hpp"
 
 namespace {
 
@@ -21,11 +22,11 @@ int fail(const std::string& message, int status) {
 
 int main(int argc, char** argv) {
   using namespace softshell;
-  // A write beyond RLIMIT_FSIZE (ulimit -f) then fails with EFBIG, reported
-  // in one line, instead of killing the process; PoCL's kernel cache writes
-  // fail the same way.
-  struct sigaction xfsz {};
-  if (::sigaction(SIGXFSZ, nullptr, &xfsz) == 0 && xfsz.sa_handler == SIG_DFL) std::signal(SIGXFSZ, SIG_IGN);
+  // Before anything else (PoCL, LLVM) touches signals: temporaries are
+  // removed on SIGINT / SIGTERM / SIGHUP unless those are ignored (nohup, a
+  // background job), and a write beyond ulimit -f fails with EFBIG, one
+  // line, instead of SIGXFSZ killing the process (host/io.hpp).
+  io_detail::install_signal_cleanup();
   try {
     return cli::run(argc, argv);
   } catch (const InputError& e) {
