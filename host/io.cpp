@@ -380,6 +380,7 @@ std::atomic<int> g_critical{0};
 // inside PoCL, installs its own to remove its temporary files), restored
 // and re-raised after ours ran, so both clean up.
 struct sigaction g_previous[NSIG];
+
 [[noreturn]] void remove_temporaries_and_die(int sig) {
   for (TempSlot& t : g_temps)
     if (t.used.load()) ::unlink(t.path);
