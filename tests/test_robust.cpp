@@ -19,6 +19,7 @@
 #include <thread>
 
 #include "auto_iso.hpp"
+#include "cl_runtime.hpp"
 #include "cli_fixture.hpp"
 #include "error.hpp"
 #include "io.hpp"
@@ -728,6 +729,37 @@ TEST_F(Robust, MemoryLimitIsHonouredUpFront) {
                             "usable here (75 % of the memory, cgroup or ulimit)"});
   EXPECT_FALSE(fs::exists(file("u.nrrd")));
 #endif
+}
+
+// The device's limits, on a described device (a GPU with 1 GiB, of which
+// 256 MiB in one allocation): its global memory, then its largest buffer.
+TEST(RobustMemory, DeviceLimitsAreCheckedWithTheNumbers) {
+  DeviceInfo gpu;
+  gpu.type = "GPU";
+  gpu.device_name = "Test GPU";
+  gpu.global_mem = cl_ulong(1) << 30;
+  gpu.max_alloc = cl_ulong(1) << 28;
+  EXPECT_NO_THROW(check_classify_memory(gpu, "v.nrrd", {128, 128, 128}, Classifier::Variational, true));
+  try {
+    check_classify_memory(gpu, "v.nrrd", {256, 256, 256}, Classifier::Variational, true);
+    ADD_FAILURE() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("v.nrrd: classifying 256x256x256 voxels needs about 1.8 GiB of device memory "
+                                         "(118 B per voxel), more than the 1.0 GiB of Test GPU"),
+              std::string::npos)
+        << e.what();
+  }
+  gpu.global_mem = cl_ulong(1) << 34;
+  try {
+    check_classify_memory(gpu, "v.nrrd", {256, 256, 256}, Classifier::Variational, true);
+    ADD_FAILURE() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("needs a 640.0 MiB buffer, but Test GPU allows at most 256.0 MiB per allocation"),
+              std::string::npos)
+        << e.what();
+  }
+  // Levoy's largest buffer is one float per voxel.
+  EXPECT_NO_THROW(check_classify_memory(gpu, "v.nrrd", {256, 256, 256}, Classifier::Levoy, false));
 }
 
 // ---- the automatic isovalue on data it cannot use -------------------------------------------
