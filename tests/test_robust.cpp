@@ -283,6 +283,8 @@ TEST_F(Robust, ReproTeemErrorPaths) {
                         {"not a NRRD file (the first line is not NRRD0001 to NRRD0006)"});
   expect_one_line_error(run({"info", write("k.nrrd", "NRRD0004\nkinds: space space space\n" + tail)}),
                         {"field 'kinds' comes before 'dimension'"});
+  expect_one_line_error(run({"info", write("kv.nrrd", "NRRD0005\nkinds: space:=x\n" + tail)}),
+                        {"field 'kinds' comes before 'dimension'"});
   expect_one_line_error(run({"info", write("b.nrrd", "NRRD0004\nblock size: 4\n" + tail)}),
                         {"'block size' given for type 'uchar'"});
   const unsigned char gz[] = {0x1f, 0x8b, 8, 0, 0, 0, 0, 0, 0, 3, 0x63, 0x65, 0x63, 0x63, 0x67, 0x63, 0x67, 0xe7, 4, 0, 0};
