@@ -177,9 +177,12 @@ HeaderScan scan_header(const std::string& path) {
   for (int n = 2; next_line(); ++n) {
     if (n > kMaxHeaderLines) throw input_error(path, "header longer than 100000 lines");
     if (line.empty()) break;  // end of the header
-    if (line[0] == '#' || line.find(":=") != std::string::npos) continue;  // comment, key/value pair
+    if (line[0] == '#') continue;  // a comment
     const auto colon = line.find(':');
     if (colon == std::string::npos) continue;  // Teem reports it
+    // A key/value pair has ":=" at its first colon; a field may hold ":="
+    // further on (Teem parses it as the field: found by fuzzing).
+    if (colon + 1 < line.size() && line[colon + 1] == '=') continue;
     std::string key;
     for (char c : line.substr(0, colon))
       if (c != ' ' && c != '\t') key += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));

@@ -61,8 +61,12 @@ MemoryNeed classify_memory_need(const Dims3& dims, Classifier method, bool mask)
 
 void check_classify_memory(const Runtime& rt, const std::string& path, const Dims3& dims, Classifier method,
                            bool mask) {
+  check_classify_memory(rt.info(), path, dims, method, mask);
+}
+
+void check_classify_memory(const DeviceInfo& d, const std::string& path, const Dims3& dims, Classifier method,
+                           bool mask) {
   const MemoryNeed m = classify_memory_need(dims, method, mask);
-  const DeviceInfo& d = rt.info();
   const std::string what = "classifying " + dims_text(dims) + " voxels";
   // PoCL and other CPU devices allocate their buffers in host memory.
   const bool shared = d.type == "CPU";

@@ -38,5 +38,9 @@ MemoryNeed classify_memory_need(const Dims3& dims, Classifier method, bool mask)
 // its largest allocation.
 void check_classify_memory(const Runtime& rt, const std::string& path, const Dims3& dims, Classifier method,
                            bool mask);
+// The same against a device's description (for tests: any device).
+struct DeviceInfo;
+void check_classify_memory(const DeviceInfo& device, const std::string& path, const Dims3& dims, Classifier method,
+                           bool mask);
 
 }  // namespace softshell

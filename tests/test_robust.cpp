@@ -14,11 +14,13 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstdio>
 #include <cmath>
 #include <sstream>
 #include <thread>
 
 #include "auto_iso.hpp"
+#include "cl_runtime.hpp"
 #include "cli_fixture.hpp"
 #include "error.hpp"
 #include "io.hpp"
@@ -58,6 +60,19 @@ class Robust : public CliTest {
     return file(name);
   }
 
+  // The stacks of every thread of `pid` (gdb, when installed), for a hang.
+  static std::string file_stacks(pid_t pid) {
+    const std::string cmd = "gdb -batch -p " + std::to_string(pid) +
+                            " -ex 'thread apply all bt 20' 2>/dev/null | grep -E '^(#|Thread)' | head -150";
+    std::string out;
+    if (std::FILE* p = ::popen(cmd.c_str(), "r")) {
+      char buf[512];
+      while (std::fgets(buf, sizeof buf, p)) out += buf;
+      ::pclose(p);
+    }
+    return out.empty() ? "(no gdb)" : out;
+  }
+
   // Waits at most `limit` seconds; a process still running then is killed
   // and the test fails (a hang is a failure, not a stuck suite).
   static RunResult wait_at_most(const Child& c, double limit) {
@@ -67,8 +82,10 @@ class Robust : public CliTest {
       // WNOWAIT: leave it to wait() to collect the status and rusage.
       if (::waitid(P_PID, id_t(c.pid), &info, WEXITED | WNOHANG | WNOWAIT) == 0 && info.si_pid == c.pid) break;
       if (std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() > limit) {
+        // Where it hangs, when gdb is there to say.
+        const std::string stacks = file_stacks(c.pid);
         ::kill(c.pid, SIGKILL);
-        ADD_FAILURE() << "still running after " << limit << " s: killed";
+        ADD_FAILURE() << "still running after " << limit << " s: killed; its threads:\n" << stacks;
         break;
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
@@ -281,6 +298,8 @@ TEST_F(Robust, ReproTeemErrorPaths) {
   expect_one_line_error(run({"info", write("m.nrrd", "NRRD0004tpey\n" + tail)}),
                         {"not a NRRD file (the first line is not NRRD0001 to NRRD0006)"});
   expect_one_line_error(run({"info", write("k.nrrd", "NRRD0004\nkinds: space space space\n" + tail)}),
+                        {"field 'kinds' comes before 'dimension'"});
+  expect_one_line_error(run({"info", write("kv.nrrd", "NRRD0005\nkinds: space:=x\n" + tail)}),
                         {"field 'kinds' comes before 'dimension'"});
   expect_one_line_error(run({"info", write("b.nrrd", "NRRD0004\nblock size: 4\n" + tail)}),
                         {"'block size' given for type 'uchar'"});
@@ -518,7 +537,10 @@ TEST_F(Robust, ReadOnlyDirectoryIsAOneLineError) {
 TEST_F(Robust, SignalsLeaveNoTemporaryAndAnIntactOutput) {
   const std::string in = synthetic("in.nrrd", 64);
   const std::string previous = "the previous output";
-  // Time a run, then signal runs at delays spread over it.
+  // Time a run (after one that fills PoCL's kernel cache: with a cold cache
+  // the first run is many times slower), then signal runs at delays spread
+  // over it.
+  ASSERT_EQ(run({"classify", in, "--iso", "100", "-q", "-o", file("out.nrrd")}).status, 0);
   write("out.nrrd", previous);
   const RunResult timed = run({"classify", in, "--iso", "100", "-q", "-o", file("out.nrrd")});
   ASSERT_EQ(timed.status, 0) << timed.err;
@@ -728,6 +750,37 @@ TEST_F(Robust, MemoryLimitIsHonouredUpFront) {
                             "usable here (75 % of the memory, cgroup or ulimit)"});
   EXPECT_FALSE(fs::exists(file("u.nrrd")));
 #endif
+}
+
+// The device's limits, on a described device (a GPU with 1 GiB, of which
+// 256 MiB in one allocation): its global memory, then its largest buffer.
+TEST(RobustMemory, DeviceLimitsAreCheckedWithTheNumbers) {
+  DeviceInfo gpu;
+  gpu.type = "GPU";
+  gpu.device_name = "Test GPU";
+  gpu.global_mem = cl_ulong(1) << 30;
+  gpu.max_alloc = cl_ulong(1) << 28;
+  EXPECT_NO_THROW(check_classify_memory(gpu, "v.nrrd", {128, 128, 128}, Classifier::Variational, true));
+  try {
+    check_classify_memory(gpu, "v.nrrd", {256, 256, 256}, Classifier::Variational, true);
+    ADD_FAILURE() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("v.nrrd: classifying 256x256x256 voxels needs about 1.8 GiB of device memory "
+                                         "(118 B per voxel), more than the 1.0 GiB of Test GPU"),
+              std::string::npos)
+        << e.what();
+  }
+  gpu.global_mem = cl_ulong(1) << 34;
+  try {
+    check_classify_memory(gpu, "v.nrrd", {256, 256, 256}, Classifier::Variational, true);
+    ADD_FAILURE() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("needs a 640.0 MiB buffer, but Test GPU allows at most 256.0 MiB per allocation"),
+              std::string::npos)
+        << e.what();
+  }
+  // Levoy's largest buffer is one float per voxel.
+  EXPECT_NO_THROW(check_classify_memory(gpu, "v.nrrd", {256, 256, 256}, Classifier::Levoy, false));
 }
 
 // ---- the automatic isovalue on data it cannot use -------------------------------------------
