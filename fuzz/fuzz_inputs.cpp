@@ -221,10 +221,10 @@ bool run_raw(const std::uint8_t* data, std::size_t size) {
 }
 
 bool run_classify(const std::uint8_t* data, std::size_t size) {
-  std::uint8_t b[32] = {};
-  std::memcpy(b, data, std::min<std::size_t>(size, 32));
-  const std::uint8_t* samples = data + std::min<std::size_t>(size, 32);
-  const std::size_t nsamples = size > 32 ? size - 32 : 0;
+  std::uint8_t b[kClassifyHeader] = {};
+  std::memcpy(b, data, std::min<std::size_t>(size, kClassifyHeader));
+  const std::uint8_t* samples = data + std::min<std::size_t>(size, kClassifyHeader);
+  const std::size_t nsamples = size > kClassifyHeader ? size - kClassifyHeader : 0;
 
   const Dims3 dims{std::size_t(3 + b[0] % 6), std::size_t(3 + b[1] % 6), std::size_t(3 + b[2] % 6)};
   const int type = b[3] % 3;  // uint8, uint16, float
@@ -243,7 +243,19 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
   const int mask_rule = b[7] % 3;  // auto, none, zeros
   const bool auto_iso_value = b[8] < 128;
 
-  VariationalParams p;
+  // The shell functional's terms (bytes 32-47), or the paper's functional.
+  VariationalParams p = (b[45] & 1) ? VariationalParams::literal_defaults() : VariationalParams{};
+  if (!(b[45] & 1)) {
+    p.thickness_mm = param(b[34], 0, 6);
+    p.profile_power = param(b[35], 1, 4);
+    p.weight_cap = param(b[36], 1, 1000);
+    p.edge_share = param(b[37], 0, 0.5);
+    p.edge_power = param(b[38], 0, 8);
+    p.sharpen_iterations = b[39] % 4;
+    p.sharpen_lambda = param(b[40], 0, 4);
+    p.sharpen_barrier = param(b[41], 0.05, 1);
+    p.max_gain = param(b[42], 0, 4);
+  }
   p.alpha = param(b[11], 0, 2);
   p.beta = param(b[12], 0, 10);
   p.gamma = param(b[13], 0, 10);
@@ -265,6 +277,13 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
   lp.thickness = param(b[25], 0.5, 5);
   lp.sigma_mm = param(b[26], 0, 2);
   const bool replace = b[27] & 1;
+  // The automatic isovalue's rule and the local rule's field, the near field.
+  static const AutoIsoRule rules[] = {AutoIsoRule::Local, AutoIsoRule::EchoRidge, AutoIsoRule::Edge};
+  const AutoIsoRule rule = rules[b[32] % 3];
+  const bool want_field = rule == AutoIsoRule::Local && !(b[32] & 4);
+  const double local_fraction = param(b[43], 0, 1);
+  const double field_sigma = param(b[44], 0.5, 8);
+  const bool near_field = b[33] & 1;
 
   bool solved = false;
   const bool ok = answered([&] {
@@ -288,13 +307,29 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
       mask.resize(v.voxels());
       for (std::size_t i = 0; i < mask.size(); ++i) mask[i] = v.data[i] != 0.0f;
     }
+    // What `classify` checks of the local rule's options (CLI11 ranges).
+    if (!(local_fraction >= 0 && local_fraction <= 1)) throw InputError("--iso-fraction must be in [0, 1]");
+    if (!(field_sigma >= 0.5 && field_sigma <= 1000)) throw InputError("--iso-field-sigma must be in [0.5, 1000]");
+    if (near_field) {
+      const NearFieldReport nf = remove_near_field(v, mask);
+      if (nf.found && !mask.empty() && mask.size() != v.voxels()) fail("near-field mask of the wrong size");
+    }
     const std::vector<std::uint8_t>* m = mask.empty() ? nullptr : &mask;
     double iso;
+    std::vector<float> field;
     if (auto_iso_value) {
       AutoIsoParams ap;
-      ap.rule = levoy ? AutoIsoRule::Edge : AutoIsoRule::EchoRidge;
-      iso = auto_iso(v, m, ap);
+      ap.rule = rule;
+      ap.want_field = want_field;
+      ap.local_fraction = local_fraction;
+      ap.field_sigma_mm = field_sigma;
+      AutoIsoReport rep;
+      iso = auto_iso(v, m, ap, &rep);
       if (!std::isfinite(iso)) fail("automatic isovalue not finite");
+      field = std::move(rep.field);
+      if (!field.empty() && field.size() != v.voxels()) fail("isovalue field of the wrong size");
+      for (float f : field)
+        if (!std::isfinite(f)) fail("isovalue field not finite");
     } else {
       const IntensityMap map = v.intensity_map();
       iso = map.from_unit(param(b[9], -0.2, 1.2));
@@ -302,6 +337,11 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
       if (!std::isfinite(iso)) throw InputError("--iso must be a finite number");
     }
     if (m) fill_unscanned_in_place(v, mask);
+    if (!field.empty()) {
+      v = level_isovalue(v, field, iso);
+      for (float x : v.data)
+        if (!std::isfinite(x)) fail("levelled volume not finite");
+    }
     if (levoy) {
       lp.iso = iso;
       if (!(std::fabs(iso) <= 3.0e38)) throw InputError("--iso does not fit a float");
@@ -423,7 +463,7 @@ std::vector<Seed> seeds(const std::string& harness) {
     s.push_back({"dims.txt", "9,9,9\n"});
   } else if (harness == "classify") {
     for (int k = 0; k < 4; ++k) {
-      std::string b(32, '\0');
+      std::string b(kClassifyHeader, '\0');
       b[0] = b[1] = b[2] = 5;  // 8^3
       b[3] = char(k % 3);      // uint8, uint16, float
       b[4] = 4;                // 1 mm
@@ -435,6 +475,11 @@ std::vector<Seed> seeds(const std::string& harness) {
       for (int i = 11; i <= 20; ++i) b[i] = char(100);
       b[21] = 19, b[22] = 7, b[24] = 3;
       b[25] = 60, b[26] = 50;
+      // The shell functional near its defaults; the local rule with its
+      // field, the near field removed, in turn the paper's functional.
+      b[32] = char(k % 3), b[33] = 1;
+      b[34] = 80, b[35] = 80, b[36] = 24, b[37] = 14, b[38] = 120, b[39] = 2, b[40] = 120, b[41] = 113, b[42] = 0;
+      b[43] = 179, b[44] = 115, b[45] = char(k == 2);
       const Volume v = seed_volume(ScalarType::Float32, {8, 8, 8}, 5, 200);
       for (float x : v.data) {
         if (k % 3 == 0) b += char(int(x));

@@ -35,12 +35,16 @@ bool run_metaimage(const std::uint8_t* data, std::size_t size);
 // line (up to 64 bytes) is also given to the --raw / --spacing parsers.
 bool run_raw(const std::uint8_t* data, std::size_t size);
 // The classify pipeline on a tiny volume (dims 3..8 per axis): the first
-// 32 bytes choose dims, spacing, sample type, the method, the mask rule,
-// the isovalue (auto or a value) and the parameters, the rest are the
-// samples. Runs what `softshell classify` runs (checks, mask, automatic
-// isovalue, unscanned fill, the variational or Levoy classifier with at
-// most 20 iterations) on one OpenCL runtime per process; the opacity must
-// be finite and in [0, 1].
+// kClassifyHeader bytes choose dims, spacing, sample type, the method, the
+// mask rule, the near-field removal, the isovalue (a value, or auto by the
+// local rule with or without its field, the echo ridge or the edge) and
+// the parameters (the shell functional's, sharpening included, or the
+// paper's functional); the rest are the samples. Runs what `softshell
+// classify` runs (checks, mask, near field, automatic isovalue, unscanned
+// fill, levelling by the isovalue field, the variational or Levoy
+// classifier with at most 20 iterations) on one OpenCL runtime per
+// process; the opacity must be finite and in [0, 1].
+constexpr std::size_t kClassifyHeader = 48;
 bool run_classify(const std::uint8_t* data, std::size_t size);
 
 // Seed inputs per harness, as files: name -> bytes. Valid files of every

@@ -311,15 +311,18 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   // averaged, depth resolution kept.
   std::vector<float> lp = v.data;
   for (const int axis : {u_ax, w_ax}) {
-    const std::vector<float> w = gaussian_weights(std::max(0.5, params.sigma_mm / v.spacing[axis]), 3.0);
+    // At most as wide as the axis (wider is flat across it anyway: a
+    // spacing in the wrong unit made it 30000 taps, O(n r) for nothing),
+    // and only the taps inside the axis are visited.
+    const double sigma_vox = std::clamp(params.sigma_mm / v.spacing[axis], 0.5, std::max(0.5, double(d[axis])));
+    const std::vector<float> w = gaussian_weights(sigma_vox, 3.0);
     const long r = long(w.size() / 2);
     std::vector<float> out(n);
     for (std::size_t i = 0; i < n; ++i) {
       const long pos = long((i / stride[axis]) % d[axis]);
       double acc = 0, wsum = 0;
-      for (long k = -r; k <= r; ++k) {
-        const long q = pos + k;
-        if (q < 0 || q >= long(d[axis])) continue;
+      const long k0 = std::max(-r, -pos), k1 = std::min(r, long(d[axis]) - 1 - pos);
+      for (long k = k0; k <= k1; ++k) {
         const std::size_t j = std::size_t(long(i) + k * long(stride[axis]));
         if (scanned && !(*scanned)[j]) continue;
         acc += w[std::size_t(k + r)] * lp[j], wsum += w[std::size_t(k + r)];

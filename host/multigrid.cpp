@@ -169,6 +169,8 @@ struct MultigridSolver::Impl : Multigrid {
 MultigridSolver::MultigridSolver(DeviceSystem& fine, const SolverParams& sp)
     : impl_(std::make_unique<Impl>(fine, sp)) {}
 MultigridSolver::~MultigridSolver() = default;
+const cl::Buffer& MultigridSolver::solution() const { return impl_->fine().u; }
+
 int MultigridSolver::levels() const { return impl_->levels(); }
 const SolverParams& MultigridSolver::params() const { return impl_->params(); }
 void MultigridSolver::update_point() { impl_->update_point(); }
@@ -348,15 +350,24 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
   // A linear solve that did not converge is reported as it is: sharpening
   // would only spend more cycles on it.
   const bool linear_ok = report->converged;
-  if (steps > 0 && linear_ok && params_.sharpen_lambda > 0 &&
-      (crest = crest_of(geometry_.with_data(u, ScalarType::Float32))) > 0) {
+  if (steps > 0 && linear_ok) {
+    // The crest of u, lent to a Volume and taken back (no copy).
+    Volume lent = geometry_.with_data(std::move(u), ScalarType::Float32);
+    crest = crest_of(lent);
+    u = std::move(lent.data);
+  }
+  if (steps > 0 && linear_ok && params_.sharpen_lambda > 0 && crest > 0) {
     // The barrier relative to the linear solution's own crest, in units of
     // u_ind: ratio = (1 - barrier) / barrier puts the unstable point there.
     const double barrier = std::clamp(params_.sharpen_barrier * crest / params_.u_ind, 0.05, 0.95);
     const double ratio = (1 - barrier) / barrier;
     SolveReport step_report;
     for (int s = 0; s < steps; ++s) {
-      sys_->update_sharpen(params_, u, params_.sharpen_lambda, ratio);
+      // The linearisation point is the solution still on the device: no
+      // host copy is kept through the update and the solve, and no device
+      // copy made (8 bytes per voxel of the peak).
+      std::vector<float>().swap(u);
+      sys_->update_sharpen(params_, mg_->solution(), params_.sharpen_lambda, ratio);
       mg_->update_point();
       sharpened_ = true;
       u = mg_->solve(&step_report, nullptr, true, s + 1 < steps ? loose : 0.0);

@@ -199,18 +199,22 @@ void DeviceSystem::update_point(const VariationalParams& p) {
 
 void DeviceSystem::update_sharpen(const VariationalParams& p, const std::vector<float>& u0, double lambda,
                                   double ratio) {
+  if (u0.size() != voxels()) throw std::invalid_argument("DeviceSystem::update_sharpen: u0 has the wrong size");
+  cl::Buffer b = rt_.buffer(voxels() * sizeof(float));
+  rt_.queue().enqueueWriteBuffer(b, CL_TRUE, 0, voxels() * sizeof(float), u0.data());
+  update_sharpen(p, b, lambda, ratio);
+}
+
+void DeviceSystem::update_sharpen(const VariationalParams& p, const cl::Buffer& u0, double lambda, double ratio) {
   if (!updatable())
     throw std::logic_error("DeviceSystem::update_sharpen: the system was not built from a volume");
-  if (u0.size() != voxels()) throw std::invalid_argument("DeviceSystem::update_sharpen: u0 has the wrong size");
   VariationalParams r = p;
   r.g_ref = resolved_.g_ref;
   r.thickness_mm = p.effective_thickness_mm(spacing_);
   ClassifyCoeffs k = r.coeffs();
   k.sharpen_lambda = float(lambda), k.sharpen_ratio = float(ratio);
-  if (!u0_()) u0_ = rt_.buffer(voxels() * sizeof(float));
-  rt_.queue().enqueueWriteBuffer(u0_, CL_TRUE, 0, voxels() * sizeof(float), u0.data());
   cl::Kernel kern = rt_.kernel(kSystem, "system_update_sharpen");
-  Runtime::set_args(kern, sources_[0], sources_[1], sources_[2], fixed_, dT_, u0_, mu_, rho_, coef_, b_, k, grid_);
+  Runtime::set_args(kern, sources_[0], sources_[1], sources_[2], fixed_, dT_, u0, mu_, rho_, coef_, b_, k, grid_);
   rt_.enqueue_3d(kern, grid_);
   resolved_ = r;
 }

@@ -134,6 +134,9 @@ class DeviceSystem {
   // "Sharpening"): mu += lambda ((1 - a)^2 + ratio a^2), rho += lambda ratio
   // a^2 u_ind, a = clamp(u0 / u_ind, 0, 1).
   void update_sharpen(const VariationalParams& p, const std::vector<float>& u0, double lambda, double ratio);
+  // The same from a device buffer of voxels() floats (read by the kernel
+  // only; the caller keeps it), e.g. MultigridSolver::solution().
+  void update_sharpen(const VariationalParams& p, const cl::Buffer& u0, double lambda, double ratio);
   // The parameters in force on a volume-built level: g_ref resolved from the
   // data when it was 0, thickness_mm raised to its voxel floor.
   const VariationalParams& resolved() const { return resolved_; }
@@ -195,7 +198,7 @@ class DeviceSystem {
 
   Runtime& rt_;
   GridDesc grid_;
-  cl::Buffer mu_, rho_, fixed_, coef_, b_, dT_, partial_, u0_;
+  cl::Buffer mu_, rho_, fixed_, coef_, b_, dT_, partial_;
   std::array<cl::Buffer, 6> T_;
   std::array<cl::Buffer, 3> sources_;  // v, v~, |grad v|^2 of a volume-built level (for update_point)
   VariationalParams resolved_;
@@ -249,6 +252,9 @@ class MultigridSolver {
   void update_point();
   int levels() const;
   const SolverParams& params() const;
+  // The last solve's solution on the device (the fine level's u, fixed
+  // voxels 0); valid until the next solve or update.
+  const cl::Buffer& solution() const;
 
  private:
   struct Impl;

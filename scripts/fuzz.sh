@@ -46,7 +46,7 @@ for h in "${harnesses[@]}"; do
   # The pipeline harness runs OpenCL kernels: fewer bytes matter (dims <= 8)
   # and an input may take longer.
   max_len=65536 timeout=20
-  [ "$h" = classify ] && max_len=2080 timeout=60
+  [ "$h" = classify ] && max_len=2096 timeout=60
   mkdir -p "$corpus/$h"
   log "$h: the regression inputs of tests/data/repro"
   nice -n 10 "$exe" -timeout="$timeout" -rss_limit_mb=2560 "$ROOT"/tests/data/repro/* \

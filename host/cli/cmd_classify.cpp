@@ -311,7 +311,10 @@ int run_classify(const ClassifyOptions& o) {
   if (!mask.scanned.empty()) fill_unscanned_in_place(in, mask.scanned);
   // The local isovalue field levelled out: the classifier then works at one
   // isovalue on data whose brightness no longer drifts (host/auto_iso.hpp).
-  if (!iso_field.empty()) in = level_isovalue(in, iso_field, iso);
+  if (!iso_field.empty()) {
+    in = level_isovalue(in, iso_field, iso);
+    std::vector<float>().swap(iso_field);  // not held through the solve (4 bytes per voxel)
+  }
   return o.method == "levoy" ? run_levoy(o, rt, in, iso, iso_text, mask, t0)
                              : run_variational(o, rt, in, iso, iso_text, mask, t0);
 }
