@@ -135,7 +135,7 @@ bool answered(F&& body) {
   try {
     body();
     return true;
-  } catch (const InputError&) {
+  } catch (const InputError& e) { if (std::getenv("SOFTSHELL_FUZZ_DEBUG")) std::fprintf(stderr, "answer: %s\n", e.what());
   } catch (const NotConvergedError&) {
   } catch (const std::exception& e) {
     fail(std::string("not a documented answer: ") + typeid(e).name() + ": " + e.what());

@@ -395,6 +395,13 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
           ++rep.voxels;
         }
       }
+    // On a small or shallow volume the "band" may be most of it: that is
+    // the object (removing it would leave nothing to classify), not an
+    // occluder above it.
+    if (double(rep.voxels) > params.max_share * double(all.size())) {
+      rep.found = false, rep.too_deep = true, rep.voxels = 0;
+      std::fill(band.begin(), band.end(), std::uint8_t{0});
+    }
   }
   if (report) *report = rep;
   return band;

@@ -84,6 +84,7 @@ struct NearFieldParams {
   double min_ratio = 0.5;  // the top brighter than below it by this share of the top
   double sigma_mm = 1.0;   // lowpass across the beam of the profile's samples
   int axis = -1;           // beam axis (0 x, 1 y, 2 z); -1: beam_axis_of the data
+  double max_share = 0.5;  // a "band" holding more of the scanned voxels is the object, not a near field
 };
 struct NearFieldReport {
   int axis = 2;                 // the beam axis used
@@ -91,6 +92,7 @@ struct NearFieldReport {
   double depth_mm = 0;          // band bottom below the skin line, margin included
   double top = 0, below = 0;    // P at the top and below it (file units)
   std::size_t voxels = 0;       // voxels in the band
+  bool too_deep = false;        // a band was found but held more than max_share of the scanned voxels: kept
 };
 std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std::uint8_t>* scanned,
                                           const NearFieldParams& params = {}, NearFieldReport* report = nullptr);

@@ -21,8 +21,10 @@ namespace {
 // u, rhs, r (3 floats); the coarse levels add at most 1/7 of a level's
 // system and buffers (each has 1/8 of the voxels of the one above). In the
 // solve T is gone and the conjugate gradients' x, r, z, p, q (5 floats) are
-// there: 8 bytes less. Measured: 120.7 bytes per voxel in all between 128^3
-// and 256^3 (docs/benchmarks.md, "Memory").
+// there: 8 bytes less (the sharpening step linearises at the solution in
+// place, MultigridSolver::solution(), so it adds nothing). Measured: 119.4
+// bytes per voxel in all between 128^3 and 256^3 (docs/benchmarks.md,
+// "Memory").
 constexpr double kVariationalSystem = (4 + 6 + STENCIL_COEFS) * 4.0 + 1.0;
 constexpr double kVariationalFine = kVariationalSystem + 3 * 4.0 + 3 * 4.0;
 constexpr double kVariationalCoarse = (kVariationalSystem + 3 * 4.0) / 7.0;

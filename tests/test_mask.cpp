@@ -187,6 +187,26 @@ TEST(NearField, DarkTopOrAFaintLayerIsNoBand) {
   EXPECT_FALSE(r.found);
 }
 
+TEST(NearField, ABandThatIsMostOfTheVolumeIsKept) {
+  // The same layered band as above over a volume only 14 mm deep: the band
+  // (9 mm with its margin) would be 64 % of the voxels, so it is the object
+  // and stays; at 30 mm deep it is removed.
+  NearFieldReport r;
+  std::vector<std::uint8_t> mask;
+  const Volume shallow = layered_scan({40, 40, 28}, {0.5, 0.5, 0.5}, 2, {{2.0, 220}, {2.0, 150}, {4.0, 210}}, 40,
+                                      test::seed() + 4);
+  r = remove_near_field(shallow, mask);
+  EXPECT_FALSE(r.found);
+  EXPECT_TRUE(r.too_deep);
+  EXPECT_TRUE(mask.empty());
+  const Volume deep = layered_scan({40, 40, 60}, {0.5, 0.5, 0.5}, 2, {{2.0, 220}, {2.0, 150}, {4.0, 210}}, 40,
+                                   test::seed() + 4);
+  r = remove_near_field(deep, mask);
+  EXPECT_TRUE(r.found);
+  EXPECT_FALSE(r.too_deep);
+  EXPECT_EQ(mask.size(), deep.voxels());
+}
+
 TEST(NearField, BeamAxisFromTheSpeckleGrain) {
   // The same band along y: the beam axis is found from the grain, and the
   // band lies along it.

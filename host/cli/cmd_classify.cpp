@@ -273,6 +273,9 @@ int run_classify(const ClassifyOptions& o) {
       t << "; near field removed: the first " << std::fixed << std::setprecision(1) << nf.depth_mm
         << " mm below the skin line along " << "xyz"[nf.axis] << " (" << nf.voxels << " voxels, median " << std::setprecision(0) << nf.top
         << " over " << nf.below << " below; --near-field keep to draw it)";
+    else if (nf.too_deep)
+      t << "; near field kept: the bright band (" << std::fixed << std::setprecision(1) << nf.depth_mm
+        << " mm along " << "xyz"[nf.axis] << ") would be more than half of the scanned voxels";
     else
       t << "; no bright near field (beam along " << "xyz"[nf.axis] << ")";
     mask.text += t.str();
