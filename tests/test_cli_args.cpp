@@ -174,6 +174,10 @@ TEST_F(CliArgs, IsoOutsideTheDataWarnsOnce) {
   const RunResult lv = run({"classify", in, "--method", "levoy", "--iso", "300", "-q", "-o", file("l.nrrd")});
   EXPECT_EQ(lv.status, 0) << lv.err;
   EXPECT_NE(lv.err.find("warning: --iso 300 is outside"), std::string::npos) << lv.err;
+  // And figure2.
+  const RunResult f2 = run({"figure2", in, "--iso", "-5", "--mask", "none", "-q", "-o", file("f2.png")});
+  EXPECT_NE(f2.status, 2) << f2.err;
+  EXPECT_NE(f2.err.find("warning: --iso -5 is outside the data's value range [0, "), std::string::npos) << f2.err;
 }
 
 TEST_F(CliArgs, EvaluateRefusesATruthThatIsNoSignedDistance) {

@@ -103,20 +103,6 @@ DataMask make_mask(const std::string& option, const Volume& in) {
   return m;
 }
 
-// A warning (one line) when an explicit --iso lies outside the samples'
-// values: no boundary of the data is at that value, so the result is empty
-// (or everything). Not an error: a user may mean it. Empty: no warning.
-// Printed once the isovalue has passed the checks that refuse it.
-std::string iso_outside_data(const Volume& in, double iso) {
-  float lo = INFINITY, hi = -INFINITY;
-  for (float x : in.data) lo = std::min(lo, x), hi = std::max(hi, x);
-  if (!(lo <= hi) || (iso >= lo && iso <= hi)) return "";
-  std::ostringstream w;
-  w << "softshell: warning: --iso " << format_iso(iso) << " is outside the data's value range [" << lo << ", " << hi
-    << "] (" << scalar_type_name(in.source_type) << " samples); no boundary lies at that value\n";
-  return w.str();
-}
-
 void write_opacity(const ClassifyOptions& o, const Volume& u) {
   const progress::Stage stage("write");
   WriteOptions w;

@@ -332,6 +332,7 @@ int run_figure2(const Figure2Options& o) {
   }
 
   panel.reset();
+  if (given_iso) std::cerr << iso_outside_data(in, iso);  // after every check of the isovalue passed
   int au, av;
   plane_axes(spec.axis, au, av);
   int zoom = o.zoom;
