@@ -6,9 +6,11 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 
 #include "variational.hpp"
+#include "progress.hpp"
 
 namespace softshell {
 namespace {
@@ -199,6 +201,7 @@ std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector
     rep.residuals.push_back(mg.relative_residual());  // F.u: the previous solution, fixed voxels at 0
   } else if (sp.full_multigrid) {
     rep.residuals.push_back(1.0);  // u = 0
+    const progress::Stage fmg("full multigrid, " + std::to_string(mg.levels()) + " levels");
     mg.full_multigrid();
     rt.queue().enqueueCopyBuffer(fine.b(), F.rhs, 0, 0, n * sizeof(float));
     rep.residuals.push_back(mg.relative_residual());
@@ -207,11 +210,13 @@ std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector
     rep.residuals.push_back(mg.relative_residual());
   }
   mg.has_solution = false;  // F.u is scratch until the solve ends
+  progress::Stage stage(sp.krylov ? "solve (PCG)" : "solve (V-cycles)");
   if (!sp.krylov) {
     while (rep.residuals.back() > tol && rep.cycles < sp.max_cycles) {
       mg.vcycle(0);
       ++rep.cycles;
       rep.residuals.push_back(mg.relative_residual());
+      stage.residual(rep.residuals.back(), tol, rep.cycles);
     }
   } else if (rep.residuals.back() > tol) {
     // Preconditioned conjugate gradients on A x = b from the current u; the
@@ -247,6 +252,7 @@ std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector
         true_residual = true;
       }
       rep.residuals.push_back(rel);
+      stage.residual(rel, tol, rep.cycles);
       if (rel <= tol) break;
       mg.precondition(r, z);
       const double rz_new = fine.dot(r, z);
@@ -363,6 +369,7 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
     const double ratio = (1 - barrier) / barrier;
     SolveReport step_report;
     for (int s = 0; s < steps; ++s) {
+      const progress::Stage stage("sharpen " + std::to_string(s + 1) + "/" + std::to_string(steps));
       // The linearisation point is the solution still on the device: no
       // host copy is kept through the update and the solve, and no device
       // copy made (8 bytes per voxel of the peak).
@@ -403,7 +410,9 @@ Volume classify_variational(Runtime& rt, const Volume& v, const VariationalParam
                             SolveReport* report, const Volume* init, const std::vector<std::uint8_t>* mask,
                             ClassifyTiming* timing) {
   if (init && init->dims != v.dims) throw std::invalid_argument("initial opacity has other dims than the volume");
+  std::optional<progress::Stage> setup(std::in_place, "setup (lowpass, gradients, system, levels)");
   VariationalClassifier c(rt, v, params, sp, mask);
+  setup.reset();
   const auto t1 = std::chrono::steady_clock::now();
   Volume u = c.solve(report, init);
   if (timing) {

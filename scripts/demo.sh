@@ -1,16 +1,18 @@
 #!/usr/bin/env bash
 # The front door: installs, builds, and runs softshell's main job on a built-in
 # fetal-face phantom (simulated B-mode ultrasound with ground truth) and on the
-# real spine ultrasound in ../shared/data/plus-spine; writes volumes, reports
-# and pictures under out/.
+# real spine ultrasound shipped in data/plus-spine (data/README.md); writes
+# volumes, reports and pictures under out/ and ends with an index of them.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 
 install_deps
-build_release
+build_release softshell  # the one program the demo runs: no tests, no benchmarks
 ss="$BUILD_DIR/host/softshell"
 out="$ROOT/out"
 mkdir -p "$out"
+start="$out/.demo-start"  # the index lists what is newer: this run's files only
+touch "$start"
 
 log "OpenCL devices"
 "$ss" devices
@@ -41,7 +43,9 @@ done
 log "the paper's Figure 2 on a slice of the face"
 "$ss" figure2 "$out/face/volume.nrrd" --iso auto -o "$out/face-figure2.png"
 
-spine="$ROOT/../shared/data/plus-spine/SpinePhantomFreehandReconstructed.mha"
+# Shipped in data/ (data/README.md); ../shared/data beside the tree as a fallback.
+spine="$ROOT/data/plus-spine/SpinePhantomFreehandReconstructed.mha"
+[ -f "$spine" ] || spine="$ROOT/../shared/data/plus-spine/SpinePhantomFreehandReconstructed.mha"
 if [ -f "$spine" ]; then
   log "real 3D ultrasound: PLUS spine phantom"
   "$ss" info "$spine" > "$out/spine-info.txt"
@@ -100,5 +104,44 @@ if "$ss" figure6 --help >/dev/null 2>&1; then
   "${gl[@]}" "$ss" figure6 "$out/face-variational.nrrd" --view -30,10 --crop "$crop" -o "$out/figure6-face.png"
 fi
 
-log "done; outputs in $out:"
-ls -1 "$out" >&2
+# An index of what this run wrote: every file under out/ newer than the
+# start of the run, with its size and what it is; also saved as out/INDEX.txt.
+describe() {
+  case "$1" in
+    face/volume.nrrd) echo "phantom: simulated B-mode volume (uint8)" ;;
+    face/truth_sdf.nrrd) echo "phantom: true signed distance to the tissue boundary (voxels)" ;;
+    face/labels.nrrd) echo "phantom: tissue labels" ;;
+    face/phantom.json) echo "phantom: parameters and grey-level medians" ;;
+    face-slices.png) echo "phantom mid-slices, true boundary in orange" ;;
+    *-info.txt) echo "softshell info: dims, spacing, value range, histogram" ;;
+    *-levoy.nrrd) echo "opacity, Levoy's isovalue-contour classifier" ;;
+    *-variational.nrrd) echo "opacity, the variational classifier (defaults, --iso auto)" ;;
+    *-metrics.txt) echo "evaluate: precision, recall, blobs, normal error against the truth" ;;
+    *-classified.png) echo "mid-slices: input | Levoy | variational" ;;
+    *-figure2.png) echo "the paper's Figure 2 on one slice" ;;
+    spine-lowpass.nrrd) echo "the spine lowpassed (sigma 1 mm)" ;;
+    spine-slices.png) echo "mid-slices of the spine, raw and lowpassed" ;;
+    render-*-oriented.png) echo "oriented splats (the paper's renderer)" ;;
+    render-*-isotropic.png) echo "isotropic splats, for comparison" ;;
+    render-*.png) echo "oriented splats" ;;
+    turntable/*) echo "turntable frame (oriented splats)" ;;
+    *.ply) echo "Marching Cubes mesh of the opacity at 0.2 (binary PLY)" ;;
+    figure5-*.png) echo "the paper's Figure 5: ray casting before / after classification" ;;
+    figure6-*.png) echo "the paper's Figure 6: ray casting, Marching Cubes, shear-warp, splats" ;;
+    INDEX.txt) echo "this index" ;;
+    *) echo "" ;;
+  esac
+}
+{
+  printf 'softshell demo outputs in %s\n\n' "$out"
+  turntable=0
+  while IFS= read -r f; do
+    case "$f" in
+      turntable/*) turntable=$((turntable + 1)); [ "$turntable" -gt 1 ] && continue ;;
+    esac
+    printf '  %-36s %9s  %s\n' "$f" "$(du -h "$out/$f" | cut -f1)" "$(describe "$f")"
+  done < <(cd "$out" && find . -type f -newer "$start" ! -name INDEX.txt | sed 's|^\./||' | LC_ALL=C sort)
+  [ "$turntable" -gt 1 ] && printf '  %-36s %9s  %s\n' "turntable/ ($turntable frames)" "" "one frame listed above"
+} > "$out/INDEX.txt"
+log "done; what this run wrote:"
+cat "$out/INDEX.txt" >&2

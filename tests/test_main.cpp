@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <iostream>
 #include <memory>
 
@@ -31,7 +32,12 @@ std::uint64_t seed() {
 
 std::string shared_data_dir() {
   const char* env = std::getenv("SOFTSHELL_SHARED_DATA");
-  return env && *env ? env : SOFTSHELL_SHARED_DATA;
+  if (env && *env) return env;
+  // The volumes shipped in the source tree (data/README.md) first, then
+  // ../shared/data beside it.
+  const std::string shipped = std::string(SOFTSHELL_SOURCE_DIR) + "/data";
+  if (std::filesystem::exists(shipped + "/plus-spine")) return shipped;
+  return SOFTSHELL_SHARED_DATA;
 }
 
 bool in_ci() {

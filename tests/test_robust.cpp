@@ -411,7 +411,7 @@ TEST_F(Robust, AbsurdSigmasAreRefusedAtOnce) {
     expect_one_line_error(r, {"--grad-sigma ", "more than the 33.3 voxels"});
   }
   expect_one_line_error(run({"classify", in, "--iso", "100", "--sigma", "nan", "-o", file("u.nrrd")}),
-                        {"must be finite numbers"});
+                        {"--sigma: must be a finite number >= 0 mm, got 'nan'"});
   EXPECT_TRUE(listing().empty());
 }
 

@@ -31,8 +31,9 @@ Volume random_volume(Dims3 dims, Vec3d spacing, std::uint64_t seed, float lo = 0
 // centre (renderer tests).
 Volume shell_volume(int n);
 
-// Directory of the shared test data: $SOFTSHELL_SHARED_DATA, else the path
-// baked in at build time (../shared/data beside the source tree).
+// Directory of the real test data: $SOFTSHELL_SHARED_DATA, else data/ in the
+// source tree (data/README.md), else the path baked in at build time
+// (../shared/data beside the source tree).
 std::string shared_data_dir();
 bool in_ci();  // $CI == "true"
 

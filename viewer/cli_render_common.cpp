@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "error.hpp"
+#include "cli_validate.hpp"
 
 namespace softshell::cli {
 namespace {
@@ -31,42 +32,64 @@ std::vector<double> parse_numbers(const std::string& text, char sep, std::size_t
 
 }  // namespace
 
-void SplatViewOptions::add_to(CLI::App* sub) {
+const std::vector<std::string>& render_methods() {
+  static const std::vector<std::string> m{"splat", "isosplat", "raycast", "mc", "shearwarp"};
+  return m;
+}
+
+const std::vector<std::string>& view_methods() {
+  static const std::vector<std::string> m{"splat", "isosplat", "mc", "raycast"};
+  return m;
+}
+
+void SplatViewOptions::add_to(CLI::App* sub, const std::vector<std::string>& methods) {
+  const bool shearwarp = std::find(methods.begin(), methods.end(), "shearwarp") != methods.end();
   sub->add_option("--method", method,
-                  "splat: oriented splats (the paper); isosplat: isotropic splats facing the viewer; render only: "
-                  "raycast (OpenCL ray casting), mc (Marching Cubes mesh), shearwarp (VolPack); docs/renderers.md")
-      ->capture_default_str();
+                  std::string("splat: oriented splats (the paper); isosplat: isotropic splats facing the viewer; "
+                              "raycast: OpenCL ray casting; mc: Marching Cubes mesh") +
+                      (shearwarp ? "; shearwarp: VolPack" : "") + "; docs/renderers.md")
+      ->capture_default_str()
+      ->check(one_of(methods));
   sub->add_option("--threshold", threshold,
                   "epsilon: voxels with u > epsilon get a splat; the Gaussian falls to epsilon at the splat's rim")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(0, 1, "", Ends::Open));
   sub->add_option("--normals", normals, "Shading normals per splat: one (at the centre) or three (midway to each vertex)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(one_of({"one", "three"}));
   sub->add_option("--orientation", orientation,
                   "Splat plane and normals from: tensor (principal direction of the structure tensor of u; right on "
                   "the middle of a shell, where grad u vanishes) or gradient (grad u, the paper); docs/rendering.md")
-      ->capture_default_str();
-  sub->add_option("--tensor-sigma", tensor_sigma, "Gaussian sigma of the structure tensor in voxels, in (0, 8]")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(one_of({"tensor", "gradient"}));
+  sub->add_option("--tensor-sigma", tensor_sigma, "Gaussian sigma of the structure tensor in voxels")
+      ->capture_default_str()
+      ->check(real_range(0, 8, "voxels", Ends::OpenLow));
   sub->add_option("--order", order,
                   "Back to front: lists (the paper's six presorted lists, by the dominant view axis) or sort (exact "
                   "per-view depth sort)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(one_of({"lists", "sort"}));
   sub->add_option("--gaussian", gaussian,
                   "lambda from epsilon: paper (-0.25 ln eps, as printed) or rim (-0.25 / ln eps, so that G = eps at "
                   "the splat's rim as the paper intends; larger, smoother splats); docs/rendering.md")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(one_of({"paper", "rim"}));
   sub->add_flag("--opacity", opacity, "Treat IN as an opacity volume (float in [0, 1]) even if unsure");
   sub->add_flag("--classify", classify, "Classify IN first (with the defaults) even if it looks like an opacity volume");
 }
 
 viewer::RenderSettings SplatViewOptions::settings() const {
   viewer::RenderSettings s;
-  if (method == "splat" || method == "oriented")
-    s.method = viewer::SplatMethod::Oriented;
-  else if (method == "isosplat" || method == "isotropic")
+  // --method raycast / mc / shearwarp leave the splat method at its default
+  // (the renderers that use splat settings read crop and colours only).
+  if (method == "isosplat" || method == "isotropic")
     s.method = viewer::SplatMethod::Isotropic;
+  else if (std::find(render_methods().begin(), render_methods().end(), method) == render_methods().end() &&
+           method != "oriented")
+    throw InputError("--method " + method + ": unknown (expected " + choice_list(render_methods()) + ")");
   else
-    throw InputError("--method " + method + ": unknown (methods: splat, isosplat)");
+    s.method = viewer::SplatMethod::Oriented;
   if (normals != "one" && normals != "three") throw InputError("--normals " + normals + ": expected one or three");
   s.three_normals = normals == "three";
   if (order != "lists" && order != "sort") throw InputError("--order " + order + ": expected lists or sort");

@@ -7,6 +7,7 @@
 #include <CLI/CLI.hpp>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "opacity_input.hpp"
 #include "raycast.hpp"
@@ -24,13 +25,20 @@ Volume cropped(const Volume& u, const viewer::RenderSettings& s);
 // settings, so every renderer draws the same scene the same way.
 void apply_render_settings(RaycastParams& p, const viewer::RenderSettings& s);
 
+// --method words: `render` (splat, isosplat, raycast, mc, shearwarp) and
+// `view` (splat, isosplat, mc, raycast; shear-warp is not interactive).
+const std::vector<std::string>& render_methods();
+const std::vector<std::string>& view_methods();
+
 struct SplatViewOptions {
   std::string method = "splat", normals = "three", order = "lists", gaussian = "paper", orientation = "tensor";
   float threshold = 0.2f;
   double tensor_sigma = 1.5;
   bool opacity = false, classify = false;
 
-  void add_to(CLI::App* sub);
+  // `render` offers every renderer (render_methods()), `view` those it can
+  // show (view_methods()); help and errors list the same words.
+  void add_to(CLI::App* sub, const std::vector<std::string>& methods);
   viewer::RenderSettings settings() const;  // validates method, normals, order
   SplatParams params() const;               // validates the threshold
   viewer::InputKind input_kind() const;

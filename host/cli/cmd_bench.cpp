@@ -7,6 +7,7 @@
 
 #include "bench.hpp"
 #include "cli_common.hpp"
+#include "cli_validate.hpp"
 #include "error.hpp"
 #include "image.hpp"
 #include "text.hpp"
@@ -52,6 +53,7 @@ int run_bench_command(const BenchCliOptions& o) {
     const fs::path dir = p.parent_path().empty() ? fs::path(".") : p.parent_path();
     std::error_code ec;
     if (!fs::is_directory(dir, ec)) throw InputError(o.plot + ": directory " + dir.string() + " does not exist");
+    check_output(o.plot, OutputKind::Png);
   }
   BenchOptions bo;
   bo.quick = o.quick;
@@ -101,7 +103,7 @@ void add_bench_command(CLI::App& app, Action& action) {
       ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
   sub->add_option("--reps", o->reps, "Repeats of the cheap timings, 1..100 (default: 3 with --quick, else 5)")
       ->type_name("N")
-      ->check(CLI::Range(1, 100));
+      ->check(int_range(1, 100));
   sub->add_option("-o,--output", o->plot, "Also write a plot of time vs voxels per device (PNG)")
       ->type_name("PLOT.png");
   sub->callback([&action, o] { action = [o] { return run_bench_command(*o); }; });

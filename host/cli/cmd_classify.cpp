@@ -1,6 +1,7 @@
 // `softshell classify IN --iso V -o OUT`: opacity classification, by the
 // paper's variational method (default) or Levoy's isovalue-contour classifier
 // (the paper's Figure 2b baseline).
+#include <algorithm>
 #include <cmath>
 #include <iomanip>
 #include <iostream>
@@ -13,10 +14,12 @@
 #include "classify_checks.hpp"
 #include "cl_runtime.hpp"
 #include "cli_common.hpp"
+#include "cli_validate.hpp"
 #include "error.hpp"
 #include "io.hpp"
 #include "levoy.hpp"
 #include "mask.hpp"
+#include "progress.hpp"
 #include "metrics.hpp"
 #include "memory_need.hpp"
 #include "filter.hpp"
@@ -31,7 +34,7 @@ struct ClassifyOptions {
   std::string near_field = "remove";
   double thickness = 1.0;
   double iso_fraction = AutoIsoParams().local_fraction, iso_field_sigma = AutoIsoParams().field_sigma_mm;
-  double sigma = -1;  // unset: 1 mm for variational, 0 (raw) for levoy
+  std::optional<double> sigma;  // unset: 1 mm for variational, 0 (raw) for levoy
   VariationalParams vp;
   SolverParams sp;
   bool compress = false, quiet = false, stats = false, no_fmg = false, literal = false, no_iso_field = false;
@@ -101,6 +104,7 @@ DataMask make_mask(const std::string& option, const Volume& in) {
 }
 
 void write_opacity(const ClassifyOptions& o, const Volume& u) {
+  const progress::Stage stage("write");
   WriteOptions w;
   w.type = ScalarType::Float32;
   w.compress = o.compress;
@@ -111,7 +115,7 @@ void write_opacity(const ClassifyOptions& o, const Volume& u) {
 // refused before anything is read.
 VariationalParams variational_params(const ClassifyOptions& o) {
   VariationalParams p = o.vp;
-  p.sigma_mm = o.sigma < 0 ? 1.0 : o.sigma;
+  p.sigma_mm = o.sigma.value_or(1.0);
   if (o.literal) {
     // The paper's terms exactly; weights not given on the command line take
     // the values the earlier study chose for the literal functional.
@@ -141,13 +145,16 @@ SolverParams solver_params(const ClassifyOptions& o) {
 }
 
 int run_levoy(const ClassifyOptions& o, Runtime& rt, const Volume& in, double iso, const std::string& iso_text,
-              const DataMask& mask, Clock::time_point t0) {
+              const std::string& iso_warning, const DataMask& mask, Clock::time_point t0) {
+  std::cerr << iso_warning;
   LevoyParams p;
   p.iso = iso;
   p.thickness = o.thickness;
-  p.sigma_mm = o.sigma < 0 ? 0.0 : o.sigma;
+  p.sigma_mm = o.sigma.value_or(0.0);
   LevoyReport report;
+  std::optional<progress::Stage> stage(std::in_place, "levoy");
   Volume u = classify_levoy(rt, in, p, &report);
+  stage.reset();
   // Levoy's classifier has no notion of a data region: unscanned voxels get
   // opacity 0 after the fact (docs/real-data.md).
   if (!mask.scanned.empty())
@@ -172,11 +179,12 @@ int run_levoy(const ClassifyOptions& o, Runtime& rt, const Volume& in, double is
 }
 
 int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, double iso, const std::string& iso_text,
-                    const DataMask& mask, Clock::time_point t0) {
+                    const std::string& iso_warning, const DataMask& mask, Clock::time_point t0) {
   const IntensityMap map = in.intensity_map();
   VariationalParams p = variational_params(o);
   p.v_iso = map.to_unit(iso);
   check_normalised_iso(p.v_iso, format_iso(iso), map.describe());
+  std::cerr << iso_warning;
   const SolverParams sp = solver_params(o);
   std::optional<Volume> init;
   if (!o.init.empty()) {
@@ -184,6 +192,16 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
     if (init->dims != in.dims)
       throw InputError(o.init + ": --init has dims " + dims_text(init->dims) + ", the volume " + dims_text(in.dims));
     require_finite(*init, o.init, "an initial opacity must be finite");
+    // classify writes opacities in [0, 1]; anything else (a signed distance,
+    // a B-mode volume) is not a start the solver can use.
+    float lo = init->data.empty() ? 0.0f : init->data[0], hi = lo;
+    for (float x : init->data) lo = std::min(lo, x), hi = std::max(hi, x);
+    if (lo < -1e-3f || hi > 1.001f) {
+      std::ostringstream r;
+      r << "--init is not an opacity volume: its values lie in [" << lo << ", " << hi
+        << "], an opacity (the output of classify) in [0, 1]";
+      throw input_error(o.init, r.str());
+    }
   }
   SolveReport report;
   ClassifyTiming timing;
@@ -248,6 +266,7 @@ int run_classify(const ClassifyOptions& o) {
   if (!variational && (!(o.thickness > 0) || o.thickness > 100)) throw InputError("--thickness must be in (0, 100] voxels");
   const std::string mask_file = o.mask != "auto" && o.mask != "none" ? o.mask : "";
   ensure_distinct_outputs({o.in, mask_file, o.init}, {o.out});
+  check_output(o.out, OutputKind::Volume);  // before any work: a typo costs nothing
   const auto raw = o.raw.spec();
   // The header first: sizes, data files, the lowpasses' widths and the
   // memory the classifier needs are all checked before a sample is read.
@@ -256,13 +275,18 @@ int run_classify(const ClassifyOptions& o) {
     check_lowpass_sigma(vp.sigma_mm, head.spacing, "--sigma");
     check_lowpass_sigma(vp.grad_sigma_mm, head.spacing, "--grad-sigma");
   } else {
-    check_lowpass_sigma(o.sigma < 0 ? 0.0 : o.sigma, head.spacing, "--sigma");
+    check_lowpass_sigma(o.sigma.value_or(0.0), head.spacing, "--sigma");
   }
+  const progress::Stage command("classify");
+  std::optional<progress::Stage> step(std::in_place, "device");
   Runtime rt(o.device);
+  step.emplace("read");
   check_classify_memory(rt, o.in, head.dims, variational ? Classifier::Variational : Classifier::Levoy,
                         o.mask != "none");
   Volume in = read_volume(o.in, raw);
   o.non_finite.apply(in, o.in);
+  const std::string iso_warning = given_iso ? iso_outside_data(in, *given_iso) : "";
+  step.emplace("mask");
   DataMask mask = make_mask(o.mask, in);
   if (o.near_field == "remove") {
     // The bright near field under the probe is an occluder, not the object
@@ -286,6 +310,7 @@ int run_classify(const ClassifyOptions& o) {
   if (given_iso) {
     iso = *given_iso;
   } else {
+    step.emplace("auto iso");
     // auto: for the variational shell the local rule (an isovalue field near
     // the bright side of each boundary), for Levoy's contours the edge
     // midpoint (host/auto_iso.hpp); auto-local / auto-ridge / auto-edge
@@ -318,8 +343,9 @@ int run_classify(const ClassifyOptions& o) {
     in = level_isovalue(in, iso_field, iso);
     std::vector<float>().swap(iso_field);  // not held through the solve (4 bytes per voxel)
   }
-  return o.method == "levoy" ? run_levoy(o, rt, in, iso, iso_text, mask, t0)
-                             : run_variational(o, rt, in, iso, iso_text, mask, t0);
+  step.reset();
+  return o.method == "levoy" ? run_levoy(o, rt, in, iso, iso_text, iso_warning, mask, t0)
+                             : run_variational(o, rt, in, iso, iso_text, iso_warning, mask, t0);
 }
 
 }  // namespace
@@ -339,11 +365,11 @@ void add_classify_command(CLI::App& app, Action& action) {
   sub->add_option("--iso-fraction", o->iso_fraction,
                   "The local rule: where between a boundary's dark trough (0) and bright crest (1) its isovalue lies")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 1.0));
+      ->check(real_range(0, 1));
   sub->add_option("--iso-field-sigma", o->iso_field_sigma,
                   "The local rule: Gaussian spread (mm) of the boundaries' isovalues into the isovalue field")
       ->capture_default_str()
-      ->check(CLI::Range(0.5, 1000.0));
+      ->check(real_range(0.5, 1000, "mm"));
   sub->add_flag("--no-iso-field", o->no_iso_field,
                 "With the local rule: one isovalue (the median of the edges') instead of a field that follows "
                 "depth and local brightness");
@@ -356,23 +382,34 @@ void add_classify_command(CLI::App& app, Action& action) {
                   "remove: the bright layered band under the probe (skin, fat, muscle) is found from the depth "
                   "profile and held at u = 0 like unscanned voxels; keep: classify it like the rest")
       ->capture_default_str()
-      ->type_name("remove|keep");
+      ->type_name("remove|keep")
+      ->check(one_of({"remove", "keep"}));
   sub->add_option("--method", o->method,
                   "variational: the paper's variational classifier; levoy: Levoy's isovalue-contour opacity")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(one_of({"variational", "levoy"}));
   sub->add_option("--sigma", o->sigma,
-                  "Lowpass sigma in mm: v~ of the variational terms (default 1), or Levoy's input (default 0: raw)");
+                  "Lowpass sigma in mm: v~ of the variational terms (default 1), or Levoy's input (default 0: raw)")
+      ->check(real_range(0, INFINITY, "mm"));
   auto* g = sub->add_option_group("variational", "The paper's functional (normalised intensities, per mm)");
-  g->add_option("--alpha", o->vp.alpha, "Weight of the isovalue term F_iso")->capture_default_str();
-  g->add_option("--beta", o->vp.beta, "Weight of the tangential term F_tan")->capture_default_str();
-  g->add_option("--gamma", o->vp.gamma, "Weight of the indication term F_ind")->capture_default_str();
-  g->add_option("--omega", o->vp.omega, "Blend of v and v~ in F_iso (1: v only)")->capture_default_str();
-  g->add_option("--delta", o->vp.delta, "Share of F_ind independent of |grad v| (> 0)")->capture_default_str();
-  g->add_option("--epsilon", o->vp.epsilon, "Regulariser of 1/(|grad v|^2 + epsilon) in F_iso")->capture_default_str();
-  g->add_option("--u-ind", o->vp.u_ind, "Opacity that F_ind pulls toward")->capture_default_str();
+  g->add_option("--alpha", o->vp.alpha, "Weight of the isovalue term F_iso")->capture_default_str()
+      ->check(real_range(0, 1e6));
+  g->add_option("--beta", o->vp.beta, "Weight of the tangential term F_tan")->capture_default_str()
+      ->check(real_range(0, 1e6));
+  g->add_option("--gamma", o->vp.gamma, "Weight of the indication term F_ind")->capture_default_str()
+      ->check(real_range(0, 1e6, "", Ends::OpenLow));
+  g->add_option("--omega", o->vp.omega, "Blend of v and v~ in F_iso (1: v only)")->capture_default_str()
+      ->check(real_range(0, 1));
+  g->add_option("--delta", o->vp.delta, "Share of F_ind independent of |grad v| (> 0)")->capture_default_str()
+      ->check(real_range(0, 1, "", Ends::OpenLow));
+  g->add_option("--epsilon", o->vp.epsilon, "Regulariser of 1/(|grad v|^2 + epsilon) in F_iso")->capture_default_str()
+      ->check(real_range(1e-6, 1e6));
+  g->add_option("--u-ind", o->vp.u_ind, "Opacity that F_ind pulls toward")->capture_default_str()
+      ->check(real_range(0, 1, "", Ends::OpenLow));
   g->add_option("--kappa", o->vp.kappa,
                 "Weight of an added isotropic smoothness term kappa |grad u|^2; 0: the paper's functional")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(0, 1e6));
   g->add_flag("--literal", o->literal,
               "The paper's functional exactly: --grad-sigma 0 --kappa 0 --shell 0 --edge-share 0 --sharpen 0 --max-gain 0 "
               "(overrides them), "
@@ -380,61 +417,79 @@ void add_classify_command(CLI::App& app, Action& action) {
   g->add_option("--shell", o->vp.thickness_mm,
                 "Shell thickness in mm (full width at half maximum across the surface, at least 2 voxels); F_iso's "
                 "weight rises as (distance / half the thickness)^(2 profile-power); 0: the paper's F_iso")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(0, 1000, "mm"));
   g->add_option("--profile-power", o->vp.profile_power,
                 "Power of the shell's normalised squared distance in F_iso (1: the paper's 1/(1+d^2) fall-off)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(1, 4));
   g->add_option("--edge-share", o->vp.edge_share,
                 "The reference edge gradient is the median |grad v| of this top share of the scanned voxels; F_ind's "
                 "edge weight, beta, kappa and epsilon are relative to it; 0: the paper's absolute units")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(0, 0.5));
   g->add_option("--weight-cap", o->vp.weight_cap, "Upper bound of the shell F_iso weight (u outside the shell < 1/(1+cap))")
       ->capture_default_str()
-      ->check(CLI::Range(1.0, 1e12));
+      ->check(real_range(1, 1e12));
   g->add_option("--max-gain", o->vp.max_gain,
                 "u_ind from the data: u scaled so the median crest of the shell reaches u_ind, by at most this "
                 "factor (the system is linear in u_ind); 0: off")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 100.0));
+      ->check(real_range(0, 100));
   g->add_option("--sharpen", o->vp.sharpen_iterations,
                 "Fixed-point steps of the sharpening term (a double well pulling u to 0 or u_ind, its barrier at "
                 "--sharpen-barrier x the linear solution's crest); 0: the linear functional")
       ->capture_default_str()
-      ->check(CLI::Range(0, 10));
+      ->check(int_range(0, 10));
   g->add_option("--sharpen-lambda", o->vp.sharpen_lambda, "Weight of the sharpening term")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 1e6));
+      ->check(real_range(0, 1e6));
   g->add_option("--sharpen-barrier", o->vp.sharpen_barrier,
                 "The sharpening term's barrier, as a fraction of the linear solution's crest")
       ->capture_default_str()
-      ->check(CLI::Range(0.05, 1.0));
+      ->check(real_range(0.05, 1));
   g->add_option("--edge-power", o->vp.edge_power, "Power of the relative edge strength in F_ind's weight")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(0, 8));
   g->add_option("--grad-sigma", o->vp.grad_sigma_mm,
                 "Take |grad v| (F_iso, F_ind) from v lowpassed by this sigma in mm; 0: the paper's literal terms")
-      ->capture_default_str();
-  g->add_option("--tol", o->sp.tol, "Stop at this relative residual")->capture_default_str();
-  g->add_option("--max-cycles", o->sp.max_cycles, "Iterations before giving up (exit 3)")->capture_default_str();
-  g->add_option("--levels", o->sp.max_levels, "Multigrid levels (2: the paper's two-level scheme)")->capture_default_str();
-  g->add_option("--cycle", o->cycle, "pcg: V-cycle-preconditioned CG; v: plain V-cycles")->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(0, INFINITY, "mm"));
+  g->add_option("--tol", o->sp.tol, "Stop at this relative residual")->capture_default_str()
+      ->check(real_range(0, 1, "", Ends::Open));
+  g->add_option("--max-cycles", o->sp.max_cycles, "Iterations before giving up (exit 3)")->capture_default_str()
+      ->check(int_range(1, 100000));
+  g->add_option("--levels", o->sp.max_levels, "Multigrid levels (2: the paper's two-level scheme)")->capture_default_str()
+      ->check(int_range(1, 64));
+  g->add_option("--cycle", o->cycle, "pcg: V-cycle-preconditioned CG; v: plain V-cycles")
+      ->capture_default_str()
+      ->check(one_of({"pcg", "v"}));
   g->add_option("--smoother", o->smoother,
                 "gs: Gauss-Seidel (4-colour rows on CPUs, 8 colours on GPUs); jacobi: weighted Jacobi")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(one_of({"gs", "jacobi"}));
   g->add_flag("--no-fmg", o->no_fmg, "Start from u = 0 instead of a full-multigrid guess");
   g->add_option("--init", o->init,
                 "Warm start from this opacity volume (the linear functional only: with --sharpen > 0, the default, "
                 "every solve starts cold so the result does not depend on the start)");
   g->add_flag("--stats", o->stats, "Print the residual history");
   auto* lg = sub->add_option_group("levoy", "Levoy's classifier");
-  lg->add_option("--thickness", o->thickness, "Transition thickness r in voxels")->capture_default_str();
+  lg->add_option("--thickness", o->thickness, "Transition thickness r in voxels")
+      ->capture_default_str()
+      ->check(real_range(0, 100, "voxels", Ends::OpenLow));
   sub->add_flag("--compress", o->compress, "Compress the output");
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   add_device_option(sub, o->device);
   o->raw.add_to(sub);
   o->non_finite.add_to(sub);
   sub->callback([&action, o, sub] {
-    for (const CLI::Option* opt : sub->get_options())
-      if (opt->count() > 0) o->given.insert("--" + opt->get_single_name());
+    // The command's options and its groups' (--alpha ... live in a group).
+    std::vector<const CLI::App*> apps{sub};
+    for (const CLI::App* g : sub->get_subcommands([](const CLI::App* a) { return a->get_name().empty(); }))
+      apps.push_back(g);
+    for (const CLI::App* a : apps)
+      for (const CLI::Option* opt : a->get_options())
+        if (opt->count() > 0) o->given.insert("--" + opt->get_single_name());
     action = [o] { return run_classify(*o); };
   });
 }

@@ -4,6 +4,7 @@
 // surface peak, shell thickness, 6-connected blobs, the paper's Table 1
 // counts). Runs on the host; no OpenCL device is needed. Definitions:
 // docs/metrics.md.
+#include <algorithm>
 #include <array>
 #include <cerrno>
 #include <cmath>
@@ -14,6 +15,7 @@
 #include <sstream>
 
 #include "cli_common.hpp"
+#include "cli_validate.hpp"
 #include "error.hpp"
 #include "io.hpp"
 #include "metrics.hpp"
@@ -68,6 +70,45 @@ std::string fixed(double v, int digits) {
   return s.str();
 }
 
+// The truth must look like a signed distance in voxels: both signs (a zero
+// set inside the volume), and |grad d| near 1 on the voxels next to that
+// zero set (central differences per voxel index, one-sided at the border).
+// A B-mode volume, an opacity volume or a distance in other units fails one
+// of these; its metrics would be meaningless, so it is refused.
+void check_signed_distance(const Volume& d, const std::string& path) {
+  const auto bad = [&](const std::string& why) {
+    return input_error(path, "TRUTH_SDF does not look like a signed distance in voxels: " + why +
+                                 " (expected truth_sdf.nrrd of `softshell phantom`: negative inside, |grad| 1)");
+  };
+  float lo = d.data.empty() ? 0.0f : d.data[0], hi = lo;
+  for (float x : d.data) lo = std::min(lo, x), hi = std::max(hi, x);
+  if (!(lo < 0 && hi > 0))
+    throw bad("its values lie in [" + fixed(lo, 3) + ", " + fixed(hi, 3) + "], with no sign change");
+  const Dims3 n = d.dims;
+  std::vector<double> grads;
+  for (std::size_t z = 0; z < n[2]; ++z)
+    for (std::size_t y = 0; y < n[1]; ++y)
+      for (std::size_t x = 0; x < n[0]; ++x) {
+        if (!(std::fabs(d.at(x, y, z)) < 1.0f)) continue;
+        double g2 = 0;
+        for (int a = 0; a < 3; ++a) {
+          if (n[a] < 2) continue;
+          std::size_t lo_i[3] = {x, y, z}, hi_i[3] = {x, y, z};
+          if (lo_i[a] > 0) --lo_i[a];
+          if (hi_i[a] + 1 < n[a]) ++hi_i[a];
+          const double g = double(d.at(hi_i[0], hi_i[1], hi_i[2]) - d.at(lo_i[0], lo_i[1], lo_i[2])) /
+                           double(hi_i[a] - lo_i[a]);
+          g2 += g * g;
+        }
+        grads.push_back(std::sqrt(g2));
+      }
+  if (grads.empty()) throw bad("no voxel lies within 1 of its zero set (it jumps across it)");
+  std::nth_element(grads.begin(), grads.begin() + std::ptrdiff_t(grads.size() / 2), grads.end());
+  const double median = grads[grads.size() / 2];
+  if (!(median >= 0.5 && median <= 2.0))
+    throw bad("the median |grad| next to its zero set is " + fixed(median, 3) + " per voxel, not near 1");
+}
+
 int run_evaluate(EvaluateOptions o) {
   const auto t0 = Clock::now();
   o.params.beam = parse_direction(o.beam, "--beam");
@@ -79,6 +120,7 @@ int run_evaluate(EvaluateOptions o) {
   if (u.dims != sdf.dims)
     throw InputError("dims differ: " + dims_text(u.dims) + " (" + o.opacity + ") vs " + dims_text(sdf.dims) + " (" +
                      o.truth + ")");
+  check_signed_distance(sdf, o.truth);
   const double t_read = seconds_since(t0);
   const auto t1 = Clock::now();
   const Metrics m = evaluate_opacity(u, sdf, o.params);
@@ -159,28 +201,36 @@ void add_evaluate_command(CLI::App& app, Action& action) {
       ->required();
   sub->add_flag("--json", o->json, "Print one JSON object instead of the table");
   sub->add_option("--threshold", o->params.threshold, "Splat threshold: u > threshold is drawn (paper's epsilon)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(0, 1, "", Ends::OpenHigh));
   sub->add_option("--tolerance", o->params.tolerance, "Voxels: how near a true surface counts as on it")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(0, 1e6, "voxels"));
   auto* tol_mm = sub->add_option("--tolerance-mm", o->params.tolerance_mm,
-                                 "The tolerance in mm instead (overrides --tolerance; divided by the smallest spacing)");
+                                 "The tolerance in mm instead (overrides --tolerance; divided by the smallest spacing)")
+      ->check(real_range(0, 1e6, "mm", Ends::OpenLow));
   sub->add_option("--u-ind", o->params.u_ind, "The opacity a surface should reach: surface_peak is a fraction of it")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(0, 1, "", Ends::OpenLow));
   sub->add_option("--blob-rel", o->params.blob_rel,
                   "6-connected blobs are components of u > this times max u, in (0, 1]")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(0, 1, "", Ends::OpenLow));
   sub->add_option("--beam", o->beam, "Beam direction X,Y,Z (transducer on the z = 0 face: 0,0,1)")
       ->capture_default_str();
   sub->add_option("--facing-cos", o->params.facing_cos,
                   "A surface faces the transducer if its outward normal n has n.(-beam) >= this")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(-1, 1));
   sub->add_option("--tensor-sigma", o->params.tensor_sigma,
                   "Splat orientation scored by the normal error: the structure tensor of u with this sigma in voxels "
                   "(the renderer's default), or 0 for grad u (the paper's)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(0, 8, "voxels"));
   sub->add_option("--opaque", o->params.opaque,
                   "u > this counts toward percent_opaque (the paper's 'negligibly small' opacity)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(0, 1, "", Ends::OpenHigh));
   sub->callback([&action, o, tol_mm] {
     o->tolerance_mm_given = tol_mm->count() > 0;
     action = [o] { return run_evaluate(*o); };

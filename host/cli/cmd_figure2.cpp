@@ -21,7 +21,9 @@
 #include "filter.hpp"
 #include "cl_runtime.hpp"
 #include "cli_common.hpp"
+#include "cli_validate.hpp"
 #include "error.hpp"
+#include "progress.hpp"
 #include "image.hpp"
 #include "io.hpp"
 #include "levoy.hpp"
@@ -263,6 +265,7 @@ int run_figure2(const Figure2Options& o) {
   if (beta_given && !(o.beta >= 0 && std::isfinite(o.beta))) throw InputError("--beta must be a finite number >= 0");
   if (o.mask.empty()) throw InputError("--mask: expected FILE, auto or none");
   ensure_distinct_output(o.in, o.out);
+  check_output(o.out, OutputKind::Png);
 
   Runtime rt(o.device);
   Volume in = read_volume(o.in, o.raw.spec());
@@ -303,6 +306,8 @@ int run_figure2(const Figure2Options& o) {
   LevoyParams lp;
   lp.iso = iso;
   lp.sigma_mm = o.levoy_sigma;
+  const progress::Stage command("figure2");
+  std::optional<progress::Stage> panel(std::in_place, "panel (b): levoy");
   opacities.push_back(classify_levoy(rt, data, lp));
   apply_mask(opacities.back());
   // v_iso normalised the way classify_variational normalises `data` (for
@@ -310,6 +315,7 @@ int run_figure2(const Figure2Options& o) {
   const IntensityMap data_map = data.intensity_map();
   const double runs[4][2] = {{1.0, 0.0}, {0.6, 0.0}, {1.0, beta}, {0.6, beta}};  // omega, beta
   for (const auto& r : runs) {
+    panel.emplace("panel (" + std::string(1, char('c' + (&r - runs))) + "): variational");
     VariationalParams p = defaults;
     p.v_iso = data_map.to_unit(iso);
     p.omega = r[0];
@@ -325,6 +331,8 @@ int run_figure2(const Figure2Options& o) {
     }
   }
 
+  panel.reset();
+  if (given_iso) std::cerr << iso_outside_data(in, iso);  // after every check of the isovalue passed
   int au, av;
   plane_axes(spec.axis, au, av);
   int zoom = o.zoom;
@@ -400,10 +408,13 @@ void add_figure2_command(CLI::App& app, Action& action) {
       ->type_name("FILE|auto|none");
   sub->add_option("--beta", o->beta,
                   "Beta of panels (e) and (f), on intensities normalised to [0, 1] (default: the paper's 0.03 on "
-                  "0-255 data, i.e. 0.03 x 255^2 = 1951; the panels use the paper's functional, --literal)");
+                  "0-255 data, i.e. 0.03 x 255^2 = 1951; the panels use the paper's functional, --literal)")
+      ->check(real_range(0, 1e6));
   sub->add_option("--levoy-sigma", o->levoy_sigma, "Lowpass of panel (b) in mm (0: the raw volume, as in the paper)")
-      ->capture_default_str();
-  sub->add_option("--zoom", o->zoom, "Pixels per voxel (default: panels about 256 pixels on their long side)");
+      ->capture_default_str()
+      ->check(real_range(0, INFINITY, "mm"));
+  sub->add_option("--zoom", o->zoom, "Pixels per voxel (default 0: panels about 256 pixels on their long side)")
+      ->check(int_range(0, 64));
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   add_device_option(sub, o->device);
   o->raw.add_to(sub);

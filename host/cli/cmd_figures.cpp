@@ -12,6 +12,7 @@
 #include <iomanip>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <tuple>
 #include <vector>
@@ -19,7 +20,9 @@
 #include "auto_iso.hpp"
 #include "cli_common.hpp"
 #include "cli_render_common.hpp"
+#include "cli_validate.hpp"
 #include "error.hpp"
+#include "progress.hpp"
 #include "headless.hpp"
 #include "image.hpp"
 #include "io.hpp"
@@ -60,9 +63,12 @@ void add_raycast_options(CLI::App* sub, RaycastRenderOptions& o, bool with_uncla
                   "so ray casting shows what the splats show and not the faint haze of u away from surfaces; 0 for "
                   "raw data)")
       ->capture_default_str();
-  sub->add_option("--tf-max", o.tf_max, "raycast: largest opacity per voxel length, in (0, 1]")->capture_default_str();
+  sub->add_option("--tf-max", o.tf_max, "raycast: largest opacity per voxel length")
+      ->capture_default_str()
+      ->check(real_range(0, 1, "", Ends::OpenLow));
   sub->add_option("--step", o.step, "raycast: sampling distance along the ray, in voxels (smallest spacing)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(0.05, 4, "voxels"));
   sub->add_flag("--no-early-termination", o.no_early_termination,
                 "raycast: march every ray through the whole volume (default: stop at opacity 0.99)");
 }
@@ -121,6 +127,7 @@ viewer::OrbitCamera framed_camera(const std::array<Vec3d, 2>& box, float az, flo
 void check_png_output(const std::string& in, const std::string& out) {
   if (out.size() < 4 || out.substr(out.size() - 4) != ".png") throw InputError("-o " + out + ": expected a .png file");
   ensure_distinct_output(in, out);
+  check_output(out, OutputKind::Png);
 }
 
 // The isovalue of a raw volume as `classify --iso auto` picks it (scanned
@@ -321,7 +328,8 @@ void add_figure_options(CLI::App* sub, FigureOptions& o) {
       ->type_name("X0,X1,Y0,Y1,Z0,Z1");
   sub->add_option("--iso", o.iso, "Isovalue for classifying a raw volume (its units, or auto)")->capture_default_str();
   sub->add_option("--repeat", o.repeat, "Frames timed per panel (median, after one warm-up frame)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(int_range(1, 1000));
   add_raycast_options(sub, o.raycast, false);
   sub->add_flag("-q,--quiet", o.quiet, "Print nothing on success");
   add_device_option(sub, o.device);
@@ -353,6 +361,7 @@ RaycastParams opacity_params(const FigureOptions& o, const viewer::RenderSetting
 int run_figure5(const FigureOptions& o) {
   const auto t0 = Clock::now();
   const FigureSetup f = figure_setup(o);
+  const progress::Stage command("figure5");
   Runtime rt(o.device);
   const Volume raw = read_volume(o.in);
   if (viewer::looks_like_opacity(raw))
@@ -366,12 +375,15 @@ int run_figure5(const FigureOptions& o) {
   const Scene scene{rt, input.u, framed_camera(visible_box(input.u, after), f.az, f.el), f.settings,
                     f.width, f.height, o.repeat};
   std::vector<Panel> panels;
+  std::optional<progress::Stage> panel(std::in_place, "panel 1/2: ray casting before classification");
   panels.push_back(raycast_panel(scene, unit, before, "before classification"));
+  panel.emplace("panel 2/2: ray casting after classification");
   std::ostringstream ramp;
   ramp << std::fixed << std::setprecision(2) << "ray cast, intensity ramp " << before.tf_lo << "-" << before.tf_hi;
   panels.back().detail = ramp.str();
   panels.push_back(raycast_panel(scene, input.u, after, "after classification"));
   panels.back().detail = "ray cast, opacity u (> " + format_number(after.tf_cut) + ")";
+  panel.reset();
   write_png(o.out, compose(panels));
   if (!o.quiet) {
     print_panels("figure5 (ray casting before / after variational classification) " + o.in, o.out, panels, f.width,
@@ -386,16 +398,22 @@ int run_figure5(const FigureOptions& o) {
 int run_figure6(const FigureOptions& o) {
   const auto t0 = Clock::now();
   const FigureSetup f = figure_setup(o);
+  const progress::Stage command("figure6");
   Runtime rt(o.device);
   const viewer::OpacityInput input = viewer::load_opacity(rt, o.in, viewer::InputKind::Auto, o.iso);
   const RaycastParams p = opacity_params(o, f.settings);
   const auto box = visible_box(input.u, p);
   const Scene scene{rt, input.u, framed_camera(box, f.az, f.el), f.settings, f.width, f.height, o.repeat};
   std::vector<Panel> panels;
+  std::optional<progress::Stage> panel(std::in_place, "panel 1/4: ray casting");
   panels.push_back(raycast_panel(scene, input.u, p, "ray casting"));
+  panel.emplace("panel 2/4: Marching Cubes");
   panels.push_back(marching_cubes_panel(scene, o.level));
+  panel.emplace("panel 3/4: shear-warp");
   panels.push_back(shear_warp_panel(scene, box, f.az, f.el));
+  panel.emplace("panel 4/4: oriented splats");
   panels.push_back(splat_panel(scene));
+  panel.reset();
   write_png(o.out, compose(panels));
   if (!o.quiet) {
     print_panels("figure6 (renderers of the same classified volume) " + o.in, o.out, panels, f.width, f.height);
@@ -508,7 +526,8 @@ void add_figure6_command(CLI::App& app, Action& action) {
   sub->add_option("-o,--output", o->out, "Output PNG")->capture_default_str();
   add_figure_options(sub, *o);
   sub->add_option("--level", o->level, "Level of the Marching Cubes surface of u (default: the splats' epsilon, as render --method mc)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(-INFINITY, INFINITY));
   sub->callback([&action, o] { action = [o] { return run_figure6(*o); }; });
 }
 

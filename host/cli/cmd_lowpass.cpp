@@ -4,10 +4,13 @@
 #include <iomanip>
 #include <iostream>
 #include <memory>
+#include <optional>
 
 #include "cl_runtime.hpp"
 #include "cli_common.hpp"
+#include "cli_validate.hpp"
 #include "error.hpp"
+#include "progress.hpp"
 #include "filter.hpp"
 #include "io.hpp"
 #include "text.hpp"
@@ -29,9 +32,11 @@ int run_lowpass(const LowpassOptions& o) {
   if (!(o.sigma >= 0) || !std::isfinite(o.sigma)) throw InputError("--sigma must be >= 0 (millimetres)");
   if (!(o.truncate > 0) || o.truncate > 10) throw InputError("--truncate must be in (0, 10]");
   ensure_distinct_output(o.in, o.out);
+  check_output(o.out, OutputKind::Volume);
   const auto raw = o.raw.spec();
   // The kernel's width from the header, before the samples are read.
   check_lowpass_sigma(o.sigma, read_volume_header(o.in, raw).spacing, "--sigma", o.truncate);
+  std::optional<progress::Stage> stage(std::in_place, "lowpass");
   Runtime rt(o.device);  // fail fast on the device before reading a large input
   const double t_device = seconds_since(t0);
   const auto t_read0 = Clock::now();
@@ -58,6 +63,7 @@ int run_lowpass(const LowpassOptions& o) {
   w.compress = o.compress;
   write_volume(o.out, out, w);
   const double t_write = seconds_since(t2);
+  stage.reset();
 
   if (!o.quiet) {
     const auto& r = timing.radius;
@@ -82,8 +88,12 @@ void add_lowpass_command(CLI::App& app, Action& action) {
   auto* sub = app.add_subcommand("lowpass", "Gaussian lowpass (sigma in mm, anisotropic spacing honoured)");
   sub->add_option("IN", o->in, "Input volume")->required();
   sub->add_option("-o,--output", o->out, "Output volume (.nrrd, .mha, .mhd)")->required();
-  sub->add_option("--sigma", o->sigma, "Standard deviation in millimetres")->capture_default_str();
-  sub->add_option("--truncate", o->truncate, "Kernel radius in standard deviations")->capture_default_str();
+  sub->add_option("--sigma", o->sigma, "Standard deviation in millimetres")
+      ->capture_default_str()
+      ->check(real_range(0, INFINITY, "mm"));
+  sub->add_option("--truncate", o->truncate, "Kernel radius in standard deviations")
+      ->capture_default_str()
+      ->check(real_range(0, 10, "", Ends::OpenLow));
   sub->add_flag("--float", o->as_float, "Write float samples (default: the input's sample type)");
   sub->add_flag("--compress", o->compress, "Compress the output (gzip/zlib)");
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");

@@ -5,11 +5,14 @@
 #include <iomanip>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <sstream>
 
 #include "cl_runtime.hpp"
 #include "cli_common.hpp"
+#include "cli_validate.hpp"
 #include "error.hpp"
+#include "progress.hpp"
 #include "io.hpp"
 #include "mesh.hpp"
 
@@ -30,11 +33,13 @@ int run_mesh(const MeshOptions& o) {
   if (o.out.size() < 4 || o.out.substr(o.out.size() - 4) != ".ply")
     throw InputError("-o " + o.out + ": expected a .ply file");
   ensure_distinct_output(o.in, o.out);
+  check_output(o.out, OutputKind::Ply);
   Volume v = read_volume(o.in, o.raw.spec());
   o.non_finite.apply(v, o.in);
   for (int a = 0; a < 3; ++a)
     if (v.dims[a] < 2) throw input_error(o.in, "Marching Cubes needs at least 2 samples along every axis");
 
+  std::optional<progress::Stage> stage(std::in_place, "mesh");
   Runtime rt(o.device);
   MeshTiming mt;
   const Mesh mesh = marching_cubes(rt, v, o.level, &mt);
@@ -49,6 +54,7 @@ int run_mesh(const MeshOptions& o) {
   comment << "softshell marching cubes of " << o.in << " at level " << o.level
           << "; mm; normals point towards lower values";
   write_ply_binary(o.out, mesh, comment.str());
+  stage.reset();
   const double write_s = seconds_since(tw);
 
   if (!o.quiet) {
@@ -82,7 +88,8 @@ void add_mesh_command(CLI::App& app, Action& action) {
   sub->add_option("IN", o->in, "Input volume (any scalar type; an opacity volume, raw data, a distance field)")
       ->required();
   sub->add_option("--level", o->level, "Isovalue, in the volume's own units (e.g. 0.5 for an opacity volume)")
-      ->required();
+      ->required()
+      ->check(real_range(-INFINITY, INFINITY));
   sub->add_option("-o,--output", o->out, "Output mesh (.ply, binary little-endian)")->required();
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   o->raw.add_to(sub);

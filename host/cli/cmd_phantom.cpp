@@ -1,5 +1,6 @@
 // `softshell phantom --shape face|spine|sphere --size N --seed S -o DIR`: a
 // simulated 3D ultrasound volume with its ground truth (host/phantom.hpp).
+#include <optional>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -13,7 +14,9 @@
 
 #include "cl_runtime.hpp"
 #include "cli_common.hpp"
+#include "cli_validate.hpp"
 #include "error.hpp"
+#include "progress.hpp"
 #include "image.hpp"
 #include "io.hpp"
 #include "phantom.hpp"
@@ -119,9 +122,13 @@ int run_phantom(PhantomOptions o) {
   std::error_code ec;
   if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
     throw InputError("-o " + o.out + ": exists and is not a directory");
+  check_output(o.out, OutputKind::Directory);
+  if (!o.slices.empty()) check_output(o.slices, OutputKind::Png, "--slices");
 
   Runtime rt(o.device);  // a missing device leaves nothing behind
+  std::optional<progress::Stage> stage(std::in_place, "phantom");
   const Phantom p = make_phantom(rt, o.params);
+  stage.emplace("phantom: write");
 
   const auto t1 = Clock::now();
   fs::create_directories(dir, ec);
@@ -136,6 +143,7 @@ int run_phantom(PhantomOptions o) {
     slices = phantom_slices(p);
     write_png(o.slices, slices);
   }
+  stage.reset();
   const double t_write = seconds_since(t1);
 
   if (!o.quiet) {
@@ -189,7 +197,9 @@ void add_phantom_command(CLI::App& app, Action& action) {
                   "face: fetal face in amniotic fluid with the uterine wall behind; spine: vertebrae in soft "
                   "tissue (tissue = bone); sphere: one sphere of tissue in fluid")
       ->capture_default_str();
-  auto* size = sub->add_option("--size", o->params.size, "Voxels along each axis, in [16, 512]")->capture_default_str();
+  auto* size = sub->add_option("--size", o->params.size, "Voxels along each axis")
+                   ->capture_default_str()
+                   ->check(int_range(16, 512, "voxels"));
   sub->add_option("--dims", o->dims,
                   "X,Y,Z: a non-cubic volume (e.g. 314,85,43, the paper's largest), each in [16, 512]; isotropic "
                   "voxels of FOV / max(X,Y,Z) mm, the centred crop of the cubic phantom")
@@ -215,20 +225,25 @@ void add_phantom_command(CLI::App& app, Action& action) {
   fixed.push_back(sub->add_option(
       "--speckle", o->speckle, "AXIAL,LATERAL: PSF standard deviations in voxels, each in [0.2, 8] (default 0.6,1.5)"));
   fixed.push_back(
-      sub->add_option("--dynamic-range", o->params.dynamic_range_db, "Log compression range in dB, in [10, 100]")
-          ->capture_default_str());
+      sub->add_option("--dynamic-range", o->params.dynamic_range_db, "Log compression range in dB")
+          ->capture_default_str()
+          ->check(real_range(10, 100, "dB")));
   fixed.push_back(
-      sub->add_option("--noise", o->params.noise, "Electronic noise rms relative to the mean tissue echo, >= 0")
-          ->capture_default_str());
+      sub->add_option("--noise", o->params.noise, "Electronic noise rms relative to the mean tissue echo")
+          ->capture_default_str()
+          ->check(real_range(0, 100)));
   fixed.push_back(sub->add_option("--attenuation", o->params.attenuation,
-                                  "Depth attenuation relative to the default (0.2 dB/mm two-way in soft tissue), >= 0")
-                      ->capture_default_str());
+                                  "Depth attenuation relative to the default (0.2 dB/mm two-way in soft tissue)")
+                      ->capture_default_str()
+                      ->check(real_range(0, 100)));
   fixed.push_back(
-      sub->add_option("--specular", o->params.specular, "Strength of boundary echoes relative to the default, >= 0")
-          ->capture_default_str());
+      sub->add_option("--specular", o->params.specular, "Strength of boundary echoes relative to the default")
+          ->capture_default_str()
+          ->check(real_range(0, 100)));
   auto* fov = sub->add_option("--fov", o->params.fov_mm,
                               "Field of view in mm (default: face 100, spine 60, sphere 80; with --physics it "
-                              "replaces the preset's or the drawn fov_mm)");
+                              "replaces the preset's or the drawn fov_mm)")
+                  ->check(real_range(0, 10000, "mm", Ends::OpenLow));
   sub->add_option("--slices", o->slices,
                   "Also write a PNG of the axial | coronal | sagittal mid-slices, second row with the true "
                   "boundary in orange (and the near-field layers in cyan)");

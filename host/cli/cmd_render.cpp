@@ -9,12 +9,15 @@
 #include <iomanip>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <vector>
 
 #include "cli_common.hpp"
 #include "cli_render_common.hpp"
+#include "cli_validate.hpp"
 #include "error.hpp"
+#include "progress.hpp"
 #include "headless.hpp"
 #include "image.hpp"
 #include "text.hpp"
@@ -74,6 +77,10 @@ std::string frame_path(const std::string& out, int i) {
   return out.substr(0, cut) + num + out.substr(cut);
 }
 
+std::string frames_label(int turntable) {
+  return turntable > 0 ? "turntable, " + std::to_string(turntable) + " frames" : "draw";
+}
+
 // Box of the splat centres that the crop box keeps (the camera frames what
 // is drawn).
 std::array<Vec3d, 2> kept_box(const SplatSet& set, const viewer::RenderSettings& s) {
@@ -114,11 +121,16 @@ int run_render(const RenderOptions& o) {
   std::vector<std::string> outputs;
   for (int i = 0; i < std::max(o.turntable, 1); ++i) outputs.push_back(o.turntable ? frame_path(o.out, i) : o.out);
   ensure_distinct_outputs({o.in}, outputs);
+  for (const std::string& f : outputs) check_output(f, OutputKind::Png);
 
+  const progress::Stage command("render");
+  std::optional<progress::Stage> step(std::in_place, "input");
   Runtime rt(o.device);
   const viewer::OpacityInput input = viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso);
   SplatTiming st;
+  step.emplace("splats");
   const SplatSet set = generate_splats(rt, input.u, o.splat.params(), &st);
+  step.emplace(frames_label(o.turntable));
   if (set.splats.empty())
     throw input_error(o.in, "no voxel has opacity above the threshold " + format_number(o.splat.threshold) +
                                 " (all-zero opacity?); nothing to render");
@@ -137,7 +149,9 @@ int run_render(const RenderOptions& o) {
     cam.azimuth = az + 360.0f * float(i) / float(frames);
     stats = r.render(cam, settings);
     write_png(outputs[std::size_t(i)], r.read().rgb());
+    step->fraction(double(i + 1) / frames, "frame " + std::to_string(i + 1) + " of " + std::to_string(frames));
   }
+  step.reset();
 
   double ms = 0, sort_ms = 0;
   if (o.benchmark > 0) {
@@ -189,16 +203,19 @@ void add_render_command(CLI::App& app, Action& action) {
                   "-y up")
       ->capture_default_str()
       ->type_name("AZ,EL");
-  sub->add_option("--turntable", o->turntable, "Write N frames around the object (azimuth steps of 360/N)");
+  sub->add_option("--turntable", o->turntable, "Write N frames around the object (azimuth steps of 360/N)")
+      ->check(int_range(0, 3600));
   sub->add_option("--crop", o->crop,
                   "Keep splats inside this box, fractions of the volume's extent per axis (e.g. 0,1,0,1,0,0.6)")
       ->type_name("X0,X1,Y0,Y1,Z0,Z1");
   sub->add_option("--iso", o->iso, "Isovalue for classifying a raw volume (its units, or auto)")->capture_default_str();
-  sub->add_option("--benchmark", o->benchmark, "Also time N frames and report frames per second");
-  o->splat.add_to(sub);
+  sub->add_option("--benchmark", o->benchmark, "Also time N frames and report frames per second")
+      ->check(int_range(0, 100000));
+  o->splat.add_to(sub, render_methods());
   o->raycast = add_raycast_render_options(sub);
   sub->add_option("--level", o->level, "--method mc: isovalue of the Marching Cubes surface (default: the splats' epsilon)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(real_range(-INFINITY, INFINITY));
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   add_device_option(sub, o->device);
   sub->callback([&action, o] { action = [o] { return run_render(*o); }; });

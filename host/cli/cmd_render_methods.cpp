@@ -9,6 +9,7 @@
 
 #include "cli_common.hpp"
 #include "cli_render_common.hpp"
+#include "cli_validate.hpp"
 #include "error.hpp"
 #include "image.hpp"
 #include "mesh.hpp"
@@ -39,6 +40,7 @@ Common validate(const RaycastRenderRequest& r, const char* method) {
   if (r.opacity && r.classify) throw InputError("--opacity and --classify exclude each other");
   c.kind = r.opacity ? viewer::InputKind::Opacity : r.classify ? viewer::InputKind::Raw : viewer::InputKind::Auto;
   ensure_distinct_output(r.in, r.out);
+  check_output(r.out, OutputKind::Png);
   return c;
 }
 

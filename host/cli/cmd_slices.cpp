@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "cli_common.hpp"
+#include "cli_validate.hpp"
 #include "error.hpp"
 #include "image.hpp"
 #include "io.hpp"
@@ -24,6 +25,7 @@ int run_slices(const std::vector<std::string>& inputs, const std::string& out, i
                const NonFiniteOption& non_finite, bool quiet) {
   if (height < 0 || height > 4096) throw InputError("--height must be in [0, 4096]");
   ensure_distinct_outputs(inputs, {out});
+  check_output(out, OutputKind::Png);
   std::vector<Volume> volumes;
   for (const auto& in : inputs) {
     volumes.push_back(read_volume(in, raw.spec()));
@@ -46,7 +48,8 @@ void add_slices_command(CLI::App& app, Action& action) {
   auto* sub = app.add_subcommand("slices", "Write the three orthogonal mid-slices of volumes to a PNG");
   sub->add_option("IN", o->inputs, "Input volumes (one row each)")->required();
   sub->add_option("-o,--output", o->out, "Output PNG")->required();
-  sub->add_option("--height", o->height, "Row height in pixels (default: one pixel per smallest spacing)");
+  sub->add_option("--height", o->height, "Row height in pixels (default 0: one pixel per smallest spacing)")
+      ->check(int_range(0, 4096, "pixels"));
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   o->raw.add_to(sub);
   o->non_finite.add_to(sub);

@@ -8,6 +8,7 @@
 #include <random>
 
 #include "cli_common.hpp"
+#include "cli_validate.hpp"
 #include "error.hpp"
 #include "io.hpp"
 #include "text.hpp"
@@ -26,6 +27,7 @@ struct SyntheticOptions {
 // tissue in fluid with a bright boundary echo and multiplicative speckle.
 int run_synthetic(const std::string& out_path, int size, std::uint64_t seed, bool quiet) {
   if (size < 8 || size > 1024) throw InputError("--size must be in [8, 1024]");
+  check_output(out_path, OutputKind::Volume);
   const std::size_t n = static_cast<std::size_t>(size);
   Volume v({n, n, n}, {1.0, 1.0, 1.0}, ScalarType::UInt8);
   std::mt19937_64 rng(seed);  // mt19937_64's output sequence is fixed by the standard
@@ -52,7 +54,7 @@ void add_synthetic_command(CLI::App& app, Action& action) {
   auto o = std::make_shared<SyntheticOptions>();
   auto* sub = app.add_subcommand("synthetic", "Write a small speckled-sphere test volume (uint8)");
   sub->add_option("-o,--output", o->out, "Output volume")->required();
-  sub->add_option("--size", o->size, "Edge length in voxels")->capture_default_str();
+  sub->add_option("--size", o->size, "Edge length in voxels")->capture_default_str()->check(int_range(8, 1024, "voxels"));
   sub->add_option("--seed", o->seed, "Random seed")->capture_default_str();
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   sub->callback([&action, o] { action = [o] { return run_synthetic(o->out, o->size, o->seed, o->quiet); }; });

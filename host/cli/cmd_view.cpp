@@ -3,11 +3,14 @@
 // viewer library; registered only when the viewer is built.
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <tuple>
 
 #include "cli_common.hpp"
 #include "cli_render_common.hpp"
+#include "cli_validate.hpp"
 #include "error.hpp"
+#include "progress.hpp"
 #include "viewer_app.hpp"
 
 namespace softshell::cli {
@@ -28,11 +31,16 @@ int run_view(const ViewOptions& o) {
   v.settings = o.splat.settings();
   v.params = o.splat.params();
   if (!o.crop.empty()) parse_crop(o.crop, v.settings);
-  // --renderer (initial; the panel switches): overrides --method for the splat kinds.
+  // --method mc / raycast start with that renderer; --renderer (initial;
+  // the panel switches) overrides --method.
+  if (o.splat.method == "mc") v.renderer = viewer::ViewRenderer::Mesh;
+  if (o.splat.method == "raycast") v.renderer = viewer::ViewRenderer::Raycast;
   if (o.renderer == "splat" || o.renderer == "oriented") {
     v.settings.method = viewer::SplatMethod::Oriented;
+    v.renderer = viewer::ViewRenderer::Splats;
   } else if (o.renderer == "isosplat" || o.renderer == "isotropic") {
     v.settings.method = viewer::SplatMethod::Isotropic;
+    v.renderer = viewer::ViewRenderer::Splats;
   } else if (o.renderer == "mc") {
     v.renderer = viewer::ViewRenderer::Mesh;
   } else if (o.renderer == "raycast") {
@@ -42,13 +50,18 @@ int run_view(const ViewOptions& o) {
   }
   if (o.frames < 0) throw InputError("--frames must be >= 0");
   if (!o.screenshot.empty() && o.frames == 0) throw InputError("--screenshot needs --frames N");
-  if (!o.screenshot.empty()) ensure_distinct_output(o.in, o.screenshot);
+  if (!o.screenshot.empty()) {
+    ensure_distinct_output(o.in, o.screenshot);
+    check_output(o.screenshot, OutputKind::Png, "--screenshot");  // before the splats are made
+  }
   v.frames = o.frames;
   v.screenshot = o.screenshot;
   v.screenshot_panel = o.screenshot_panel;
   v.quiet = o.quiet;
+  std::optional<progress::Stage> stage(std::in_place, "view: load");
   Runtime rt(o.device);
   viewer::OpacityInput input = viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso);
+  stage.reset();
   if (!o.quiet) std::cout << "view: " << input.note << '\n';
   return viewer::run_viewer(rt, std::move(input), v);
 }
@@ -72,12 +85,14 @@ void add_view_command(CLI::App& app, Action& action) {
   sub->add_option("--iso", o->iso, "Isovalue for classifying a raw volume (its units, or auto)")->capture_default_str();
   sub->add_option("--renderer", o->renderer,
                   "Initial renderer (the panel switches): splat (oriented splats), isosplat (isotropic splats), mc "
-                  "(Marching Cubes mesh at level 0.2) or raycast (the OpenCL ray caster); default: --method")
-      ->type_name("splat|isosplat|mc|raycast");
-  sub->add_option("--frames", o->frames, "Draw N frames, then quit (for scripts and tests)");
+                  "(Marching Cubes mesh at level 0.2) or raycast (the OpenCL ray caster); overrides --method")
+      ->type_name("splat|isosplat|mc|raycast")
+      ->check(one_of({"splat", "isosplat", "mc", "raycast"}));
+  sub->add_option("--frames", o->frames, "Draw N frames, then quit (for scripts and tests)")
+      ->check(int_range(0, 1000000));
   sub->add_option("--screenshot", o->screenshot, "With --frames: save the last frame (without the panel) as PNG");
   sub->add_flag("--screenshot-panel", o->screenshot_panel, "Draw the control panel into the --screenshot too");
-  o->splat.add_to(sub);
+  o->splat.add_to(sub, view_methods());
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing but errors");
   add_device_option(sub, o->device);
   sub->callback([&action, o] { action = [o] { return run_view(*o); }; });

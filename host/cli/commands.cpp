@@ -4,10 +4,14 @@
 #include "commands.hpp"
 
 #include <CLI/CLI.hpp>
+#include <unistd.h>
+#include <set>
 #include <string>
 
 #include "cli_common.hpp"
+#include "cli_validate.hpp"
 #include "error.hpp"
+#include "progress.hpp"
 
 namespace softshell::cli {
 
@@ -39,6 +43,22 @@ int run(int argc, char** argv) {
   add_figure6_command(app, action);
 #endif
   add_bench_command(app, action);
+  // --progress on the commands that can take more than a second
+  // (host/progress.hpp).
+  std::string progress = "auto";
+  for (CLI::App* sub : app.get_subcommands([](const CLI::App* a) { return !a->get_name().empty(); })) {
+    static const std::set<std::string> slow{"classify", "lowpass", "mesh",   "phantom", "figure2",
+                                            "render",   "view",    "figure5", "figure6"};
+    if (slow.count(sub->get_name()))
+      sub->add_option("--progress", progress,
+                      "Progress on stderr: auto (a self-rewriting line when stderr is a terminal, unless --quiet), "
+                      "none, bar (the line even when not a terminal) or json (one JSON object per line)")
+          ->capture_default_str()
+          ->check(one_of({"auto", "none", "bar", "json"}));
+  }
+  // Every floating-point option refuses NaN and infinities, ranged or not
+  // (cli_validate.hpp).
+  require_checked_numbers(app);
 
   // CLI11 reports a misspelt command as "a subcommand is required"; name it.
   if (argc > 1 && argv[1][0] != '-') {
@@ -67,6 +87,15 @@ int run(int argc, char** argv) {
   }
 
   if (!action) throw InputError("no command given (see softshell --help)");
+  bool quiet = false;
+  for (const CLI::App* sub : app.get_subcommands()) {
+    const CLI::Option* q = sub->get_option_no_throw("--quiet");
+    quiet = quiet || (q && q->count() > 0);
+  }
+  progress::set_mode(progress == "json"  ? progress::Mode::Json
+                     : progress == "bar" ? progress::Mode::Line
+                     : progress == "none" || quiet || !::isatty(STDERR_FILENO) ? progress::Mode::Off
+                                                                               : progress::Mode::Line);
   return action();
 }
 
