@@ -306,7 +306,11 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
 Volume level_isovalue(const Volume& v, const std::vector<float>& field, double iso) {
   if (field.size() != v.voxels()) throw std::invalid_argument("level_isovalue: field size differs from the volume");
   std::vector<float> out(v.voxels());
-  for (std::size_t i = 0; i < out.size(); ++i) out[i] = float(double(v.data[i]) - double(field[i]) + iso);
+  // In double, then clamped to float's range: on float data spanning
+  // +-3e38 the difference would overflow to infinity (found by fuzzing).
+  const double big = std::numeric_limits<float>::max();
+  for (std::size_t i = 0; i < out.size(); ++i)
+    out[i] = float(std::clamp(double(v.data[i]) - double(field[i]) + iso, -big, big));
   return v.with_data(std::move(out), v.source_type);
 }
 

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <limits>
 #include <random>
 
 #include "auto_iso.hpp"
@@ -536,6 +537,19 @@ TEST(IsoAuto, LocalFieldFollowsABrightnessDriftAlongTheBeam) {
   EXPECT_NEAR(crossing(28, 42), 35.5, 1.5);
   // Without a field the level is one number for both: off by the drift at one.
   EXPECT_THROW(level_isovalue(v, std::vector<float>(3, 0.0f), iso), std::invalid_argument);
+}
+
+TEST(IsoField, LevellingFloatDataAtTheEndsOfItsRangeStaysFinite) {
+  // Samples of +-3e38 with a field of the opposite sign: the difference is
+  // beyond float's range and is clamped to it, never infinite (fuzzing).
+  Volume v({4, 1, 1}, {1, 1, 1}, ScalarType::Float32);
+  v.data = {3.0e38f, -3.0e38f, 1.0f, 0.0f};
+  const std::vector<float> field = {-3.0e38f, 3.0e38f, 2.0f, 0.0f};
+  const Volume lv = level_isovalue(v, field, 0.5);
+  EXPECT_EQ(lv.data[0], std::numeric_limits<float>::max());
+  EXPECT_EQ(lv.data[1], -std::numeric_limits<float>::max());
+  EXPECT_FLOAT_EQ(lv.data[2], -0.5f);
+  EXPECT_FLOAT_EQ(lv.data[3], 0.5f);
 }
 
 TEST(IsoAuto, ConstantOrEmptyInputsFailCleanly) {
