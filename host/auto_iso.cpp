@@ -1,6 +1,9 @@
 // `--iso auto` (host/auto_iso.hpp): mean gradient magnitude of the lowpassed
 // volume per value bin, and its peak. Host code: one separable Gaussian and
 // one histogram pass, a fraction of a second on the volumes softshell meets.
+// Every pass over the voxels is split in z-ranges over threads
+// (AutoIsoParams::threads); per-range results are combined in z order and
+// sums are taken per z-plane, so the result is the same for any thread count.
 #include "auto_iso.hpp"
 
 #include <algorithm>
@@ -14,6 +17,7 @@
 #include "error.hpp"
 #include "filter.hpp"
 #include "io.hpp"
+#include "parallel.hpp"
 
 namespace softshell {
 namespace {
@@ -22,7 +26,8 @@ namespace {
 // lowpass) of one or two fields. Lines are split among threads; each line is
 // padded by its edge samples first, so the taps need no clamping, and summed
 // in a fixed order (the result does not depend on the thread count).
-void blur_axis(std::vector<float>& a, std::vector<float>* b, const Dims3& d, int axis, const std::vector<float>& w) {
+void blur_axis(std::vector<float>& a, std::vector<float>* b, const Dims3& d, int axis, const std::vector<float>& w,
+               int max_threads) {
   const std::size_t stride = axis == 0 ? 1 : (axis == 1 ? d[0] : d[0] * d[1]);
   const std::size_t len = d[axis];
   const long r = static_cast<long>(w.size() / 2);
@@ -51,11 +56,8 @@ void blur_axis(std::vector<float>& a, std::vector<float>* b, const Dims3& d, int
     }
   };
   const std::size_t threads =
-      std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, std::max<std::size_t>(1, lines / 256));
-  std::vector<std::thread> pool;
-  for (std::size_t t = 1; t < threads; ++t) pool.emplace_back(run, lines * t / threads, lines * (t + 1) / threads);
-  run(0, lines / threads);
-  for (auto& th : pool) th.join();
+      std::clamp<std::size_t>(std::size_t(host_threads(max_threads)), 1, std::max<std::size_t>(1, lines / 256));
+  parallel_ranges(lines, int(threads), run);
 }
 
 }  // namespace
@@ -86,23 +88,35 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     }
   }
 
+  const int threads = host_threads(params.threads);
+  // Calls f(z0, z1) for ranges of the interior planes [1, nz - 1).
+  const std::size_t inner_planes = d[2] - 2;
+  auto over_planes = [&](auto&& f) {
+    parallel_ranges(inner_planes, threads, [&](std::size_t a, std::size_t b) { f(a + 1, b + 1); });
+  };
+  auto over_voxels = [&](auto&& f) { parallel_ranges(n, threads, f); };
+
   // v~: normalised convolution of the scanned samples.
   std::vector<float> num(n), den;
   if (mask) {
     den.resize(n);
-    for (std::size_t i = 0; i < n; ++i) {
-      den[i] = (*mask)[i] ? 1.0f : 0.0f;
-      num[i] = (*mask)[i] ? v.data[i] : 0.0f;
-    }
+    over_voxels([&](std::size_t i0, std::size_t i1) {
+      for (std::size_t i = i0; i < i1; ++i) {
+        den[i] = (*mask)[i] ? 1.0f : 0.0f;
+        num[i] = (*mask)[i] ? v.data[i] : 0.0f;
+      }
+    });
   } else {
     num = v.data;
   }
   for (int axis = 0; axis < 3; ++axis) {
     const double sigma_vox = std::max(1.0, params.sigma_mm / v.spacing[axis]);
-    blur_axis(num, mask ? &den : nullptr, d, axis, gaussian_weights(sigma_vox, 3.0));
+    blur_axis(num, mask ? &den : nullptr, d, axis, gaussian_weights(sigma_vox, 3.0), threads);
   }
   if (mask)
-    for (std::size_t i = 0; i < n; ++i) num[i] = den[i] > 1e-6f ? num[i] / den[i] : 0.0f;
+    over_voxels([&](std::size_t i0, std::size_t i1) {
+      for (std::size_t i = i0; i < i1; ++i) num[i] = den[i] > 1e-6f ? num[i] / den[i] : 0.0f;
+    });
 
   // Voxels that count: inside, scanned with their six neighbours.
   const std::size_t sx = 1, sy = d[0], sz = d[0] * d[1];
@@ -113,14 +127,22 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   };
   double lo = std::numeric_limits<double>::infinity(), hi = -lo;
   std::size_t used = 0;
-  for (std::size_t z = 1; z + 1 < d[2]; ++z)
-    for (std::size_t y = 1; y + 1 < d[1]; ++y)
-      for (std::size_t x = 1; x + 1 < d[0]; ++x) {
-        const std::size_t i = v.index(x, y, z);
-        if (!usable(i)) continue;
-        lo = std::min(lo, double(num[i])), hi = std::max(hi, double(num[i]));
-        ++used;
-      }
+  {
+    // Per plane: min, max, count (exact, in any order).
+    std::vector<double> plo(d[2], lo), phi(d[2], hi);
+    std::vector<std::size_t> pused(d[2], 0);
+    over_planes([&](std::size_t z0, std::size_t z1) {
+      for (std::size_t z = z0; z < z1; ++z)
+        for (std::size_t y = 1; y + 1 < d[1]; ++y)
+          for (std::size_t x = 1; x + 1 < d[0]; ++x) {
+            const std::size_t i = v.index(x, y, z);
+            if (!usable(i)) continue;
+            plo[z] = std::min(plo[z], double(num[i])), phi[z] = std::max(phi[z], double(num[i]));
+            ++pused[z];
+          }
+    });
+    for (std::size_t z = 0; z < d[2]; ++z) lo = std::min(lo, plo[z]), hi = std::max(hi, phi[z]), used += pused[z];
+  }
   if (used == 0) throw InputError("--iso auto: no scanned voxels to take the isovalue from");
   if (!(hi > lo)) throw InputError("--iso auto: the volume is constant, it has no boundary to pick an isovalue at");
 
@@ -133,20 +155,30 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   // |grad v~| per usable voxel (-1 elsewhere), for both rules.
   const double hx = v.spacing[0], hy = v.spacing[1], hz = v.spacing[2];
   std::vector<float> gfield(n, -1.0f), gmag;
-  gmag.reserve(used);
-  for (std::size_t z = 1; z + 1 < d[2]; ++z)
-    for (std::size_t y = 1; y + 1 < d[1]; ++y)
-      for (std::size_t x = 1; x + 1 < d[0]; ++x) {
-        const std::size_t i = v.index(x, y, z);
-        if (!usable(i)) continue;
-        const double gx = (num[i + sx] - num[i - sx]) / (2 * hx), gy = (num[i + sy] - num[i - sy]) / (2 * hy),
-                     gz = (num[i + sz] - num[i - sz]) / (2 * hz);
-        gfield[i] = float(std::sqrt(gx * gx + gy * gy + gz * gz));
-        gmag.push_back(gfield[i]);
-        const int b = std::clamp(int((num[i] - lo) / width), 0, bins - 1);
-        sum[b] += gfield[i];
-        ++count[b];
-      }
+  {
+    // Per plane: the histogram's sums and counts, added up in z order.
+    std::vector<double> psum(d[2] * std::size_t(bins), 0.0);
+    std::vector<std::size_t> pcount(d[2] * std::size_t(bins), 0);
+    over_planes([&](std::size_t z0, std::size_t z1) {
+      for (std::size_t z = z0; z < z1; ++z)
+        for (std::size_t y = 1; y + 1 < d[1]; ++y)
+          for (std::size_t x = 1; x + 1 < d[0]; ++x) {
+            const std::size_t i = v.index(x, y, z);
+            if (!usable(i)) continue;
+            const double gx = (num[i + sx] - num[i - sx]) / (2 * hx), gy = (num[i + sy] - num[i - sy]) / (2 * hy),
+                         gz = (num[i + sz] - num[i - sz]) / (2 * hz);
+            gfield[i] = float(std::sqrt(gx * gx + gy * gy + gz * gz));
+            const int b = std::clamp(int((num[i] - lo) / width), 0, bins - 1);
+            psum[z * std::size_t(bins) + std::size_t(b)] += gfield[i];
+            ++pcount[z * std::size_t(bins) + std::size_t(b)];
+          }
+    });
+    for (std::size_t z = 0; z < d[2]; ++z)
+      for (int b = 0; b < bins; ++b) sum[b] += psum[z * std::size_t(bins) + std::size_t(b)], count[b] += pcount[z * std::size_t(bins) + std::size_t(b)];
+    gmag.reserve(used);
+    for (std::size_t i = 0; i < n; ++i)
+      if (gfield[i] >= 0) gmag.push_back(gfield[i]);
+  }
 
   // Mean per bin where there are enough voxels, smoothed [1 2 1] over the
   // valid bins; the peak's centre is the isovalue.
@@ -198,19 +230,35 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     }
     return i;
   };
-  for (std::size_t z = 1; z + 1 < d[2]; ++z)
-    for (std::size_t y = 1; y + 1 < d[1]; ++y)
-      for (std::size_t x = 1; x + 1 < d[0]; ++x) {
-        const std::size_t i = v.index(x, y, z);
-        if (!(gfield[i] >= edge_threshold) || gfield[i] <= 0) continue;
-        const float crest = num[climb(x, y, z, 1.0f)];
-        crests.push_back(crest);
-        if (params.rule == AutoIsoRule::Local) {
-          const float trough = num[climb(x, y, z, -1.0f)];
-          locals.push_back(float(trough + params.local_fraction * (crest - trough)));
-          local_at.push_back(i);
-        }
-      }
+  {
+    // Per range of planes its own lists, joined in z order: the serial order.
+    struct Found {
+      std::vector<float> crests, locals;
+      std::vector<std::size_t> local_at;
+    };
+    std::vector<Found> found(std::size_t(range_count(inner_planes, threads)));
+    parallel_ranges_indexed(inner_planes, threads, [&](int k, std::size_t a, std::size_t b) {
+      Found& f = found[std::size_t(k)];
+      for (std::size_t z = a + 1; z < b + 1; ++z)
+        for (std::size_t y = 1; y + 1 < d[1]; ++y)
+          for (std::size_t x = 1; x + 1 < d[0]; ++x) {
+            const std::size_t i = v.index(x, y, z);
+            if (!(gfield[i] >= edge_threshold) || gfield[i] <= 0) continue;
+            const float crest = num[climb(x, y, z, 1.0f)];
+            f.crests.push_back(crest);
+            if (params.rule == AutoIsoRule::Local) {
+              const float trough = num[climb(x, y, z, -1.0f)];
+              f.locals.push_back(float(trough + params.local_fraction * (crest - trough)));
+              f.local_at.push_back(i);
+            }
+          }
+    });
+    for (const Found& f : found) {
+      crests.insert(crests.end(), f.crests.begin(), f.crests.end());
+      locals.insert(locals.end(), f.locals.begin(), f.locals.end());
+      local_at.insert(local_at.end(), f.local_at.begin(), f.local_at.end());
+    }
+  }
   if (crests.empty())  // no usable voxel has a gradient (e.g. a one-voxel checkerboard)
     throw InputError("--iso auto: the volume has no boundary to pick an isovalue at (|grad v~| is 0 everywhere)");
   std::vector<float> sorted = crests;
@@ -246,7 +294,8 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
       }
       for (int axis = 0; axis < 3; ++axis)
         // Unnormalised Gaussian: the density of edges per cell stays comparable to the prior.
-        blur_axis(fn, &fd, dcoarse, axis, gaussian_weights(std::max(1.0, sigma_vox[axis] / double(f[axis])), 3.0));
+        blur_axis(fn, &fd, dcoarse, axis, gaussian_weights(std::max(1.0, sigma_vox[axis] / double(f[axis])), 3.0),
+                  threads);
       // fd is now the Gaussian-weighted edge density per cell (weights sum to
       // 1 per axis); field_prior edges per Gaussian volume of (sqrt(2 pi) sigma)^3 voxels.
       double gauss_volume = 1;
@@ -260,7 +309,8 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
         const double pos = std::clamp((double(x) + 0.5) / double(f[a]) - 0.5, 0.0, double(dc[a] - 1));
         c0 = std::size_t(pos), c1 = std::min(c0 + 1, dc[a] - 1), t = float(pos - double(c0));
       };
-      for (std::size_t z = 0; z < d[2]; ++z) {
+      parallel_ranges(d[2], threads, [&](std::size_t za, std::size_t zb) {
+      for (std::size_t z = za; z < zb; ++z) {
         std::size_t z0, z1;
         float tz;
         weights(2, z, z0, z1, tz);
@@ -282,6 +332,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
           }
         }
       }
+      });
     }
   }
   const double iso = params.rule == AutoIsoRule::EchoRidge ? ridge_iso
@@ -306,7 +357,9 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
 Volume level_isovalue(const Volume& v, const std::vector<float>& field, double iso) {
   if (field.size() != v.voxels()) throw std::invalid_argument("level_isovalue: field size differs from the volume");
   std::vector<float> out(v.voxels());
-  for (std::size_t i = 0; i < out.size(); ++i) out[i] = float(double(v.data[i]) - double(field[i]) + iso);
+  parallel_ranges(out.size(), host_threads(0), [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) out[i] = float(double(v.data[i]) - double(field[i]) + iso);
+  });
   return v.with_data(std::move(out), v.source_type);
 }
 

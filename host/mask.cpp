@@ -1,6 +1,9 @@
 // The scanned-region mask: a morphological opening of the exact zeros,
 // flood fill of its boundary-touching regions with a size rule, and
-// 6-neighbour growth (host/mask.hpp gives the rule).
+// 6-neighbour growth (host/mask.hpp gives the rule). The passes over all
+// voxels run on threads (MaskParams::threads) in ranges whose results are
+// combined in order, so the mask is the same for any thread count; the flood
+// fill and the growth layers stay serial.
 #include "mask.hpp"
 #include <cstdio>
 #include <cstdlib>
@@ -12,6 +15,7 @@
 #include "error.hpp"
 #include "filter.hpp"
 #include "io.hpp"
+#include "parallel.hpp"
 #include "text.hpp"
 
 namespace softshell {
@@ -33,13 +37,15 @@ void for_face_neighbours(const Dims3& d, std::size_t i, F&& f) {
 // One axis of a binary cube filter with half-width r, in place on `a`:
 // erode (all of [i - r, i + r] set; outside the volume counts as set) or
 // dilate (any of them set). Running counts along each line, O(voxels).
-void filter_axis(std::vector<std::uint8_t>& a, const Dims3& d, int axis, int r, bool erode) {
+void filter_axis(std::vector<std::uint8_t>& a, const Dims3& d, int axis, int r, bool erode, int threads) {
   const std::size_t stride = axis == 0 ? 1 : (axis == 1 ? d[0] : d[0] * d[1]);
   const std::size_t len = d[axis];
+  const std::size_t lines = a.size() / len;
+  // Lines are independent: each range of lines on its own thread.
+  parallel_ranges(lines, threads, [&](std::size_t l0, std::size_t l1) {
   std::vector<std::uint8_t> line(len);
   std::vector<std::size_t> prefix(len + 1);
-  const std::size_t lines = a.size() / len;
-  for (std::size_t l = 0; l < lines; ++l) {
+  for (std::size_t l = l0; l < l1; ++l) {
     // Start of line l: enumerate the voxels with coordinate 0 along `axis`.
     std::size_t start;
     if (axis == 0) start = l * d[0];
@@ -56,10 +62,30 @@ void filter_axis(std::vector<std::uint8_t>& a, const Dims3& d, int axis, int r, 
       a[start + i * stride] = erode ? !any_break : any_break;
     }
   }
+  });
 }
 
-void cube_filter(std::vector<std::uint8_t>& a, const Dims3& d, int r, bool erode) {
-  for (int axis = 0; axis < 3; ++axis) filter_axis(a, d, axis, r, erode);
+void cube_filter(std::vector<std::uint8_t>& a, const Dims3& d, int r, bool erode, int threads) {
+  for (int axis = 0; axis < 3; ++axis) filter_axis(a, d, axis, r, erode, threads);
+}
+
+// The unscanned voxels (mask 0) with a face neighbour that passes `take`, in
+// index order.
+template <class F>
+std::vector<std::size_t> frontier_of(const std::vector<std::uint8_t>& mask, const Dims3& d, int threads, F&& take) {
+  const std::size_t n = mask.size();
+  std::vector<std::vector<std::size_t>> parts(std::size_t(range_count(n, threads)));
+  parallel_ranges_indexed(n, threads, [&](int k, std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) {
+      if (mask[i] != 0) continue;
+      bool edge = false;
+      for_face_neighbours(d, i, [&](std::size_t j) { edge = edge || take(j); });
+      if (edge) parts[std::size_t(k)].push_back(i);
+    }
+  });
+  std::vector<std::size_t> out;
+  for (const auto& p : parts) out.insert(out.end(), p.begin(), p.end());
+  return out;
 }
 
 }  // namespace
@@ -73,14 +99,17 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
   const auto min_size = std::max<std::size_t>(1, static_cast<std::size_t>(std::ceil(params.min_fraction * double(n))));
   MaskReport rep;
 
+  const int threads = host_threads(params.threads);
   // 1. The exact zeros, opened by the cube.
   std::vector<std::uint8_t> zero(n);
-  for (std::size_t i = 0; i < n; ++i) zero[i] = v.data[i] == 0.0f ? 1 : 0;
+  parallel_ranges(n, threads, [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) zero[i] = v.data[i] == 0.0f ? 1 : 0;
+  });
   rep.zeros = static_cast<std::size_t>(std::count(zero.begin(), zero.end(), std::uint8_t{1}));
   std::vector<std::uint8_t> solid = zero;
   if (params.solid > 0) {
-    cube_filter(solid, d, params.solid, true);
-    cube_filter(solid, d, params.solid, false);
+    cube_filter(solid, d, params.solid, true, threads);
+    cube_filter(solid, d, params.solid, false, threads);
   }
 
   // 2. Flood fill of the solid regions from the volume's faces. state: 0 not
@@ -136,19 +165,41 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
     // Per beam line: the first and last nonzero sample.
     std::vector<std::uint32_t> first(n / len, std::uint32_t(len)), last(n / len, 0);
     auto line_of = [&](std::size_t i) { return (i % stride) + (i / (stride * len)) * stride; };
-    for (std::size_t i = 0; i < n; ++i)
-      if (v.data[i] != 0.0f) {
-        const std::size_t l = line_of(i);
-        const auto pos = std::uint32_t((i / stride) % len);
-        first[l] = std::min(first[l], pos), last[l] = std::max(last[l], pos);
-      }
+    {
+      // Per range of voxels its own first/last, merged (min and max: exact).
+      const int parts = range_count(n, threads);
+      const auto nparts = static_cast<std::size_t>(parts);
+      std::vector<std::vector<std::uint32_t>> pf(nparts), pl(nparts);
+      parallel_ranges_indexed(n, threads, [&](int k, std::size_t i0, std::size_t i1) {
+        std::vector<std::uint32_t>& f = pf[std::size_t(k)];
+        std::vector<std::uint32_t>& l_ = pl[std::size_t(k)];
+        f.assign(n / len, std::uint32_t(len)), l_.assign(n / len, 0);
+        for (std::size_t i = i0; i < i1; ++i)
+          if (v.data[i] != 0.0f) {
+            const std::size_t l = line_of(i);
+            const auto pos = std::uint32_t((i / stride) % len);
+            f[l] = std::min(f[l], pos), l_[l] = std::max(l_[l], pos);
+          }
+      });
+      for (int k = 0; k < parts; ++k)
+        for (std::size_t l = 0; l < first.size(); ++l)
+          first[l] = std::min(first[l], pf[std::size_t(k)][l]), last[l] = std::max(last[l], pl[std::size_t(k)][l]);
+    }
     std::size_t enclosed = 0, total = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-      if (state[i] != kUnscanned) continue;
-      ++total;
-      const std::size_t l = line_of(i);
-      const auto pos = std::uint32_t((i / stride) % len);
-      enclosed += first[l] < pos && pos < last[l];
+    {
+      const int parts = range_count(n, threads);
+      const auto nparts = static_cast<std::size_t>(parts);
+      std::vector<std::size_t> pe(nparts, 0), pt(nparts, 0);
+      parallel_ranges_indexed(n, threads, [&](int k, std::size_t i0, std::size_t i1) {
+        for (std::size_t i = i0; i < i1; ++i) {
+          if (state[i] != kUnscanned) continue;
+          ++pt[std::size_t(k)];
+          const std::size_t l = line_of(i);
+          const auto pos = std::uint32_t((i / stride) % len);
+          pe[std::size_t(k)] += first[l] < pos && pos < last[l];
+        }
+      });
+      for (int k = 0; k < parts; ++k) enclosed += pe[std::size_t(k)], total += pt[std::size_t(k)];
     }
     rep.enclosed_share = total ? double(enclosed) / double(total) : 0.0;
     // Faces of the volume with scanned voxels on at least 2 % of them.
@@ -174,16 +225,17 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
   }
 
   // 3. The ragged edge of the fill: zeros within `solid` steps through zeros.
-  if (rep.unscanned_regions > 0) grow_unscanned(mask, d, params.solid, &zero);
+  if (rep.unscanned_regions > 0) grow_unscanned(mask, d, params.solid, &zero, threads);
   rep.zero_fill = count_unscanned(mask);
   // 4. The partial-volume rim.
-  if (rep.unscanned_regions > 0) grow_unscanned(mask, d, params.grow);
+  if (rep.unscanned_regions > 0) grow_unscanned(mask, d, params.grow, nullptr, threads);
   rep.unscanned = count_unscanned(mask);
   if (report) *report = rep;
   return mask;
 }
 
-void grow_unscanned(std::vector<std::uint8_t>& mask, const Dims3& d, int voxels, const std::vector<std::uint8_t>* within) {
+void grow_unscanned(std::vector<std::uint8_t>& mask, const Dims3& d, int voxels, const std::vector<std::uint8_t>* within,
+                    int threads) {
   const std::size_t n = d[0] * d[1] * d[2];
   if (mask.size() != n || (within && within->size() != n))
     throw std::invalid_argument("grow_unscanned: mask size differs from dims");
@@ -191,13 +243,7 @@ void grow_unscanned(std::vector<std::uint8_t>& mask, const Dims3& d, int voxels,
   auto may_take = [&](std::size_t j) { return mask[j] != 0 && (!within || (*within)[j] != 0); };
   // Frontier: unscanned voxels with a face neighbour that may be taken; each
   // layer takes the neighbours of the frontier.
-  std::vector<std::size_t> frontier, next;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (mask[i] != 0) continue;
-    bool edge = false;
-    for_face_neighbours(d, i, [&](std::size_t j) { edge = edge || may_take(j); });
-    if (edge) frontier.push_back(i);
-  }
+  std::vector<std::size_t> frontier = frontier_of(mask, d, host_threads(threads), may_take), next;
   for (int layer = 0; layer < voxels && !frontier.empty(); ++layer) {
     next.clear();
     for (std::size_t i : frontier)
@@ -211,38 +257,35 @@ void grow_unscanned(std::vector<std::uint8_t>& mask, const Dims3& d, int voxels,
   }
 }
 
-Volume fill_unscanned(const Volume& v, const std::vector<std::uint8_t>& mask, int depth) {
+Volume fill_unscanned(const Volume& v, const std::vector<std::uint8_t>& mask, int depth, int threads) {
   Volume out = v;
-  fill_unscanned_in_place(out, mask, depth);
+  fill_unscanned_in_place(out, mask, depth, threads);
   return out;
 }
 
-void fill_unscanned_in_place(Volume& out, const std::vector<std::uint8_t>& mask, int depth) {
+void fill_unscanned_in_place(Volume& out, const std::vector<std::uint8_t>& mask, int depth, int threads) {
   const Dims3& d = out.dims;
   const std::size_t n = out.voxels();
   if (mask.size() != n) throw std::invalid_argument("fill_unscanned: mask size differs from the volume");
   // done: scanned or filled in an earlier layer.
   std::vector<std::uint8_t> done(mask);
-  std::vector<std::size_t> layer, next;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (done[i]) continue;
-    bool edge = false;
-    for_face_neighbours(d, i, [&](std::size_t j) { edge = edge || done[j]; });
-    if (edge) layer.push_back(i);
-  }
+  threads = host_threads(threads);
+  std::vector<std::size_t> layer = frontier_of(done, d, threads, [&](std::size_t j) { return done[j] != 0; }), next;
   std::vector<float> value(layer.size());
   for (int k = 0; !layer.empty() && (depth <= 0 || k < depth); ++k) {
     // Values first, from earlier layers only, so the order within a layer
     // does not matter (deterministic).
     value.resize(layer.size());
-    for (std::size_t a = 0; a < layer.size(); ++a) {
-      double s = 0;
-      int c = 0;
-      for_face_neighbours(d, layer[a], [&](std::size_t j) {
-        if (done[j]) s += out.data[j], ++c;
-      });
-      value[a] = static_cast<float>(s / c);
-    }
+    parallel_ranges(layer.size(), layer.size() >= 65536 ? threads : 1, [&](std::size_t a0, std::size_t a1) {
+      for (std::size_t a = a0; a < a1; ++a) {
+        double s = 0;
+        int c = 0;
+        for_face_neighbours(d, layer[a], [&](std::size_t j) {
+          if (done[j]) s += out.data[j], ++c;
+        });
+        value[a] = static_cast<float>(s / c);
+      }
+    });
     for (std::size_t a = 0; a < layer.size(); ++a) out.data[layer[a]] = value[a], done[layer[a]] = 1;
     next.clear();
     for (std::size_t i : layer)
@@ -267,25 +310,38 @@ std::size_t count_unscanned(const std::vector<std::uint8_t>& mask) {
   return static_cast<std::size_t>(std::count(mask.begin(), mask.end(), std::uint8_t{0}));
 }
 
-int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned) {
+int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int threads) {
   // Speckle is finest along the beam (the axial resolution is the best of
   // the three), so the data's mean squared difference between neighbours, per
   // mm, is largest along it.
   const Dims3& d = v.dims;
   const std::size_t stride[3] = {1, d[0], d[0] * d[1]};
   double energy[3] = {0, 0, 0};
+  // Sums per z-plane, added in z order: the same for any thread count.
+  const std::size_t plane = d[0] * d[1];
+  std::vector<double> psum(3 * d[2], 0.0);
+  std::vector<std::size_t> pcount(3 * d[2], 0);
+  parallel_ranges(d[2], host_threads(threads), [&](std::size_t z0, std::size_t z1) {
+    for (std::size_t z = z0; z < z1; ++z)
+      for (int a = 0; a < 3; ++a) {
+        if (d[a] < 2) continue;
+        double sum = 0;
+        std::size_t count = 0;
+        for (std::size_t i = z * plane; i < (z + 1) * plane; ++i) {
+          if ((i / stride[a]) % d[a] + 1 >= d[a]) continue;
+          const std::size_t j = i + stride[a];
+          if (v.data[i] == 0.0f || v.data[j] == 0.0f) continue;  // unscanned fill or the floor
+          if (scanned && (!(*scanned)[i] || !(*scanned)[j])) continue;
+          const double g = (double(v.data[j]) - double(v.data[i])) / v.spacing[a];
+          sum += g * g, ++count;
+        }
+        psum[3 * z + std::size_t(a)] = sum, pcount[3 * z + std::size_t(a)] = count;
+      }
+  });
   for (int a = 0; a < 3; ++a) {
-    if (d[a] < 2) continue;
     double sum = 0;
     std::size_t count = 0;
-    for (std::size_t i = 0; i < v.voxels(); ++i) {
-      if ((i / stride[a]) % d[a] + 1 >= d[a]) continue;
-      const std::size_t j = i + stride[a];
-      if (v.data[i] == 0.0f || v.data[j] == 0.0f) continue;  // unscanned fill or the floor
-      if (scanned && (!(*scanned)[i] || !(*scanned)[j])) continue;
-      const double g = (double(v.data[j]) - double(v.data[i])) / v.spacing[a];
-      sum += g * g, ++count;
-    }
+    for (std::size_t z = 0; z < d[2]; ++z) sum += psum[3 * z + std::size_t(a)], count += pcount[3 * z + std::size_t(a)];
     energy[a] = count ? sum / double(count) : 0;
   }
   return int(std::max_element(energy, energy + 3) - energy);
@@ -297,7 +353,8 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   const std::size_t n = v.voxels();
   if (scanned && scanned->size() != n) throw std::invalid_argument("near_field_band: mask size differs from the volume");
   NearFieldReport rep;
-  rep.axis = params.axis >= 0 && params.axis < 3 ? params.axis : beam_axis_of(v, scanned);
+  const int threads = host_threads(params.threads);
+  rep.axis = params.axis >= 0 && params.axis < 3 ? params.axis : beam_axis_of(v, scanned, threads);
   std::vector<std::uint8_t> band(n, 0);
   const int ax = rep.axis, u_ax = ax == 0 ? 1 : 0, w_ax = ax == 2 ? 1 : 2;  // the two lateral axes
   const std::size_t stride[3] = {1, d[0], d[0] * d[1]};
@@ -314,7 +371,8 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     const std::vector<float> w = gaussian_weights(std::max(0.5, params.sigma_mm / v.spacing[axis]), 3.0);
     const long r = long(w.size() / 2);
     std::vector<float> out(n);
-    for (std::size_t i = 0; i < n; ++i) {
+    parallel_ranges(n, threads, [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) {
       const long pos = long((i / stride[axis]) % d[axis]);
       double acc = 0, wsum = 0;
       for (long k = -r; k <= r; ++k) {
@@ -326,6 +384,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
       }
       out[i] = wsum > 0 ? float(acc / wsum) : lp[i];
     }
+    });
     lp.swap(out);
   }
   // Skin line per beam line (its first scanned voxel), samples per depth bin.
