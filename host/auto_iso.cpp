@@ -22,42 +22,72 @@
 namespace softshell {
 namespace {
 
+// out[i] = sum_k w[k] rows[k][i] for i < m, the terms added in k order from
+// 0 (the order of a per-sample loop over the taps, so the same bits), the
+// loop over i innermost so it vectorises.
+void weighted_rows(float* out, const float* const* rows, const std::vector<float>& w, std::size_t m) {
+  std::fill(out, out + m, 0.0f);
+  for (std::size_t k = 0; k < w.size(); ++k) {
+    const float wk = w[k];
+    const float* src = rows[k];
+    for (std::size_t i = 0; i < m; ++i) out[i] += wk * src[i];
+  }
+}
+
 // In-place separable Gaussian along `axis` (clamp-to-edge like the device
-// lowpass) of one or two fields. Lines are split among threads; each line is
-// padded by its edge samples first, so the taps need no clamping, and summed
-// in a fixed order (the result does not depend on the thread count).
+// lowpass) of one or two fields. Each output sample sums its taps in a fixed
+// order; the work is split among threads by x-lines (axis 0), z-planes (axis
+// 1) or y-slices (axis 2), whole contiguous rows at a time, so the result
+// does not depend on the thread count.
 void blur_axis(std::vector<float>& a, std::vector<float>* b, const Dims3& d, int axis, const std::vector<float>& w,
                int max_threads) {
-  const std::size_t stride = axis == 0 ? 1 : (axis == 1 ? d[0] : d[0] * d[1]);
   const std::size_t len = d[axis];
   const long r = static_cast<long>(w.size() / 2);
   if (r == 0 || len < 2) return;
-  const std::size_t lines = a.size() / len;
-  auto run = [&](std::size_t l0, std::size_t l1) {
-    std::vector<float> pa(len + 2 * std::size_t(r)), pb(b ? pa.size() : 0);
-    for (std::size_t l = l0; l < l1; ++l) {
-      const std::size_t start = axis == 0 ? l * d[0] : (axis == 1 ? (l % d[0]) + (l / d[0]) * d[0] * d[1] : l);
-      for (long i = -r; i < long(len) + r; ++i) {
-        const std::size_t j = start + std::size_t(std::clamp(i, 0L, long(len) - 1)) * stride;
-        pa[std::size_t(i + r)] = a[j];
-        if (b) pb[std::size_t(i + r)] = (*b)[j];
-      }
-      for (std::size_t i = 0; i < len; ++i) {
-        float sa = 0;
-        for (std::size_t k = 0; k < w.size(); ++k) sa += w[k] * pa[i + k];
-        a[start + i * stride] = sa;
-      }
-      if (b)
-        for (std::size_t i = 0; i < len; ++i) {
-          float sb = 0;
-          for (std::size_t k = 0; k < w.size(); ++k) sb += w[k] * pb[i + k];
-          (*b)[start + i * stride] = sb;
+  const std::size_t nx = d[0], ny = d[1], nz = d[2], taps = w.size();
+  const int threads = host_threads(max_threads);
+  auto clamp_at = [&](long i) { return std::size_t(std::clamp(i, 0L, long(len) - 1)); };
+  for (std::vector<float>* field : {&a, b}) {
+    if (!field) continue;
+    float* f = field->data();
+    if (axis == 0) {
+      parallel_ranges(ny * nz, threads, [&](std::size_t l0, std::size_t l1) {
+        std::vector<float> pad(len + 2 * std::size_t(r));
+        std::vector<const float*> rows(taps);
+        for (std::size_t l = l0; l < l1; ++l) {
+          float* line = f + l * nx;
+          for (long i = -r; i < long(len) + r; ++i) pad[std::size_t(i + r)] = line[clamp_at(i)];
+          for (std::size_t k = 0; k < taps; ++k) rows[k] = pad.data() + k;
+          weighted_rows(line, rows.data(), w, len);
         }
+      });
+    } else if (axis == 1) {
+      parallel_ranges(nz, threads, [&](std::size_t z0, std::size_t z1) {
+        std::vector<float> out(nx * ny);
+        std::vector<const float*> rows(taps);
+        for (std::size_t z = z0; z < z1; ++z) {
+          float* plane = f + z * nx * ny;
+          for (std::size_t y = 0; y < ny; ++y) {
+            for (std::size_t k = 0; k < taps; ++k) rows[k] = plane + clamp_at(long(y) + long(k) - r) * nx;
+            weighted_rows(out.data() + y * nx, rows.data(), w, nx);
+          }
+          std::copy(out.begin(), out.end(), plane);
+        }
+      });
+    } else {
+      parallel_ranges(ny, threads, [&](std::size_t y0, std::size_t y1) {
+        std::vector<float> slice(nz * nx);  // the rows (z, y) of one y, z-major
+        std::vector<const float*> rows(taps);
+        for (std::size_t y = y0; y < y1; ++y) {
+          for (std::size_t z = 0; z < nz; ++z) std::copy_n(f + (z * ny + y) * nx, nx, slice.data() + z * nx);
+          for (std::size_t z = 0; z < nz; ++z) {
+            for (std::size_t k = 0; k < taps; ++k) rows[k] = slice.data() + clamp_at(long(z) + long(k) - r) * nx;
+            weighted_rows(f + (z * ny + y) * nx, rows.data(), w, nx);
+          }
+        }
+      });
     }
-  };
-  const std::size_t threads =
-      std::clamp<std::size_t>(std::size_t(host_threads(max_threads)), 1, std::max<std::size_t>(1, lines / 256));
-  parallel_ranges(lines, int(threads), run);
+  }
 }
 
 }  // namespace

@@ -38,6 +38,27 @@ void for_face_neighbours(const Dims3& d, std::size_t i, F&& f) {
 // erode (all of [i - r, i + r] set; outside the volume counts as set) or
 // dilate (any of them set). Running counts along each line, O(voxels).
 void filter_axis(std::vector<std::uint8_t>& a, const Dims3& d, int axis, int r, bool erode, int threads) {
+  if (axis == 2) {
+    // Lines along z are d[0] d[1] bytes apart: each y-slice (its z-rows) is
+    // copied to a contiguous buffer first and filtered there, in cache.
+    const std::size_t nx = d[0], ny = d[1], nz = d[2];
+    parallel_ranges(ny, threads, [&](std::size_t y0, std::size_t y1) {
+      std::vector<std::uint8_t> slice(nz * nx);
+      std::vector<std::size_t> prefix(nz + 1);
+      for (std::size_t y = y0; y < y1; ++y) {
+        for (std::size_t z = 0; z < nz; ++z) std::copy_n(a.data() + (z * ny + y) * nx, nx, slice.data() + z * nx);
+        for (std::size_t x = 0; x < nx; ++x) {
+          for (std::size_t z = 0; z < nz; ++z) prefix[z + 1] = prefix[z] + ((slice[z * nx + x] != 0) != erode ? 1 : 0);
+          for (std::size_t z = 0; z < nz; ++z) {
+            const std::size_t lo = z >= std::size_t(r) ? z - r : 0, hi = std::min(nz, z + r + 1);
+            const bool any_break = prefix[hi] - prefix[lo] > 0;
+            a[(z * ny + y) * nx + x] = erode ? !any_break : any_break;
+          }
+        }
+      }
+    });
+    return;
+  }
   const std::size_t stride = axis == 0 ? 1 : (axis == 1 ? d[0] : d[0] * d[1]);
   const std::size_t len = d[axis];
   const std::size_t lines = a.size() / len;
@@ -327,13 +348,17 @@ int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int 
         if (d[a] < 2) continue;
         double sum = 0;
         std::size_t count = 0;
-        for (std::size_t i = z * plane; i < (z + 1) * plane; ++i) {
-          if ((i / stride[a]) % d[a] + 1 >= d[a]) continue;
-          const std::size_t j = i + stride[a];
-          if (v.data[i] == 0.0f || v.data[j] == 0.0f) continue;  // unscanned fill or the floor
-          if (scanned && (!(*scanned)[i] || !(*scanned)[j])) continue;
-          const double g = (double(v.data[j]) - double(v.data[i])) / v.spacing[a];
-          sum += g * g, ++count;
+        if (a == 2 && z + 1 >= d[2]) continue;
+        for (std::size_t y = 0; y < d[1]; ++y) {
+          if (a == 1 && y + 1 >= d[1]) continue;
+          const std::size_t x_end = a == 0 ? d[0] - 1 : d[0];
+          for (std::size_t x = 0, i = z * plane + y * d[0]; x < x_end; ++x, ++i) {  // i ascending, as before
+            const std::size_t j = i + stride[a];
+            if (v.data[i] == 0.0f || v.data[j] == 0.0f) continue;  // unscanned fill or the floor
+            if (scanned && (!(*scanned)[i] || !(*scanned)[j])) continue;
+            const double g = (double(v.data[j]) - double(v.data[i])) / v.spacing[a];
+            sum += g * g, ++count;
+          }
         }
         psum[3 * z + std::size_t(a)] = sum, pcount[3 * z + std::size_t(a)] = count;
       }
@@ -371,20 +396,61 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     const std::vector<float> w = gaussian_weights(std::max(0.5, params.sigma_mm / v.spacing[axis]), 3.0);
     const long r = long(w.size() / 2);
     std::vector<float> out(n);
-    parallel_ranges(n, threads, [&](std::size_t i0, std::size_t i1) {
-    for (std::size_t i = i0; i < i1; ++i) {
-      const long pos = long((i / stride[axis]) % d[axis]);
-      double acc = 0, wsum = 0;
-      for (long k = -r; k <= r; ++k) {
-        const long q = pos + k;
-        if (q < 0 || q >= long(d[axis])) continue;
-        const std::size_t j = std::size_t(long(i) + k * long(stride[axis]));
-        if (scanned && !(*scanned)[j]) continue;
-        acc += w[std::size_t(k + r)] * lp[j], wsum += w[std::size_t(k + r)];
-      }
-      out[i] = wsum > 0 ? float(acc / wsum) : lp[i];
+    // Normalised over the scanned taps inside the volume, each output's
+    // terms added in tap order (double). Along y or z a whole x-row of
+    // outputs at a time (an unscanned or outside tap adds 0: the same sums,
+    // vectorised); along x one line at a time. Split by z-planes or y-rows,
+    // the result does not depend on the thread count.
+    const std::size_t nx = d[0], ny = d[1], nz = d[2];
+    const std::size_t len = d[axis];
+    if (axis == 0) {
+      parallel_ranges(ny * nz, threads, [&](std::size_t l0, std::size_t l1) {
+        for (std::size_t l = l0; l < l1; ++l) {
+          const std::size_t base = l * nx;
+          for (std::size_t x = 0; x < nx; ++x) {
+            double acc = 0, wsum = 0;
+            for (long k = -r; k <= r; ++k) {
+              const long q = long(x) + k;
+              if (q < 0 || q >= long(nx)) continue;
+              const std::size_t j = base + std::size_t(q);
+              if (scanned && !(*scanned)[j]) continue;
+              acc += w[std::size_t(k + r)] * lp[j], wsum += w[std::size_t(k + r)];
+            }
+            out[base + x] = wsum > 0 ? float(acc / wsum) : lp[base + x];
+          }
+        }
+      });
+    } else {
+      // Rows (pos, outer): axis 1: pos = y, outer = z; axis 2: pos = z, outer = y.
+      const std::size_t outer_n = axis == 1 ? nz : ny;
+      parallel_ranges(outer_n, threads, [&](std::size_t o0, std::size_t o1) {
+        std::vector<double> acc(nx), wsum(nx);
+        for (std::size_t o = o0; o < o1; ++o)
+          for (std::size_t pos = 0; pos < len; ++pos) {
+            auto row_at = [&](std::size_t p) { return axis == 1 ? (o * ny + p) * nx : (p * ny + o) * nx; };
+            std::fill(acc.begin(), acc.end(), 0.0), std::fill(wsum.begin(), wsum.end(), 0.0);
+            for (long k = -r; k <= r; ++k) {
+              const long q = long(pos) + k;
+              if (q < 0 || q >= long(len)) continue;
+              const std::size_t row = row_at(std::size_t(q));
+              const float wk = w[std::size_t(k + r)];  // float products, as the per-voxel loop
+              const float* src = lp.data() + row;
+              if (scanned) {
+                const std::uint8_t* m = scanned->data() + row;
+                for (std::size_t x = 0; x < nx; ++x) {
+                  acc[x] += m[x] ? wk * src[x] : 0.0;
+                  wsum[x] += m[x] ? wk : 0.0;
+                }
+              } else {
+                for (std::size_t x = 0; x < nx; ++x) acc[x] += wk * src[x], wsum[x] += wk;
+              }
+            }
+            const std::size_t row = row_at(pos);
+            for (std::size_t x = 0; x < nx; ++x)
+              out[row + x] = wsum[x] > 0 ? float(acc[x] / wsum[x]) : lp[row + x];
+          }
+      });
     }
-    });
     lp.swap(out);
   }
   // Skin line per beam line (its first scanned voxel), samples per depth bin.
@@ -394,20 +460,59 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   const std::size_t lines = d[u_ax] * d[w_ax];
   std::vector<long> skin(lines, -1);
   std::vector<std::vector<float>> at_depth(bins);
-  std::vector<float> all;
-  for (std::size_t b = 0; b < d[w_ax]; ++b)
-    for (std::size_t a = 0; a < d[u_ax]; ++a) {
-      const std::size_t l = a + b * d[u_ax];
-      for (std::size_t z = 0; z < d[ax]; ++z) {
-        const std::size_t i = voxel(a, b, z);
-        if (scanned && !(*scanned)[i]) continue;
-        if (skin[l] < 0) skin[l] = long(z);
-        const auto bin = std::size_t(double(long(z) - skin[l]) * hz / 0.5);
-        if (bin < bins) at_depth[bin].push_back(lp[i]);
-        all.push_back(lp[i]);
-      }
+  std::size_t all = 0;
+  {
+    // In memory order (z-planes over threads): the skin line of every beam
+    // line (its first scanned voxel, the minimum depth: exact), then the
+    // samples per depth bin, per range of planes, joined (the medians below
+    // do not depend on the order of a bin's samples).
+    const std::size_t nx = d[0], ny = d[1], nz = d[2];
+    auto line_depth = [&](std::size_t x, std::size_t y, std::size_t z, std::size_t& l, long& depth) {
+      const std::size_t c[3] = {x, y, z};
+      l = c[u_ax] + c[w_ax] * d[u_ax], depth = long(c[ax]);
+    };
+    const int parts = range_count(nz, threads);
+    std::vector<std::vector<long>> pskin(static_cast<std::size_t>(parts), std::vector<long>(lines, -1));
+    parallel_ranges_indexed(nz, threads, [&](int k, std::size_t z0, std::size_t z1) {
+      std::vector<long>& sk = pskin[std::size_t(k)];
+      for (std::size_t z = z0; z < z1; ++z)
+        for (std::size_t y = 0; y < ny; ++y)
+          for (std::size_t x = 0; x < nx; ++x) {
+            const std::size_t i = (z * ny + y) * nx + x;
+            if (scanned && !(*scanned)[i]) continue;
+            std::size_t l;
+            long depth;
+            line_depth(x, y, z, l, depth);
+            if (sk[l] < 0 || depth < sk[l]) sk[l] = depth;
+          }
+    });
+    for (const auto& sk : pskin)
+      for (std::size_t l = 0; l < lines; ++l)
+        if (sk[l] >= 0 && (skin[l] < 0 || sk[l] < skin[l])) skin[l] = sk[l];
+    std::vector<std::vector<std::vector<float>>> pbins(static_cast<std::size_t>(parts), std::vector<std::vector<float>>(bins));
+    std::vector<std::size_t> pall(static_cast<std::size_t>(parts), 0);
+    parallel_ranges_indexed(nz, threads, [&](int k, std::size_t z0, std::size_t z1) {
+      auto& pb = pbins[std::size_t(k)];
+      for (std::size_t z = z0; z < z1; ++z)
+        for (std::size_t y = 0; y < ny; ++y)
+          for (std::size_t x = 0; x < nx; ++x) {
+            const std::size_t i = (z * ny + y) * nx + x;
+            if (scanned && !(*scanned)[i]) continue;
+            std::size_t l;
+            long depth;
+            line_depth(x, y, z, l, depth);
+            const auto bin = std::size_t(double(depth - skin[l]) * hz / 0.5);
+            if (bin < bins) pb[bin].push_back(lp[i]);
+            ++pall[std::size_t(k)];
+          }
+    });
+    for (int k = 0; k < parts; ++k) {
+      all += pall[std::size_t(k)];
+      for (std::size_t b = 0; b < bins; ++b)
+        at_depth[b].insert(at_depth[b].end(), pbins[std::size_t(k)][b].begin(), pbins[std::size_t(k)][b].end());
     }
-  if (all.size() < 100) {
+  }
+  if (all < 100) {
     if (report) *report = rep;
     return band;
   }
