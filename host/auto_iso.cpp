@@ -239,24 +239,30 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   std::vector<std::size_t> local_at;
   // Climbs v~ from voxel (x, y, z) through the 26 neighbours, up (sign 1) or
   // down (sign -1), at most climb_steps; returns the voxel reached.
+  // The 26 neighbours as index offsets, in the order (dz, dy, dx) ascending:
+  // ties keep the first. A climb stays on usable voxels, which are interior,
+  // so every neighbour is inside the volume, and the ones on its faces are
+  // never usable (gfield -1): no bounds checks are needed.
+  std::array<long, 26> around{};
+  {
+    int k = 0;
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx)
+          if (dx || dy || dz) around[std::size_t(k++)] = dx + long(d[0]) * (dy + long(d[1]) * dz);
+  }
   auto climb = [&](std::size_t x, std::size_t y, std::size_t z, float sign) {
     std::size_t i = v.index(x, y, z);
-    long cx = long(x), cy = long(y), cz = long(z);
     for (int step = 0; step < params.climb_steps; ++step) {
       std::size_t best_i = i;
-      long bx = cx, by = cy, bz = cz;
-      for (int dz = -1; dz <= 1; ++dz)
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dx = -1; dx <= 1; ++dx) {
-            const long nx = cx + dx, ny = cy + dy, nz = cz + dz;
-            if (nx < 1 || ny < 1 || nz < 1 || nx + 1 >= long(d[0]) || ny + 1 >= long(d[1]) || nz + 1 >= long(d[2]))
-              continue;
-            const std::size_t j = v.index(std::size_t(nx), std::size_t(ny), std::size_t(nz));
-            if (gfield[j] < 0) continue;  // not usable
-            if (sign * num[j] > sign * num[best_i]) best_i = j, bx = nx, by = ny, bz = nz;
-          }
+      float best = sign * num[i];
+      for (const long o : around) {
+        const std::size_t j = std::size_t(long(i) + o);
+        if (gfield[j] < 0) continue;  // not usable
+        if (sign * num[j] > best) best_i = j, best = sign * num[j];
+      }
       if (best_i == i) break;
-      i = best_i, cx = bx, cy = by, cz = bz;
+      i = best_i;
     }
     return i;
   };

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <cstdint>
 #include <memory>
 #include <mutex>
 #include <stdexcept>
@@ -86,7 +87,13 @@ HostStream host_stream(std::size_t n, int reps, int threads) {
   auto work = [&](int id) {
     const std::size_t lo = n * std::size_t(id) / std::size_t(threads), hi = n * std::size_t(id + 1) / std::size_t(threads);
     const std::size_t me = std::size_t(id);
-    for (std::size_t i = lo; i < hi; ++i) pa[i] = float(i % 1000) * 1e-3f, pb[i] = float(i % 777) * 1e-2f, pc[i] = 0.0f;
+    // Values from a bijective hash of the index: no two pages alike (a
+    // periodic pattern lets a hypervisor merge identical pages, and a copy
+    // from a few merged pages runs from cache: 69 GB/s "copy" on 2 cores).
+    for (std::size_t i = lo; i < hi; ++i) {
+      const auto h = std::uint32_t(i) * 2654435761u, g = (std::uint32_t(i) ^ 0x9e3779b9u) * 2246822519u;
+      pa[i] = float(h >> 8) * 1e-7f, pb[i] = float(g >> 8) * 1e-7f, pc[i] = float(i);
+    }
     for (int r = -1; r < reps; ++r) {  // r = -1: the warm-up
       const float s = 0.5f + 0.25f * float(r + 1);
       barrier.wait();
