@@ -1,6 +1,9 @@
 // `--iso auto` (host/auto_iso.hpp): mean gradient magnitude of the lowpassed
 // volume per value bin, and its peak. Host code: one separable Gaussian and
 // one histogram pass, a fraction of a second on the volumes softshell meets.
+// Every pass over the voxels is split in z-ranges over threads
+// (AutoIsoParams::threads); per-range results are combined in z order and
+// sums are taken per z-plane, so the result is the same for any thread count.
 #include "auto_iso.hpp"
 
 #include <algorithm>
@@ -14,48 +17,77 @@
 #include "error.hpp"
 #include "filter.hpp"
 #include "io.hpp"
+#include "parallel.hpp"
 
 namespace softshell {
 namespace {
 
+// out[i] = sum_k w[k] rows[k][i] for i < m, the terms added in k order from
+// 0 (the order of a per-sample loop over the taps, so the same bits), the
+// loop over i innermost so it vectorises.
+void weighted_rows(float* out, const float* const* rows, const std::vector<float>& w, std::size_t m) {
+  std::fill(out, out + m, 0.0f);
+  for (std::size_t k = 0; k < w.size(); ++k) {
+    const float wk = w[k];
+    const float* src = rows[k];
+    for (std::size_t i = 0; i < m; ++i) out[i] += wk * src[i];
+  }
+}
+
 // In-place separable Gaussian along `axis` (clamp-to-edge like the device
-// lowpass) of one or two fields. Lines are split among threads; each line is
-// padded by its edge samples first, so the taps need no clamping, and summed
-// in a fixed order (the result does not depend on the thread count).
-void blur_axis(std::vector<float>& a, std::vector<float>* b, const Dims3& d, int axis, const std::vector<float>& w) {
-  const std::size_t stride = axis == 0 ? 1 : (axis == 1 ? d[0] : d[0] * d[1]);
+// lowpass) of one or two fields. Each output sample sums its taps in a fixed
+// order; the work is split among threads by x-lines (axis 0), z-planes (axis
+// 1) or y-slices (axis 2), whole contiguous rows at a time, so the result
+// does not depend on the thread count.
+void blur_axis(std::vector<float>& a, std::vector<float>* b, const Dims3& d, int axis, const std::vector<float>& w,
+               int max_threads) {
   const std::size_t len = d[axis];
   const long r = static_cast<long>(w.size() / 2);
   if (r == 0 || len < 2) return;
-  const std::size_t lines = a.size() / len;
-  auto run = [&](std::size_t l0, std::size_t l1) {
-    std::vector<float> pa(len + 2 * std::size_t(r)), pb(b ? pa.size() : 0);
-    for (std::size_t l = l0; l < l1; ++l) {
-      const std::size_t start = axis == 0 ? l * d[0] : (axis == 1 ? (l % d[0]) + (l / d[0]) * d[0] * d[1] : l);
-      for (long i = -r; i < long(len) + r; ++i) {
-        const std::size_t j = start + std::size_t(std::clamp(i, 0L, long(len) - 1)) * stride;
-        pa[std::size_t(i + r)] = a[j];
-        if (b) pb[std::size_t(i + r)] = (*b)[j];
-      }
-      for (std::size_t i = 0; i < len; ++i) {
-        float sa = 0;
-        for (std::size_t k = 0; k < w.size(); ++k) sa += w[k] * pa[i + k];
-        a[start + i * stride] = sa;
-      }
-      if (b)
-        for (std::size_t i = 0; i < len; ++i) {
-          float sb = 0;
-          for (std::size_t k = 0; k < w.size(); ++k) sb += w[k] * pb[i + k];
-          (*b)[start + i * stride] = sb;
+  const std::size_t nx = d[0], ny = d[1], nz = d[2], taps = w.size();
+  const int threads = host_threads(max_threads);
+  auto clamp_at = [&](long i) { return std::size_t(std::clamp(i, 0L, long(len) - 1)); };
+  for (std::vector<float>* field : {&a, b}) {
+    if (!field) continue;
+    float* f = field->data();
+    if (axis == 0) {
+      parallel_ranges(ny * nz, threads, [&](std::size_t l0, std::size_t l1) {
+        std::vector<float> pad(len + 2 * std::size_t(r));
+        std::vector<const float*> rows(taps);
+        for (std::size_t l = l0; l < l1; ++l) {
+          float* line = f + l * nx;
+          for (long i = -r; i < long(len) + r; ++i) pad[std::size_t(i + r)] = line[clamp_at(i)];
+          for (std::size_t k = 0; k < taps; ++k) rows[k] = pad.data() + k;
+          weighted_rows(line, rows.data(), w, len);
         }
+      });
+    } else if (axis == 1) {
+      parallel_ranges(nz, threads, [&](std::size_t z0, std::size_t z1) {
+        std::vector<float> out(nx * ny);
+        std::vector<const float*> rows(taps);
+        for (std::size_t z = z0; z < z1; ++z) {
+          float* plane = f + z * nx * ny;
+          for (std::size_t y = 0; y < ny; ++y) {
+            for (std::size_t k = 0; k < taps; ++k) rows[k] = plane + clamp_at(long(y) + long(k) - r) * nx;
+            weighted_rows(out.data() + y * nx, rows.data(), w, nx);
+          }
+          std::copy(out.begin(), out.end(), plane);
+        }
+      });
+    } else {
+      parallel_ranges(ny, threads, [&](std::size_t y0, std::size_t y1) {
+        std::vector<float> slice(nz * nx);  // the rows (z, y) of one y, z-major
+        std::vector<const float*> rows(taps);
+        for (std::size_t y = y0; y < y1; ++y) {
+          for (std::size_t z = 0; z < nz; ++z) std::copy_n(f + (z * ny + y) * nx, nx, slice.data() + z * nx);
+          for (std::size_t z = 0; z < nz; ++z) {
+            for (std::size_t k = 0; k < taps; ++k) rows[k] = slice.data() + clamp_at(long(z) + long(k) - r) * nx;
+            weighted_rows(f + (z * ny + y) * nx, rows.data(), w, nx);
+          }
+        }
+      });
     }
-  };
-  const std::size_t threads =
-      std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, std::max<std::size_t>(1, lines / 256));
-  std::vector<std::thread> pool;
-  for (std::size_t t = 1; t < threads; ++t) pool.emplace_back(run, lines * t / threads, lines * (t + 1) / threads);
-  run(0, lines / threads);
-  for (auto& th : pool) th.join();
+  }
 }
 
 }  // namespace
@@ -86,23 +118,35 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     }
   }
 
+  const int threads = host_threads(params.threads);
+  // Calls f(z0, z1) for ranges of the interior planes [1, nz - 1).
+  const std::size_t inner_planes = d[2] - 2;
+  auto over_planes = [&](auto&& f) {
+    parallel_ranges(inner_planes, threads, [&](std::size_t a, std::size_t b) { f(a + 1, b + 1); });
+  };
+  auto over_voxels = [&](auto&& f) { parallel_ranges(n, threads, f); };
+
   // v~: normalised convolution of the scanned samples.
   std::vector<float> num(n), den;
   if (mask) {
     den.resize(n);
-    for (std::size_t i = 0; i < n; ++i) {
-      den[i] = (*mask)[i] ? 1.0f : 0.0f;
-      num[i] = (*mask)[i] ? v.data[i] : 0.0f;
-    }
+    over_voxels([&](std::size_t i0, std::size_t i1) {
+      for (std::size_t i = i0; i < i1; ++i) {
+        den[i] = (*mask)[i] ? 1.0f : 0.0f;
+        num[i] = (*mask)[i] ? v.data[i] : 0.0f;
+      }
+    });
   } else {
     num = v.data;
   }
   for (int axis = 0; axis < 3; ++axis) {
     const double sigma_vox = std::max(1.0, params.sigma_mm / v.spacing[axis]);
-    blur_axis(num, mask ? &den : nullptr, d, axis, gaussian_weights(sigma_vox, 3.0));
+    blur_axis(num, mask ? &den : nullptr, d, axis, gaussian_weights(sigma_vox, 3.0), threads);
   }
   if (mask)
-    for (std::size_t i = 0; i < n; ++i) num[i] = den[i] > 1e-6f ? num[i] / den[i] : 0.0f;
+    over_voxels([&](std::size_t i0, std::size_t i1) {
+      for (std::size_t i = i0; i < i1; ++i) num[i] = den[i] > 1e-6f ? num[i] / den[i] : 0.0f;
+    });
 
   // Voxels that count: inside, scanned with their six neighbours.
   const std::size_t sx = 1, sy = d[0], sz = d[0] * d[1];
@@ -113,14 +157,22 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   };
   double lo = std::numeric_limits<double>::infinity(), hi = -lo;
   std::size_t used = 0;
-  for (std::size_t z = 1; z + 1 < d[2]; ++z)
-    for (std::size_t y = 1; y + 1 < d[1]; ++y)
-      for (std::size_t x = 1; x + 1 < d[0]; ++x) {
-        const std::size_t i = v.index(x, y, z);
-        if (!usable(i)) continue;
-        lo = std::min(lo, double(num[i])), hi = std::max(hi, double(num[i]));
-        ++used;
-      }
+  {
+    // Per plane: min, max, count (exact, in any order).
+    std::vector<double> plo(d[2], lo), phi(d[2], hi);
+    std::vector<std::size_t> pused(d[2], 0);
+    over_planes([&](std::size_t z0, std::size_t z1) {
+      for (std::size_t z = z0; z < z1; ++z)
+        for (std::size_t y = 1; y + 1 < d[1]; ++y)
+          for (std::size_t x = 1; x + 1 < d[0]; ++x) {
+            const std::size_t i = v.index(x, y, z);
+            if (!usable(i)) continue;
+            plo[z] = std::min(plo[z], double(num[i])), phi[z] = std::max(phi[z], double(num[i]));
+            ++pused[z];
+          }
+    });
+    for (std::size_t z = 0; z < d[2]; ++z) lo = std::min(lo, plo[z]), hi = std::max(hi, phi[z]), used += pused[z];
+  }
   if (used == 0) throw InputError("--iso auto: no scanned voxels to take the isovalue from");
   if (!(hi > lo)) throw InputError("--iso auto: the volume is constant, it has no boundary to pick an isovalue at");
 
@@ -133,20 +185,30 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   // |grad v~| per usable voxel (-1 elsewhere), for both rules.
   const double hx = v.spacing[0], hy = v.spacing[1], hz = v.spacing[2];
   std::vector<float> gfield(n, -1.0f), gmag;
-  gmag.reserve(used);
-  for (std::size_t z = 1; z + 1 < d[2]; ++z)
-    for (std::size_t y = 1; y + 1 < d[1]; ++y)
-      for (std::size_t x = 1; x + 1 < d[0]; ++x) {
-        const std::size_t i = v.index(x, y, z);
-        if (!usable(i)) continue;
-        const double gx = (num[i + sx] - num[i - sx]) / (2 * hx), gy = (num[i + sy] - num[i - sy]) / (2 * hy),
-                     gz = (num[i + sz] - num[i - sz]) / (2 * hz);
-        gfield[i] = float(std::sqrt(gx * gx + gy * gy + gz * gz));
-        gmag.push_back(gfield[i]);
-        const int b = std::clamp(int((num[i] - lo) / width), 0, bins - 1);
-        sum[b] += gfield[i];
-        ++count[b];
-      }
+  {
+    // Per plane: the histogram's sums and counts, added up in z order.
+    std::vector<double> psum(d[2] * std::size_t(bins), 0.0);
+    std::vector<std::size_t> pcount(d[2] * std::size_t(bins), 0);
+    over_planes([&](std::size_t z0, std::size_t z1) {
+      for (std::size_t z = z0; z < z1; ++z)
+        for (std::size_t y = 1; y + 1 < d[1]; ++y)
+          for (std::size_t x = 1; x + 1 < d[0]; ++x) {
+            const std::size_t i = v.index(x, y, z);
+            if (!usable(i)) continue;
+            const double gx = (num[i + sx] - num[i - sx]) / (2 * hx), gy = (num[i + sy] - num[i - sy]) / (2 * hy),
+                         gz = (num[i + sz] - num[i - sz]) / (2 * hz);
+            gfield[i] = float(std::sqrt(gx * gx + gy * gy + gz * gz));
+            const int b = std::clamp(int((num[i] - lo) / width), 0, bins - 1);
+            psum[z * std::size_t(bins) + std::size_t(b)] += gfield[i];
+            ++pcount[z * std::size_t(bins) + std::size_t(b)];
+          }
+    });
+    for (std::size_t z = 0; z < d[2]; ++z)
+      for (int b = 0; b < bins; ++b) sum[b] += psum[z * std::size_t(bins) + std::size_t(b)], count[b] += pcount[z * std::size_t(bins) + std::size_t(b)];
+    gmag.reserve(used);
+    for (std::size_t i = 0; i < n; ++i)
+      if (gfield[i] >= 0) gmag.push_back(gfield[i]);
+  }
 
   // Mean per bin where there are enough voxels, smoothed [1 2 1] over the
   // valid bins; the peak's centre is the isovalue.
@@ -177,40 +239,62 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   std::vector<std::size_t> local_at;
   // Climbs v~ from voxel (x, y, z) through the 26 neighbours, up (sign 1) or
   // down (sign -1), at most climb_steps; returns the voxel reached.
+  // The 26 neighbours as index offsets, in the order (dz, dy, dx) ascending:
+  // ties keep the first. A climb stays on usable voxels, which are interior,
+  // so every neighbour is inside the volume, and the ones on its faces are
+  // never usable (gfield -1): no bounds checks are needed.
+  std::array<long, 26> around{};
+  {
+    int k = 0;
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx)
+          if (dx || dy || dz) around[std::size_t(k++)] = dx + long(d[0]) * (dy + long(d[1]) * dz);
+  }
   auto climb = [&](std::size_t x, std::size_t y, std::size_t z, float sign) {
     std::size_t i = v.index(x, y, z);
-    long cx = long(x), cy = long(y), cz = long(z);
     for (int step = 0; step < params.climb_steps; ++step) {
       std::size_t best_i = i;
-      long bx = cx, by = cy, bz = cz;
-      for (int dz = -1; dz <= 1; ++dz)
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dx = -1; dx <= 1; ++dx) {
-            const long nx = cx + dx, ny = cy + dy, nz = cz + dz;
-            if (nx < 1 || ny < 1 || nz < 1 || nx + 1 >= long(d[0]) || ny + 1 >= long(d[1]) || nz + 1 >= long(d[2]))
-              continue;
-            const std::size_t j = v.index(std::size_t(nx), std::size_t(ny), std::size_t(nz));
-            if (gfield[j] < 0) continue;  // not usable
-            if (sign * num[j] > sign * num[best_i]) best_i = j, bx = nx, by = ny, bz = nz;
-          }
+      float best = sign * num[i];
+      for (const long o : around) {
+        const std::size_t j = std::size_t(long(i) + o);
+        if (gfield[j] < 0) continue;  // not usable
+        if (sign * num[j] > best) best_i = j, best = sign * num[j];
+      }
       if (best_i == i) break;
-      i = best_i, cx = bx, cy = by, cz = bz;
+      i = best_i;
     }
     return i;
   };
-  for (std::size_t z = 1; z + 1 < d[2]; ++z)
-    for (std::size_t y = 1; y + 1 < d[1]; ++y)
-      for (std::size_t x = 1; x + 1 < d[0]; ++x) {
-        const std::size_t i = v.index(x, y, z);
-        if (!(gfield[i] >= edge_threshold) || gfield[i] <= 0) continue;
-        const float crest = num[climb(x, y, z, 1.0f)];
-        crests.push_back(crest);
-        if (params.rule == AutoIsoRule::Local) {
-          const float trough = num[climb(x, y, z, -1.0f)];
-          locals.push_back(float(trough + params.local_fraction * (crest - trough)));
-          local_at.push_back(i);
-        }
-      }
+  {
+    // Per range of planes its own lists, joined in z order: the serial order.
+    struct Found {
+      std::vector<float> crests, locals;
+      std::vector<std::size_t> local_at;
+    };
+    std::vector<Found> found(std::size_t(range_count(inner_planes, threads)));
+    parallel_ranges_indexed(inner_planes, threads, [&](int k, std::size_t a, std::size_t b) {
+      Found& f = found[std::size_t(k)];
+      for (std::size_t z = a + 1; z < b + 1; ++z)
+        for (std::size_t y = 1; y + 1 < d[1]; ++y)
+          for (std::size_t x = 1; x + 1 < d[0]; ++x) {
+            const std::size_t i = v.index(x, y, z);
+            if (!(gfield[i] >= edge_threshold) || gfield[i] <= 0) continue;
+            const float crest = num[climb(x, y, z, 1.0f)];
+            f.crests.push_back(crest);
+            if (params.rule == AutoIsoRule::Local) {
+              const float trough = num[climb(x, y, z, -1.0f)];
+              f.locals.push_back(float(trough + params.local_fraction * (crest - trough)));
+              f.local_at.push_back(i);
+            }
+          }
+    });
+    for (const Found& f : found) {
+      crests.insert(crests.end(), f.crests.begin(), f.crests.end());
+      locals.insert(locals.end(), f.locals.begin(), f.locals.end());
+      local_at.insert(local_at.end(), f.local_at.begin(), f.local_at.end());
+    }
+  }
   if (crests.empty())  // no usable voxel has a gradient (e.g. a one-voxel checkerboard)
     throw InputError("--iso auto: the volume has no boundary to pick an isovalue at (|grad v~| is 0 everywhere)");
   std::vector<float> sorted = crests;
@@ -246,7 +330,8 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
       }
       for (int axis = 0; axis < 3; ++axis)
         // Unnormalised Gaussian: the density of edges per cell stays comparable to the prior.
-        blur_axis(fn, &fd, dcoarse, axis, gaussian_weights(std::max(1.0, sigma_vox[axis] / double(f[axis])), 3.0));
+        blur_axis(fn, &fd, dcoarse, axis, gaussian_weights(std::max(1.0, sigma_vox[axis] / double(f[axis])), 3.0),
+                  threads);
       // fd is now the Gaussian-weighted edge density per cell (weights sum to
       // 1 per axis); field_prior edges per Gaussian volume of (sqrt(2 pi) sigma)^3 voxels.
       double gauss_volume = 1;
@@ -260,7 +345,8 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
         const double pos = std::clamp((double(x) + 0.5) / double(f[a]) - 0.5, 0.0, double(dc[a] - 1));
         c0 = std::size_t(pos), c1 = std::min(c0 + 1, dc[a] - 1), t = float(pos - double(c0));
       };
-      for (std::size_t z = 0; z < d[2]; ++z) {
+      parallel_ranges(d[2], threads, [&](std::size_t za, std::size_t zb) {
+      for (std::size_t z = za; z < zb; ++z) {
         std::size_t z0, z1;
         float tz;
         weights(2, z, z0, z1, tz);
@@ -282,6 +368,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
           }
         }
       }
+      });
     }
   }
   const double iso = params.rule == AutoIsoRule::EchoRidge ? ridge_iso
@@ -309,8 +396,10 @@ Volume level_isovalue(const Volume& v, const std::vector<float>& field, double i
   // In double, then clamped to float's range: on float data spanning
   // +-3e38 the difference would overflow to infinity (found by fuzzing).
   const double big = std::numeric_limits<float>::max();
-  for (std::size_t i = 0; i < out.size(); ++i)
-    out[i] = float(std::clamp(double(v.data[i]) - double(field[i]) + iso, -big, big));
+  parallel_ranges(out.size(), host_threads(0), [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i)
+      out[i] = float(std::clamp(double(v.data[i]) - double(field[i]) + iso, -big, big));
+  });
   return v.with_data(std::move(out), v.source_type);
 }
 

@@ -47,6 +47,7 @@ struct AutoIsoParams {
   double field_sigma_mm = 4.0;  // Local: spread of the edges' isovalues into a field
   double field_prior = 0.5;     // Local: weight of the global median in the field (edges per Gaussian volume)
   bool want_field = false;      // Local: fill AutoIsoReport::field
+  int threads = 0;              // host threads (0: every core); the results are the same for any count
 };
 
 struct AutoIsoReport {

@@ -16,6 +16,9 @@
 #include <random>
 #include <sstream>
 #include <stdexcept>
+#include <thread>
+
+#include <unistd.h>
 
 #include "error.hpp"
 #include "filter.hpp"
@@ -292,6 +295,9 @@ void bench_stream(Runtime& rt, DeviceBench& db, int reps, std::mt19937& rng) {
   const std::size_t n = std::size_t(1) << 24;  // 64 MiB per array: twice the largest cache here
   const std::size_t bytes = n * sizeof(float);
   db.stream_elements = n;
+  // The host's own bandwidth first, same array sizes, same repeats.
+  db.host = host_stream(n, reps);
+  check(db, db.host.ok, "host stream: copy or triad gave a wrong result");
   std::vector<float> a(n), b(n), c(n);
   std::uniform_real_distribution<float> U(-1.0f, 1.0f);
   for (std::size_t i = 0; i < n; ++i) a[i] = U(rng), b[i] = U(rng);
@@ -391,6 +397,120 @@ void bench_sweep_apply(Runtime& rt, DeviceBench& db, int size, int reps) {
   db.sweep_gbps = ByteModel::sweep * double(N) / db.sweep.min * 1e-9;
   db.apply_gbps = ByteModel::apply * double(N) / db.apply.min * 1e-9;
   if (db.copy_gbps > 0) db.sweep_fraction = db.sweep_gbps / db.copy_gbps, db.apply_fraction = db.apply_gbps / db.copy_gbps;
+  if (db.host.copy_gbps > 0)
+    db.sweep_fraction_host = db.sweep_gbps / db.host.copy_gbps, db.apply_fraction_host = db.apply_gbps / db.host.copy_gbps;
+}
+
+// The solve against its bandwidth bound: a built hierarchy's cold solves
+// (FMG + PCG), timed by the solver (no hierarchy build), with the bytes the
+// solver counted under the byte model.
+void bench_solve_bound(DeviceBench& db, DeviceSystem& sys, const SolverParams& sp, int reps) {
+  MultigridSolver mg(sys, sp);
+  SolveReport rep;
+  mg.solve(&rep);  // warm-up
+  std::vector<double> t;
+  for (int r = 0; r < reps; ++r) {
+    mg.solve(&rep);
+    check(db, rep.converged, "solve bound: the solve did not converge");
+    t.push_back(rep.seconds);
+  }
+  db.solve_seconds = summarise(t).min;
+  db.solve_iterations = rep.cycles;
+  db.solve_bytes_per_voxel = rep.bytes / double(sys.voxels());
+  if (db.host.copy_gbps > 0) {
+    db.solve_bound_s = rep.bytes / (db.host.copy_gbps * 1e9);
+    db.solve_bound_ratio = db.solve_seconds / db.solve_bound_s;
+  }
+  if (db.copy_gbps > 0) db.solve_bound_ratio_device = db.solve_seconds / (rep.bytes / (db.copy_gbps * 1e9));
+}
+
+// ---- HYPRE PFMG-PCG (bench/pfmg_peer.cpp, a separate MPI program)
+
+// The peer program: $SOFTSHELL_PFMG_PEER, else next to this executable,
+// else in ../bench/ from it (the build tree: build/host/softshell,
+// build/bench/softshell_pfmg_peer); "" when none exists.
+std::string pfmg_peer_path() {
+  auto exists = [](const std::string& p) { return !p.empty() && ::access(p.c_str(), X_OK) == 0; };
+  if (const char* env = std::getenv("SOFTSHELL_PFMG_PEER")) return exists(env) ? env : "";
+  char self[4096];
+  const ssize_t len = ::readlink("/proc/self/exe", self, sizeof self - 1);
+  if (len > 0) {
+    std::string dir(self, std::size_t(len));
+    dir = dir.substr(0, dir.rfind('/'));
+    for (const std::string& p : {dir + "/softshell_pfmg_peer", dir + "/../bench/softshell_pfmg_peer"})
+      if (exists(p)) return p;
+  }
+  return "";
+}
+
+// ||b - A u|| / ||b|| in float64 of a float64 u.
+double relative_residual64(const HostStencil& s, const std::vector<double>& u) {
+  const GridDesc& g = s.grid;
+  const std::size_t N = s.voxels();
+  const Offsets o(g);
+  double rr = 0, bb = 0;
+  for (int z = 0, p = 0; z < g.nz; ++z)
+    for (int y = 0; y < g.ny; ++y)
+      for (int x = 0; x < g.nx; ++x, ++p) {
+        const double au = boundary(g, x, y, z) ? double(s.coef[p]) * u[p] : row<double>(s, o, N, std::size_t(p), u.data());
+        rr += (s.b[p] - au) * (s.b[p] - au), bb += double(s.b[p]) * s.b[p];
+      }
+  return bb > 0 ? std::sqrt(rr / bb) : std::sqrt(rr);
+}
+
+struct PfmgRun {
+  double setup = 0, solve = 0, hypre_residual = 0, residual = 0;
+  long iterations = 0;
+  int ranks = 0;
+};
+
+// Exports the system, runs the peer on `ranks` MPI ranks to `tol`, reads
+// its solution back and evaluates its residual here (float64).
+PfmgRun run_pfmg(const std::string& peer, const HostStencil& hs, double tol, int ranks) {
+  char dir_template[] = "/tmp/softshell-pfmg-XXXXXX";
+  const char* dir = ::mkdtemp(dir_template);
+  if (!dir) throw std::runtime_error("cannot make a temporary directory for the PFMG peer");
+  const std::string sys_path = std::string(dir) + "/system.bin", out_path = std::string(dir) + "/result.bin",
+                    log_path = std::string(dir) + "/log.txt";
+  struct Cleanup {
+    std::string a, b, c, d;
+    ~Cleanup() { std::remove(a.c_str()), std::remove(b.c_str()), std::remove(c.c_str()), ::rmdir(d.c_str()); }
+  } cleanup{sys_path, out_path, log_path, dir};
+  {
+    std::ofstream f(sys_path, std::ios::binary);
+    const std::int32_t dims[3] = {hs.grid.nx, hs.grid.ny, hs.grid.nz};
+    f.write("SSPFMG1", 8);
+    f.write(reinterpret_cast<const char*>(dims), sizeof dims);
+    f.write(reinterpret_cast<const char*>(hs.coef.data()), std::streamsize(hs.coef.size() * sizeof(float)));
+    f.write(reinterpret_cast<const char*>(hs.b.data()), std::streamsize(hs.b.size() * sizeof(float)));
+    if (!f) throw std::runtime_error("cannot write the system for the PFMG peer");
+  }
+  std::ostringstream cmd;
+  cmd << "mpirun -n " << ranks << " --bind-to none --oversubscribe" << (::geteuid() == 0 ? " --allow-run-as-root" : "")
+      << " '" << peer << "' '" << sys_path << "' '" << out_path << "' " << fmt("%.17g", tol) << " > '" << log_path
+      << "' 2>&1";
+  const int rc = std::system(cmd.str().c_str());
+  std::ifstream in(out_path, std::ios::binary);
+  char magic[8];
+  double head[3];
+  std::int64_t it = 0;
+  PfmgRun r;
+  std::vector<double> u(hs.voxels());
+  if (rc != 0 || !in.read(magic, 8) || std::memcmp(magic, "SSPFMGR", 8) != 0 ||
+      !in.read(reinterpret_cast<char*>(head), sizeof head) || !in.read(reinterpret_cast<char*>(&it), sizeof it) ||
+      !in.read(reinterpret_cast<char*>(u.data()), std::streamsize(u.size() * sizeof(double)))) {
+    // The first line of the log that says something (mpirun frames its
+    // messages with lines of dashes).
+    std::ifstream log(log_path);
+    std::string line, first;
+    while (first.empty() && std::getline(log, line))
+      if (line.find_first_not_of("- \t") != std::string::npos) first = line;
+    throw std::runtime_error("mpirun " + peer + " failed (status " + std::to_string(rc) + ")" +
+                             (first.empty() ? "" : ": " + first));
+  }
+  r.setup = head[0], r.solve = head[1], r.hypre_residual = head[2], r.iterations = long(it), r.ranks = ranks;
+  r.residual = relative_residual64(hs, u);
+  return r;
 }
 
 // ---- peers
@@ -427,6 +547,7 @@ double bench_peers(Runtime& rt, DeviceBench& db, const Phantom& ph, double beta,
   soft.residual = host_relative_residual(hs, u);
   soft.ok = rep.converged && soft.residual <= ok_tol;
   soft.detail = std::to_string(rep.levels) + "-level V-cycle-preconditioned CG, " + rt.info().device_name;
+  if (beta == VariationalParams{}.beta) bench_solve_bound(db, sys, sp, std::max(reps, 3));
   check(db, soft.ok, "softshell solve" + tag + ": residual " + std::to_string(soft.residual) + " above " +
                         std::to_string(db.tol));
   out.push_back(soft);
@@ -470,6 +591,42 @@ double bench_peers(Runtime& rt, DeviceBench& db, const Phantom& ph, double beta,
     }
     check(db, pr.ok, pr.name + tag + ": did not reach the residual (" + std::to_string(pr.residual) + ") " + pr.error);
     out.push_back(pr);
+  }
+  const std::string peer = pfmg_peer_path();
+  if (!peer.empty() && std::system("command -v mpirun > /dev/null 2>&1") != 0) {
+    db.notes.push_back("hypre-pfmg-pcg" + tag + ": skipped: " + peer + " is built but mpirun is not on the PATH");
+  } else if (!peer.empty()) {
+    PeerResult pr;
+    pr.name = "hypre-pfmg-pcg";
+    progress("peers: " + pr.name + tag);
+    const int ranks = int(std::max(1u, std::thread::hardware_concurrency()));
+    try {
+      // The same repeats as softshell's solve, after one warm-up run.
+      std::vector<double> totals, solves;
+      PfmgRun run;
+      for (int r = 0; r < reps + 1; ++r) {
+        run = run_pfmg(peer, hs, db.tol, ranks);
+        if (r > 0) totals.push_back(run.setup + run.solve), solves.push_back(run.solve);
+      }
+      pr.time = summarise(totals);
+      pr.iterations = run.iterations;
+      pr.residual = run.residual;
+      pr.ok = run.residual <= ok_tol;
+      pr.detail = "float64, HYPRE " + std::string("PFMG-PCG (Struct), ") + std::to_string(ranks) + " MPI rank" +
+                  (ranks > 1 ? "s" : "") + ", V(1,1) weighted Jacobi, Galerkin; setup " +
+                  fmt("%.3f", run.setup) + " s + solve " + fmt("%.3f", summarise(solves).min) + " s";
+      if (beta == VariationalParams{}.beta && pr.ok && soft.ok) {
+        db.speedup_vs_pfmg = pr.time.min / soft.time.min;
+        db.pfmg_solve_seconds = summarise(solves).min;
+      }
+      check(db, pr.ok, pr.name + tag + ": did not reach the residual (" + std::to_string(pr.residual) + ")");
+      out.push_back(pr);
+    } catch (const std::exception& e) {
+      // The peer could not run here (no mpirun, MPI refusing to start): a
+      // note, not a failed check; the other peers stand.
+      db.notes.push_back(pr.name + tag + ": skipped: " + describe(e));
+      progress(db.notes.back());
+    }
   }
   double best = 0;
   for (const PeerResult& p : out)
@@ -977,7 +1134,15 @@ std::string bench_json(const BenchReport& rep) {
   std::ostringstream s;
   s << "{\n  \"quick\": " << (rep.quick ? "true" : "false") << ",\n  \"seconds\": " << json_number(rep.seconds)
     << ",\n  \"host_cpu\": " << json_string(rep.host_cpu) << ",\n  \"host_threads\": " << rep.host_threads << ",\n  \"load_average_before\": " << json_string(rep.load_before)
-    << ",\n  \"load_average_after\": " << json_string(rep.load_after)
+    << ",\n  \"load_average_after\": " << json_string(rep.load_after);
+  {
+    // The host's bandwidth: the fastest of the per-device measurements.
+    double copy = 0, triad = 0;
+    for (const DeviceBench& d : rep.devices) copy = std::max(copy, d.host.copy_gbps), triad = std::max(triad, d.host.triad_gbps);
+    s << ",\n  \"host_stream_gbps\": {\"copy\": " << (copy > 0 ? json_number(copy) : "null")
+      << ", \"triad\": " << (triad > 0 ? json_number(triad) : "null") << "}";
+  }
+  s
     << ",\n  \"byte_model\": {\"sweep_bytes_per_voxel\": " << json_number(ByteModel::sweep)
     << ", \"apply_bytes_per_voxel\": " << json_number(ByteModel::apply)
     << ", \"copy_bytes_per_element\": 8, \"triad_bytes_per_element\": 12},\n  \"all_checks_passed\": "
@@ -994,10 +1159,22 @@ std::string bench_json(const BenchReport& rep) {
     for (std::size_t k = 0; k < d.failed_checks.size(); ++k) s << (k ? ", " : "") << json_string(d.failed_checks[k]);
     s << "],\n      \"stream_gbps\": {\"copy\": " << num(d.copy_gbps) << ", \"triad\": " << num(d.triad_gbps)
       << ", \"elements\": " << d.stream_elements << ", \"copy_time\": " << json_timing(d.copy)
-      << ", \"triad_time\": " << json_timing(d.triad) << "},\n      \"bandwidth_voxels\": " << d.bw_voxels
+      << ", \"triad_time\": " << json_timing(d.triad) << "},\n      \"host_stream_gbps\": {\"copy\": "
+      << num(d.host.copy_gbps) << ", \"triad\": " << num(d.host.triad_gbps) << ", \"threads\": " << d.host.threads
+      << ", \"elements\": " << d.host.elements << ", \"copy_time\": "
+      << json_timing({d.host.copy_min_s, d.host.copy_median_s, d.host.reps}) << ", \"triad_time\": "
+      << json_timing({d.host.triad_min_s, d.host.triad_median_s, d.host.reps}) << "},\n      \"bandwidth_voxels\": " << d.bw_voxels
       << ",\n      \"sweep_gbps\": " << num(d.sweep_gbps) << ",\n      \"sweep_fraction\": " << num(d.sweep_fraction)
       << ",\n      \"sweep_time\": " << json_timing(d.sweep) << ",\n      \"apply_gbps\": " << num(d.apply_gbps)
       << ",\n      \"apply_fraction\": " << num(d.apply_fraction) << ",\n      \"apply_time\": " << json_timing(d.apply)
+      << ",\n      \"sweep_fraction_host\": " << num(d.sweep_fraction_host)
+      << ",\n      \"apply_fraction_host\": " << num(d.apply_fraction_host)
+      << ",\n      \"solve_bound_ratio\": " << num(d.solve_bound_ratio) << ",\n      \"solve_bound\": {\"solve_s\": "
+      << num(d.solve_seconds) << ", \"iterations\": " << d.solve_iterations << ", \"bytes_per_voxel\": "
+      << num(d.solve_bytes_per_voxel) << ", \"bound_s\": " << num(d.solve_bound_s)
+      << ", \"ratio_vs_device_copy\": " << num(d.solve_bound_ratio_device) << "}"
+      << ",\n      \"speedup_vs_pfmg\": " << (d.speedup_vs_pfmg > 0 ? num(d.speedup_vs_pfmg) : "null")
+      << ",\n      \"pfmg_solve_s\": " << (d.pfmg_solve_seconds > 0 ? num(d.pfmg_solve_seconds) : "null")
       << ",\n      \"sweep_check\": " << num(d.sweep_check) << ",\n      \"apply_check\": " << num(d.apply_check)
       << ",\n      \"peer_voxels\": " << d.peer_voxels << ",\n      \"tolerance\": " << json_number(d.tol)
       << ",\n      \"peers\": [";
@@ -1072,15 +1249,21 @@ std::string bench_table(const BenchReport& rep) {
       s << "   skipped: " << d.skip_reason << "\n";
       continue;
     }
-    s << "\nbandwidth (min of " << d.copy.reps << "; GB/s by the byte model; fraction of copy)\n";
+    s << "\nbandwidth (min of " << d.copy.reps << "; GB/s by the byte model; fraction of the device's copy and of the"
+      << " host's copy)\n";
     s << "  " << std::left << std::setw(34) << "kernel" << std::right << std::setw(10) << "min ms" << std::setw(11)
-      << "median ms" << std::setw(9) << "GB/s" << std::setw(9) << "of copy" << "\n";
+      << "median ms" << std::setw(9) << "GB/s" << std::setw(9) << "of copy" << std::setw(9) << "of host" << "\n";
     auto bw = [&](const std::string& name, const Timing& t, double gbps) {
       s << "  " << std::left << std::setw(34) << name << std::right << std::setw(10) << fmt("%.2f", t.min * 1e3)
         << std::setw(11) << fmt("%.2f", t.median * 1e3) << std::setw(9) << fmt("%.2f", gbps) << std::setw(8)
-        << fmt("%.0f", d.copy_gbps > 0 ? 100 * gbps / d.copy_gbps : 0) << "%\n";
+        << fmt("%.0f", d.copy_gbps > 0 ? 100 * gbps / d.copy_gbps : 0) << "%" << std::setw(8)
+        << fmt("%.0f", d.host.copy_gbps > 0 ? 100 * gbps / d.host.copy_gbps : 0) << "%\n";
     };
     const std::string m = std::to_string(d.stream_elements >> 20) + "M";
+    const std::string th = std::to_string(d.host.threads) + " thr";
+    bw("host copy (" + m + " floats, " + th + ")", {d.host.copy_min_s, d.host.copy_median_s, d.host.reps}, d.host.copy_gbps);
+    bw("host triad (" + m + " floats, " + th + ")", {d.host.triad_min_s, d.host.triad_median_s, d.host.reps},
+       d.host.triad_gbps);
     bw("copy (" + m + " floats, 8 B)", d.copy, d.copy_gbps);
     bw("triad (" + m + " floats, 12 B)", d.triad, d.triad_gbps);
     const std::string v = std::to_string(d.bw_size) + "^3";
@@ -1107,6 +1290,11 @@ std::string bench_table(const BenchReport& rep) {
       s << "  speedup of softshell vs the fastest Eigen CG: " << fmt("%.2f", speedup) << "x\n";
     };
     peers("default parameters", d.peers, d.speedup_vs_eigen_cg);
+    if (d.speedup_vs_pfmg > 0) s << "  speedup of softshell vs HYPRE PFMG-PCG: " << fmt("%.2f", d.speedup_vs_pfmg) << "x\n";
+    s << "  solve vs its bandwidth bound: " << fmt("%.3f", d.solve_seconds) << " s (FMG + " << d.solve_iterations
+      << " it, " << fmt("%.0f", d.solve_bytes_per_voxel) << " B/voxel) vs " << fmt("%.3f", d.solve_bound_s)
+      << " s at the host's copy bandwidth = " << fmt("%.2f", d.solve_bound_ratio) << "x (" << fmt("%.2f", d.solve_bound_ratio_device)
+      << "x at the device's)\n";
     if (d.aniso_beta > 0) peers("beta " + fmt("%g", d.aniso_beta), d.peers_aniso, d.speedup_vs_eigen_cg_aniso);
     s << "\nwarm start (v_iso +5 %): re-solve " << fmt("%.3f", d.warm_warm_total) << " s (update "
       << fmt("%.3f", d.warm_update) << " + solve from the previous u " << fmt("%.3f", d.warm_warm_solve) << ", "

@@ -23,6 +23,7 @@
 #include "cl_runtime.hpp"
 #include "image.hpp"
 #include "stencil.h"
+#include "stream.hpp"
 #include "volume.hpp"
 
 namespace softshell {
@@ -111,6 +112,18 @@ struct DeviceBench {
   double sweep_gbps = 0, sweep_fraction = 0, apply_gbps = 0, apply_fraction = 0;
   double sweep_check = 0, apply_check = 0;  // max relative deviation from the host reference
   std::string sweep_order;                   // the sweep's Gauss-Seidel ordering, in words
+  // The host's own STREAM (host_stream(): std::thread on every core, no
+  // OpenCL), run right before the device's: what the machine can move, the
+  // yardstick of the *_host fractions (GB/s by the byte model / host copy).
+  HostStream host;
+  double sweep_fraction_host = 0, apply_fraction_host = 0;
+  // The solve against its bandwidth bound, on the peers' system: a built
+  // MultigridSolver's cold solve (FMG + PCG, no hierarchy build; min over
+  // repeats) against SolveReport::bytes / host copy bandwidth (the bound), and
+  // against the device's copy bandwidth.
+  double solve_seconds = 0, solve_bytes_per_voxel = 0, solve_bound_s = 0;
+  double solve_bound_ratio = 0, solve_bound_ratio_device = 0;
+  int solve_iterations = 0;
 
   // Peers on one system (face phantom of peer_size^3) at the default
   // parameters; the stable keys describe this case.
@@ -119,6 +132,10 @@ struct DeviceBench {
   double tol = 1e-4;
   std::vector<PeerResult> peers;
   double speedup_vs_eigen_cg = 0;  // fastest Eigen CG / softshell solve (min times)
+  // HYPRE PFMG-PCG (setup + solve) / softshell's solve (hierarchy + solve),
+  // min times, as for Eigen; 0: not run (the peer was not built).
+  double speedup_vs_pfmg = 0;
+  double pfmg_solve_seconds = 0;   // its solve alone (min)
   // The same volume with a strongly anisotropic system (beta = 1000, where
   // point smoothers and diagonal preconditioning struggle; docs/solver.md).
   // Full mode only.

@@ -1,6 +1,9 @@
 // The scanned-region mask: a morphological opening of the exact zeros,
 // flood fill of its boundary-touching regions with a size rule, and
-// 6-neighbour growth (host/mask.hpp gives the rule).
+// 6-neighbour growth (host/mask.hpp gives the rule). The passes over all
+// voxels run on threads (MaskParams::threads) in ranges whose results are
+// combined in order, so the mask is the same for any thread count; the flood
+// fill and the growth layers stay serial.
 #include "mask.hpp"
 #include <cstdio>
 #include <cstdlib>
@@ -12,6 +15,7 @@
 #include "error.hpp"
 #include "filter.hpp"
 #include "io.hpp"
+#include "parallel.hpp"
 #include "text.hpp"
 
 namespace softshell {
@@ -33,13 +37,36 @@ void for_face_neighbours(const Dims3& d, std::size_t i, F&& f) {
 // One axis of a binary cube filter with half-width r, in place on `a`:
 // erode (all of [i - r, i + r] set; outside the volume counts as set) or
 // dilate (any of them set). Running counts along each line, O(voxels).
-void filter_axis(std::vector<std::uint8_t>& a, const Dims3& d, int axis, int r, bool erode) {
+void filter_axis(std::vector<std::uint8_t>& a, const Dims3& d, int axis, int r, bool erode, int threads) {
+  if (axis == 2) {
+    // Lines along z are d[0] d[1] bytes apart: each y-slice (its z-rows) is
+    // copied to a contiguous buffer first and filtered there, in cache.
+    const std::size_t nx = d[0], ny = d[1], nz = d[2];
+    parallel_ranges(ny, threads, [&](std::size_t y0, std::size_t y1) {
+      std::vector<std::uint8_t> slice(nz * nx);
+      std::vector<std::size_t> prefix(nz + 1);
+      for (std::size_t y = y0; y < y1; ++y) {
+        for (std::size_t z = 0; z < nz; ++z) std::copy_n(a.data() + (z * ny + y) * nx, nx, slice.data() + z * nx);
+        for (std::size_t x = 0; x < nx; ++x) {
+          for (std::size_t z = 0; z < nz; ++z) prefix[z + 1] = prefix[z] + ((slice[z * nx + x] != 0) != erode ? 1 : 0);
+          for (std::size_t z = 0; z < nz; ++z) {
+            const std::size_t lo = z >= std::size_t(r) ? z - r : 0, hi = std::min(nz, z + r + 1);
+            const bool any_break = prefix[hi] - prefix[lo] > 0;
+            a[(z * ny + y) * nx + x] = erode ? !any_break : any_break;
+          }
+        }
+      }
+    });
+    return;
+  }
   const std::size_t stride = axis == 0 ? 1 : (axis == 1 ? d[0] : d[0] * d[1]);
   const std::size_t len = d[axis];
+  const std::size_t lines = a.size() / len;
+  // Lines are independent: each range of lines on its own thread.
+  parallel_ranges(lines, threads, [&](std::size_t l0, std::size_t l1) {
   std::vector<std::uint8_t> line(len);
   std::vector<std::size_t> prefix(len + 1);
-  const std::size_t lines = a.size() / len;
-  for (std::size_t l = 0; l < lines; ++l) {
+  for (std::size_t l = l0; l < l1; ++l) {
     // Start of line l: enumerate the voxels with coordinate 0 along `axis`.
     std::size_t start;
     if (axis == 0) start = l * d[0];
@@ -56,10 +83,30 @@ void filter_axis(std::vector<std::uint8_t>& a, const Dims3& d, int axis, int r, 
       a[start + i * stride] = erode ? !any_break : any_break;
     }
   }
+  });
 }
 
-void cube_filter(std::vector<std::uint8_t>& a, const Dims3& d, int r, bool erode) {
-  for (int axis = 0; axis < 3; ++axis) filter_axis(a, d, axis, r, erode);
+void cube_filter(std::vector<std::uint8_t>& a, const Dims3& d, int r, bool erode, int threads) {
+  for (int axis = 0; axis < 3; ++axis) filter_axis(a, d, axis, r, erode, threads);
+}
+
+// The unscanned voxels (mask 0) with a face neighbour that passes `take`, in
+// index order.
+template <class F>
+std::vector<std::size_t> frontier_of(const std::vector<std::uint8_t>& mask, const Dims3& d, int threads, F&& take) {
+  const std::size_t n = mask.size();
+  std::vector<std::vector<std::size_t>> parts(std::size_t(range_count(n, threads)));
+  parallel_ranges_indexed(n, threads, [&](int k, std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) {
+      if (mask[i] != 0) continue;
+      bool edge = false;
+      for_face_neighbours(d, i, [&](std::size_t j) { edge = edge || take(j); });
+      if (edge) parts[std::size_t(k)].push_back(i);
+    }
+  });
+  std::vector<std::size_t> out;
+  for (const auto& p : parts) out.insert(out.end(), p.begin(), p.end());
+  return out;
 }
 
 }  // namespace
@@ -73,14 +120,17 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
   const auto min_size = std::max<std::size_t>(1, static_cast<std::size_t>(std::ceil(params.min_fraction * double(n))));
   MaskReport rep;
 
+  const int threads = host_threads(params.threads);
   // 1. The exact zeros, opened by the cube.
   std::vector<std::uint8_t> zero(n);
-  for (std::size_t i = 0; i < n; ++i) zero[i] = v.data[i] == 0.0f ? 1 : 0;
+  parallel_ranges(n, threads, [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) zero[i] = v.data[i] == 0.0f ? 1 : 0;
+  });
   rep.zeros = static_cast<std::size_t>(std::count(zero.begin(), zero.end(), std::uint8_t{1}));
   std::vector<std::uint8_t> solid = zero;
   if (params.solid > 0) {
-    cube_filter(solid, d, params.solid, true);
-    cube_filter(solid, d, params.solid, false);
+    cube_filter(solid, d, params.solid, true, threads);
+    cube_filter(solid, d, params.solid, false, threads);
   }
 
   // 2. Flood fill of the solid regions from the volume's faces. state: 0 not
@@ -136,19 +186,41 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
     // Per beam line: the first and last nonzero sample.
     std::vector<std::uint32_t> first(n / len, std::uint32_t(len)), last(n / len, 0);
     auto line_of = [&](std::size_t i) { return (i % stride) + (i / (stride * len)) * stride; };
-    for (std::size_t i = 0; i < n; ++i)
-      if (v.data[i] != 0.0f) {
-        const std::size_t l = line_of(i);
-        const auto pos = std::uint32_t((i / stride) % len);
-        first[l] = std::min(first[l], pos), last[l] = std::max(last[l], pos);
-      }
+    {
+      // Per range of voxels its own first/last, merged (min and max: exact).
+      const int parts = range_count(n, threads);
+      const auto nparts = static_cast<std::size_t>(parts);
+      std::vector<std::vector<std::uint32_t>> pf(nparts), pl(nparts);
+      parallel_ranges_indexed(n, threads, [&](int k, std::size_t i0, std::size_t i1) {
+        std::vector<std::uint32_t>& f = pf[std::size_t(k)];
+        std::vector<std::uint32_t>& l_ = pl[std::size_t(k)];
+        f.assign(n / len, std::uint32_t(len)), l_.assign(n / len, 0);
+        for (std::size_t i = i0; i < i1; ++i)
+          if (v.data[i] != 0.0f) {
+            const std::size_t l = line_of(i);
+            const auto pos = std::uint32_t((i / stride) % len);
+            f[l] = std::min(f[l], pos), l_[l] = std::max(l_[l], pos);
+          }
+      });
+      for (int k = 0; k < parts; ++k)
+        for (std::size_t l = 0; l < first.size(); ++l)
+          first[l] = std::min(first[l], pf[std::size_t(k)][l]), last[l] = std::max(last[l], pl[std::size_t(k)][l]);
+    }
     std::size_t enclosed = 0, total = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-      if (state[i] != kUnscanned) continue;
-      ++total;
-      const std::size_t l = line_of(i);
-      const auto pos = std::uint32_t((i / stride) % len);
-      enclosed += first[l] < pos && pos < last[l];
+    {
+      const int parts = range_count(n, threads);
+      const auto nparts = static_cast<std::size_t>(parts);
+      std::vector<std::size_t> pe(nparts, 0), pt(nparts, 0);
+      parallel_ranges_indexed(n, threads, [&](int k, std::size_t i0, std::size_t i1) {
+        for (std::size_t i = i0; i < i1; ++i) {
+          if (state[i] != kUnscanned) continue;
+          ++pt[std::size_t(k)];
+          const std::size_t l = line_of(i);
+          const auto pos = std::uint32_t((i / stride) % len);
+          pe[std::size_t(k)] += first[l] < pos && pos < last[l];
+        }
+      });
+      for (int k = 0; k < parts; ++k) enclosed += pe[std::size_t(k)], total += pt[std::size_t(k)];
     }
     rep.enclosed_share = total ? double(enclosed) / double(total) : 0.0;
     // Faces of the volume with scanned voxels on at least 2 % of them.
@@ -174,16 +246,17 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
   }
 
   // 3. The ragged edge of the fill: zeros within `solid` steps through zeros.
-  if (rep.unscanned_regions > 0) grow_unscanned(mask, d, params.solid, &zero);
+  if (rep.unscanned_regions > 0) grow_unscanned(mask, d, params.solid, &zero, threads);
   rep.zero_fill = count_unscanned(mask);
   // 4. The partial-volume rim.
-  if (rep.unscanned_regions > 0) grow_unscanned(mask, d, params.grow);
+  if (rep.unscanned_regions > 0) grow_unscanned(mask, d, params.grow, nullptr, threads);
   rep.unscanned = count_unscanned(mask);
   if (report) *report = rep;
   return mask;
 }
 
-void grow_unscanned(std::vector<std::uint8_t>& mask, const Dims3& d, int voxels, const std::vector<std::uint8_t>* within) {
+void grow_unscanned(std::vector<std::uint8_t>& mask, const Dims3& d, int voxels, const std::vector<std::uint8_t>* within,
+                    int threads) {
   const std::size_t n = d[0] * d[1] * d[2];
   if (mask.size() != n || (within && within->size() != n))
     throw std::invalid_argument("grow_unscanned: mask size differs from dims");
@@ -191,13 +264,7 @@ void grow_unscanned(std::vector<std::uint8_t>& mask, const Dims3& d, int voxels,
   auto may_take = [&](std::size_t j) { return mask[j] != 0 && (!within || (*within)[j] != 0); };
   // Frontier: unscanned voxels with a face neighbour that may be taken; each
   // layer takes the neighbours of the frontier.
-  std::vector<std::size_t> frontier, next;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (mask[i] != 0) continue;
-    bool edge = false;
-    for_face_neighbours(d, i, [&](std::size_t j) { edge = edge || may_take(j); });
-    if (edge) frontier.push_back(i);
-  }
+  std::vector<std::size_t> frontier = frontier_of(mask, d, host_threads(threads), may_take), next;
   for (int layer = 0; layer < voxels && !frontier.empty(); ++layer) {
     next.clear();
     for (std::size_t i : frontier)
@@ -211,38 +278,35 @@ void grow_unscanned(std::vector<std::uint8_t>& mask, const Dims3& d, int voxels,
   }
 }
 
-Volume fill_unscanned(const Volume& v, const std::vector<std::uint8_t>& mask, int depth) {
+Volume fill_unscanned(const Volume& v, const std::vector<std::uint8_t>& mask, int depth, int threads) {
   Volume out = v;
-  fill_unscanned_in_place(out, mask, depth);
+  fill_unscanned_in_place(out, mask, depth, threads);
   return out;
 }
 
-void fill_unscanned_in_place(Volume& out, const std::vector<std::uint8_t>& mask, int depth) {
+void fill_unscanned_in_place(Volume& out, const std::vector<std::uint8_t>& mask, int depth, int threads) {
   const Dims3& d = out.dims;
   const std::size_t n = out.voxels();
   if (mask.size() != n) throw std::invalid_argument("fill_unscanned: mask size differs from the volume");
   // done: scanned or filled in an earlier layer.
   std::vector<std::uint8_t> done(mask);
-  std::vector<std::size_t> layer, next;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (done[i]) continue;
-    bool edge = false;
-    for_face_neighbours(d, i, [&](std::size_t j) { edge = edge || done[j]; });
-    if (edge) layer.push_back(i);
-  }
+  threads = host_threads(threads);
+  std::vector<std::size_t> layer = frontier_of(done, d, threads, [&](std::size_t j) { return done[j] != 0; }), next;
   std::vector<float> value(layer.size());
   for (int k = 0; !layer.empty() && (depth <= 0 || k < depth); ++k) {
     // Values first, from earlier layers only, so the order within a layer
     // does not matter (deterministic).
     value.resize(layer.size());
-    for (std::size_t a = 0; a < layer.size(); ++a) {
-      double s = 0;
-      int c = 0;
-      for_face_neighbours(d, layer[a], [&](std::size_t j) {
-        if (done[j]) s += out.data[j], ++c;
-      });
-      value[a] = static_cast<float>(s / c);
-    }
+    parallel_ranges(layer.size(), layer.size() >= 65536 ? threads : 1, [&](std::size_t a0, std::size_t a1) {
+      for (std::size_t a = a0; a < a1; ++a) {
+        double s = 0;
+        int c = 0;
+        for_face_neighbours(d, layer[a], [&](std::size_t j) {
+          if (done[j]) s += out.data[j], ++c;
+        });
+        value[a] = static_cast<float>(s / c);
+      }
+    });
     for (std::size_t a = 0; a < layer.size(); ++a) out.data[layer[a]] = value[a], done[layer[a]] = 1;
     next.clear();
     for (std::size_t i : layer)
@@ -267,25 +331,42 @@ std::size_t count_unscanned(const std::vector<std::uint8_t>& mask) {
   return static_cast<std::size_t>(std::count(mask.begin(), mask.end(), std::uint8_t{0}));
 }
 
-int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned) {
+int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int threads) {
   // Speckle is finest along the beam (the axial resolution is the best of
   // the three), so the data's mean squared difference between neighbours, per
   // mm, is largest along it.
   const Dims3& d = v.dims;
   const std::size_t stride[3] = {1, d[0], d[0] * d[1]};
   double energy[3] = {0, 0, 0};
+  // Sums per z-plane, added in z order: the same for any thread count.
+  const std::size_t plane = d[0] * d[1];
+  std::vector<double> psum(3 * d[2], 0.0);
+  std::vector<std::size_t> pcount(3 * d[2], 0);
+  parallel_ranges(d[2], host_threads(threads), [&](std::size_t z0, std::size_t z1) {
+    for (std::size_t z = z0; z < z1; ++z)
+      for (int a = 0; a < 3; ++a) {
+        if (d[a] < 2) continue;
+        double sum = 0;
+        std::size_t count = 0;
+        if (a == 2 && z + 1 >= d[2]) continue;
+        for (std::size_t y = 0; y < d[1]; ++y) {
+          if (a == 1 && y + 1 >= d[1]) continue;
+          const std::size_t x_end = a == 0 ? d[0] - 1 : d[0];
+          for (std::size_t x = 0, i = z * plane + y * d[0]; x < x_end; ++x, ++i) {  // i ascending, as before
+            const std::size_t j = i + stride[a];
+            if (v.data[i] == 0.0f || v.data[j] == 0.0f) continue;  // unscanned fill or the floor
+            if (scanned && (!(*scanned)[i] || !(*scanned)[j])) continue;
+            const double g = (double(v.data[j]) - double(v.data[i])) / v.spacing[a];
+            sum += g * g, ++count;
+          }
+        }
+        psum[3 * z + std::size_t(a)] = sum, pcount[3 * z + std::size_t(a)] = count;
+      }
+  });
   for (int a = 0; a < 3; ++a) {
-    if (d[a] < 2) continue;
     double sum = 0;
     std::size_t count = 0;
-    for (std::size_t i = 0; i < v.voxels(); ++i) {
-      if ((i / stride[a]) % d[a] + 1 >= d[a]) continue;
-      const std::size_t j = i + stride[a];
-      if (v.data[i] == 0.0f || v.data[j] == 0.0f) continue;  // unscanned fill or the floor
-      if (scanned && (!(*scanned)[i] || !(*scanned)[j])) continue;
-      const double g = (double(v.data[j]) - double(v.data[i])) / v.spacing[a];
-      sum += g * g, ++count;
-    }
+    for (std::size_t z = 0; z < d[2]; ++z) sum += psum[3 * z + std::size_t(a)], count += pcount[3 * z + std::size_t(a)];
     energy[a] = count ? sum / double(count) : 0;
   }
   return int(std::max_element(energy, energy + 3) - energy);
@@ -297,7 +378,8 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   const std::size_t n = v.voxels();
   if (scanned && scanned->size() != n) throw std::invalid_argument("near_field_band: mask size differs from the volume");
   NearFieldReport rep;
-  rep.axis = params.axis >= 0 && params.axis < 3 ? params.axis : beam_axis_of(v, scanned);
+  const int threads = host_threads(params.threads);
+  rep.axis = params.axis >= 0 && params.axis < 3 ? params.axis : beam_axis_of(v, scanned, threads);
   std::vector<std::uint8_t> band(n, 0);
   const int ax = rep.axis, u_ax = ax == 0 ? 1 : 0, w_ax = ax == 2 ? 1 : 2;  // the two lateral axes
   const std::size_t stride[3] = {1, d[0], d[0] * d[1]};
@@ -318,16 +400,58 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     const std::vector<float> w = gaussian_weights(sigma_vox, 3.0);
     const long r = long(w.size() / 2);
     std::vector<float> out(n);
-    for (std::size_t i = 0; i < n; ++i) {
-      const long pos = long((i / stride[axis]) % d[axis]);
-      double acc = 0, wsum = 0;
-      const long k0 = std::max(-r, -pos), k1 = std::min(r, long(d[axis]) - 1 - pos);
-      for (long k = k0; k <= k1; ++k) {
-        const std::size_t j = std::size_t(long(i) + k * long(stride[axis]));
-        if (scanned && !(*scanned)[j]) continue;
-        acc += w[std::size_t(k + r)] * lp[j], wsum += w[std::size_t(k + r)];
-      }
-      out[i] = wsum > 0 ? float(acc / wsum) : lp[i];
+    // Normalised over the scanned taps inside the volume, each output's
+    // terms added in tap order (double). Along y or z a whole x-row of
+    // outputs at a time (an unscanned or outside tap adds 0: the same sums,
+    // vectorised); along x one line at a time. Split by z-planes or y-rows,
+    // the result does not depend on the thread count.
+    const std::size_t nx = d[0], ny = d[1], nz = d[2];
+    const std::size_t len = d[axis];
+    if (axis == 0) {
+      parallel_ranges(ny * nz, threads, [&](std::size_t l0, std::size_t l1) {
+        for (std::size_t l = l0; l < l1; ++l) {
+          const std::size_t base = l * nx;
+          for (std::size_t x = 0; x < nx; ++x) {
+            double acc = 0, wsum = 0;
+            const long k0 = std::max(-r, -long(x)), k1 = std::min(r, long(nx) - 1 - long(x));
+            for (long k = k0; k <= k1; ++k) {
+              const std::size_t j = base + std::size_t(long(x) + k);
+              if (scanned && !(*scanned)[j]) continue;
+              acc += w[std::size_t(k + r)] * lp[j], wsum += w[std::size_t(k + r)];
+            }
+            out[base + x] = wsum > 0 ? float(acc / wsum) : lp[base + x];
+          }
+        }
+      });
+    } else {
+      // Rows (pos, outer): axis 1: pos = y, outer = z; axis 2: pos = z, outer = y.
+      const std::size_t outer_n = axis == 1 ? nz : ny;
+      parallel_ranges(outer_n, threads, [&](std::size_t o0, std::size_t o1) {
+        std::vector<double> acc(nx), wsum(nx);
+        for (std::size_t o = o0; o < o1; ++o)
+          for (std::size_t pos = 0; pos < len; ++pos) {
+            auto row_at = [&](std::size_t p) { return axis == 1 ? (o * ny + p) * nx : (p * ny + o) * nx; };
+            std::fill(acc.begin(), acc.end(), 0.0), std::fill(wsum.begin(), wsum.end(), 0.0);
+            const long k0 = std::max(-r, -long(pos)), k1 = std::min(r, long(len) - 1 - long(pos));
+            for (long k = k0; k <= k1; ++k) {
+              const std::size_t row = row_at(std::size_t(long(pos) + k));
+              const float wk = w[std::size_t(k + r)];  // float products, as the per-voxel loop
+              const float* src = lp.data() + row;
+              if (scanned) {
+                const std::uint8_t* m = scanned->data() + row;
+                for (std::size_t x = 0; x < nx; ++x) {
+                  acc[x] += m[x] ? wk * src[x] : 0.0;
+                  wsum[x] += m[x] ? wk : 0.0;
+                }
+              } else {
+                for (std::size_t x = 0; x < nx; ++x) acc[x] += wk * src[x], wsum[x] += wk;
+              }
+            }
+            const std::size_t row = row_at(pos);
+            for (std::size_t x = 0; x < nx; ++x)
+              out[row + x] = wsum[x] > 0 ? float(acc[x] / wsum[x]) : lp[row + x];
+          }
+      });
     }
     lp.swap(out);
   }
@@ -338,20 +462,59 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   const std::size_t lines = d[u_ax] * d[w_ax];
   std::vector<long> skin(lines, -1);
   std::vector<std::vector<float>> at_depth(bins);
-  std::vector<float> all;
-  for (std::size_t b = 0; b < d[w_ax]; ++b)
-    for (std::size_t a = 0; a < d[u_ax]; ++a) {
-      const std::size_t l = a + b * d[u_ax];
-      for (std::size_t z = 0; z < d[ax]; ++z) {
-        const std::size_t i = voxel(a, b, z);
-        if (scanned && !(*scanned)[i]) continue;
-        if (skin[l] < 0) skin[l] = long(z);
-        const auto bin = std::size_t(double(long(z) - skin[l]) * hz / 0.5);
-        if (bin < bins) at_depth[bin].push_back(lp[i]);
-        all.push_back(lp[i]);
-      }
+  std::size_t all = 0;
+  {
+    // In memory order (z-planes over threads): the skin line of every beam
+    // line (its first scanned voxel, the minimum depth: exact), then the
+    // samples per depth bin, per range of planes, joined (the medians below
+    // do not depend on the order of a bin's samples).
+    const std::size_t nx = d[0], ny = d[1], nz = d[2];
+    auto line_depth = [&](std::size_t x, std::size_t y, std::size_t z, std::size_t& l, long& depth) {
+      const std::size_t c[3] = {x, y, z};
+      l = c[u_ax] + c[w_ax] * d[u_ax], depth = long(c[ax]);
+    };
+    const int parts = range_count(nz, threads);
+    std::vector<std::vector<long>> pskin(static_cast<std::size_t>(parts), std::vector<long>(lines, -1));
+    parallel_ranges_indexed(nz, threads, [&](int k, std::size_t z0, std::size_t z1) {
+      std::vector<long>& sk = pskin[std::size_t(k)];
+      for (std::size_t z = z0; z < z1; ++z)
+        for (std::size_t y = 0; y < ny; ++y)
+          for (std::size_t x = 0; x < nx; ++x) {
+            const std::size_t i = (z * ny + y) * nx + x;
+            if (scanned && !(*scanned)[i]) continue;
+            std::size_t l;
+            long depth;
+            line_depth(x, y, z, l, depth);
+            if (sk[l] < 0 || depth < sk[l]) sk[l] = depth;
+          }
+    });
+    for (const auto& sk : pskin)
+      for (std::size_t l = 0; l < lines; ++l)
+        if (sk[l] >= 0 && (skin[l] < 0 || sk[l] < skin[l])) skin[l] = sk[l];
+    std::vector<std::vector<std::vector<float>>> pbins(static_cast<std::size_t>(parts), std::vector<std::vector<float>>(bins));
+    std::vector<std::size_t> pall(static_cast<std::size_t>(parts), 0);
+    parallel_ranges_indexed(nz, threads, [&](int k, std::size_t z0, std::size_t z1) {
+      auto& pb = pbins[std::size_t(k)];
+      for (std::size_t z = z0; z < z1; ++z)
+        for (std::size_t y = 0; y < ny; ++y)
+          for (std::size_t x = 0; x < nx; ++x) {
+            const std::size_t i = (z * ny + y) * nx + x;
+            if (scanned && !(*scanned)[i]) continue;
+            std::size_t l;
+            long depth;
+            line_depth(x, y, z, l, depth);
+            const auto bin = std::size_t(double(depth - skin[l]) * hz / 0.5);
+            if (bin < bins) pb[bin].push_back(lp[i]);
+            ++pall[std::size_t(k)];
+          }
+    });
+    for (int k = 0; k < parts; ++k) {
+      all += pall[std::size_t(k)];
+      for (std::size_t b = 0; b < bins; ++b)
+        at_depth[b].insert(at_depth[b].end(), pbins[std::size_t(k)][b].begin(), pbins[std::size_t(k)][b].end());
     }
-  if (all.size() < 100) {
+  }
+  if (all < 100) {
     if (report) *report = rep;
     return band;
   }
@@ -398,7 +561,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     // On a small or shallow volume the "band" may be most of it: that is
     // the object (removing it would leave nothing to classify), not an
     // occluder above it.
-    if (double(rep.voxels) > params.max_share * double(all.size())) {
+    if (double(rep.voxels) > params.max_share * double(all)) {
       rep.found = false, rep.too_deep = true, rep.voxels = 0;
       std::fill(band.begin(), band.end(), std::uint8_t{0});
     }

@@ -46,6 +46,7 @@ struct MaskParams {
   int min_faces = 0;
   int solid = 2;  // cube half-width of step 1, voxels (0: every zero voxel, the plain rule)
   int grow = 2;
+  int threads = 0;  // host threads (0: every core); the mask is the same for any count
 };
 
 struct MaskReport {
@@ -66,7 +67,8 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
 // The beam axis of a scan, from the data: speckle is finest along the beam,
 // so the mean squared difference between neighbours (per mm, scanned
 // nonzero samples) is largest along it.
-int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned);
+// `threads` (0: every core) does not change the result.
+int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int threads = 0);
 
 // The bright layered near field under the probe (skin, fat, muscle: an
 // occluder, not the object; docs/real-data.md, "The near field"). Along the
@@ -85,6 +87,7 @@ struct NearFieldParams {
   double sigma_mm = 1.0;   // lowpass across the beam of the profile's samples
   int axis = -1;           // beam axis (0 x, 1 y, 2 z); -1: beam_axis_of the data
   double max_share = 0.5;  // a "band" holding more of the scanned voxels is the object, not a near field
+  int threads = 0;         // host threads (0: every core); the band is the same for any count
 };
 struct NearFieldReport {
   int axis = 2;                 // the beam axis used
@@ -114,10 +117,11 @@ std::vector<std::uint8_t> read_mask(const std::string& path, const Dims3& dims);
 // v~ and the gradients then see no step at the edge of the sweep (the zero
 // fill would otherwise read as a strong boundary a few voxels into the
 // scan); the classifiers still hold u = 0 there. `depth` > 0 stops after
-// that many layers (the rest keeps its samples).
-Volume fill_unscanned(const Volume& v, const std::vector<std::uint8_t>& mask, int depth = 0);
+// that many layers (the rest keeps its samples). `threads` (0: every core)
+// does not change the result.
+Volume fill_unscanned(const Volume& v, const std::vector<std::uint8_t>& mask, int depth = 0, int threads = 0);
 // The same, in place: no second copy of the volume (the CLI's classify).
-void fill_unscanned_in_place(Volume& v, const std::vector<std::uint8_t>& mask, int depth = 0);
+void fill_unscanned_in_place(Volume& v, const std::vector<std::uint8_t>& mask, int depth = 0, int threads = 0);
 
 // Number of unscanned (0) entries.
 std::size_t count_unscanned(const std::vector<std::uint8_t>& mask);
@@ -125,6 +129,6 @@ std::size_t count_unscanned(const std::vector<std::uint8_t>& mask);
 // 6-neighbour dilation of the unscanned set by `voxels` layers (in place);
 // with `within`, only into voxels where (*within)[i] != 0.
 void grow_unscanned(std::vector<std::uint8_t>& mask, const Dims3& dims, int voxels,
-                    const std::vector<std::uint8_t>* within = nullptr);
+                    const std::vector<std::uint8_t>* within = nullptr, int threads = 0);
 
 }  // namespace softshell

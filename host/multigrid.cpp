@@ -1,19 +1,32 @@
 // Multigrid solver of the variational classifier's system (docs/numerics.md,
 // "Multigrid"): levels by rediscretisation, V(nu1, nu2) cycles with
 // Gauss-Seidel (DeviceSystem::gs_order()) or weighted Jacobi, full multigrid
-// for the initial guess, stopping on the relative residual.
+// for the initial guess, stopping on the relative residual; below
+// kRefineBelow, mixed-precision iterative refinement (float64 residuals and
+// solution on the host, float32 correction solves on the device).
 #include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
 #include <optional>
 #include <stdexcept>
+#include <thread>
 
 #include "variational.hpp"
 #include "progress.hpp"
 
 namespace softshell {
 namespace {
+
+// Bytes per voxel each operation moves at the least (float32; the byte model
+// of docs/benchmarks.md): they add up to SolveReport::bytes.
+namespace bytes_per_voxel {
+constexpr double sweep = STENCIL_COEFS * 4 + 4 + 4 + 4;  // coefficients, rhs, u read, u write
+constexpr double jacobi = sweep + 8;                     // + the copy back from tmp
+constexpr double residual = STENCIL_COEFS * 4 + 4 + 4 + 4;  // coefficients, rhs, x, r write
+constexpr double apply = STENCIL_COEFS * 4 + 4 + 4;
+constexpr double fill = 4, copy = 8, dot = 8, norm = 4, axpby = 12;
+}  // namespace bytes_per_voxel
 
 struct Level {
   std::unique_ptr<DeviceSystem> owned;  // null for the caller's fine level
@@ -55,8 +68,15 @@ class Multigrid {
   }
   Level& fine() { return levels_.front(); }
 
+  // Bytes moved so far under the byte model (SolveReport::bytes).
+  double bytes = 0;
+  void count(const DeviceSystem& sys, double per_voxel, int times = 1) {
+    bytes += per_voxel * double(sys.voxels()) * times;
+  }
+
   void smooth(int l, int sweeps, bool reverse) {
     Level& L = levels_[l];
+    count(*L.sys, sp_.jacobi ? bytes_per_voxel::jacobi : bytes_per_voxel::sweep, sweeps);
     if (sp_.jacobi)
       L.sys->relax_jacobi(L.rhs, L.u, L.tmp, sp_.jacobi_weight, sweeps);
     else
@@ -79,8 +99,10 @@ class Multigrid {
     Level& C = levels_[l + 1];
     smooth(l, sp_.pre_sweeps, false);
     L.sys->residual(L.rhs, L.u, L.r);
+    count(*L.sys, bytes_per_voxel::residual);
     restrict_residual(L, C);
     rt_.queue().enqueueFillBuffer(C.u, 0.0f, 0, C.sys->voxels() * sizeof(float));
+    count(*C.sys, bytes_per_voxel::fill);
     vcycle(l + 1);
     prolong_add(C, L);
     smooth(l, sp_.post_sweeps, true);
@@ -93,6 +115,7 @@ class Multigrid {
       Level& L = levels_[l];
       rt_.queue().enqueueCopyBuffer(L.sys->b(), L.rhs, 0, 0, L.sys->voxels() * sizeof(float));
       rt_.queue().enqueueFillBuffer(L.u, 0.0f, 0, L.sys->voxels() * sizeof(float));
+      count(*L.sys, bytes_per_voxel::copy + bytes_per_voxel::fill);
       if (l == levels() - 1) {
         smooth_symmetric(l, coarse_sweeps());
       } else {
@@ -110,17 +133,21 @@ class Multigrid {
     F.rhs = r;
     F.u = z;
     rt_.queue().enqueueFillBuffer(z, 0.0f, 0, F.sys->voxels() * sizeof(float));
+    count(*F.sys, bytes_per_voxel::fill);
     vcycle(0);
     F.rhs = rhs;
     F.u = u;
   }
 
-  // ||b - A u|| / ||b|| of the fine level's u, against the system's own b
-  // (the V-cycle and the preconditioner reuse F.rhs).
-  double relative_residual() {
+  // ||rhs - A u|| / ||rhs|| of the fine level's u (into F.r), `rhs_norm`
+  // given; by default against the system's own b (the V-cycle and the
+  // preconditioner reuse F.rhs).
+  double relative_residual() { return relative_residual(fine().sys->b(), b_norm_); }
+  double relative_residual(const cl::Buffer& rhs, double rhs_norm) {
     Level& F = fine();
-    F.sys->residual(F.sys->b(), F.u, F.r);
-    return b_norm_ > 0 ? F.sys->norm(F.r) / b_norm_ : F.sys->norm(F.r);
+    F.sys->residual(rhs, F.u, F.r);
+    count(*F.sys, bytes_per_voxel::residual + bytes_per_voxel::norm);
+    return rhs_norm > 0 ? F.sys->norm(F.r) / rhs_norm : F.sys->norm(F.r);
   }
 
  private:
@@ -146,11 +173,13 @@ class Multigrid {
   void restrict_residual(const Level& F, const Level& C) {
     Runtime::set_args(restrict_, F.r, C.sys->fixed(), C.rhs, F.sys->grid(), C.sys->grid());
     rt_.enqueue_3d(restrict_, C.sys->grid());
+    count(*F.sys, 4), count(*C.sys, 4 + 1);  // fine r read; coarse rhs written, fixed read
   }
 
   void prolong_add(const Level& C, const Level& F) {
     Runtime::set_args(prolong_, C.u, F.sys->fixed(), F.u, F.sys->grid(), C.sys->grid());
     rt_.enqueue_3d(prolong_, F.sys->grid());
+    count(*C.sys, 4), count(*F.sys, 8 + 1);  // coarse u read; fine u read and written, fixed read
   }
 
   SolverParams sp_;
@@ -160,12 +189,188 @@ class Multigrid {
   std::vector<Level> levels_;
 };
 
+
+// Mixed-precision iterative refinement (docs/solver.md, "float64 answers"):
+// below this tolerance the float32 iteration is run to kRefineBelow, then
+// corrected by float32 solves of A e = r for the float64 residual r of the
+// float64 solution, each to kRefineInner relative to its r.
+constexpr double kRefineBelow = 1e-4;
+constexpr double kRefineInner = 1e-3;
+constexpr int kMaxRefinements = 12;
+
+// r = b - A u in float64 on the host (the stencil as the device stores it:
+// boundary rows are c_0 x_p, interior rows the 19 points), over z-slabs on
+// every core. Returns ||r||^2; the sum is taken in a fixed order (one partial
+// per z-plane), so the result does not depend on the thread count.
+double host_residual64(const GridDesc& g, const std::vector<float>& coef, const std::vector<float>& b,
+                       const std::vector<double>& u, std::vector<double>& r) {
+  const std::size_t N = grid_voxels(g), sy = std::size_t(g.nx), sz = sy * std::size_t(g.ny);
+  long off[STENCIL_COEFS];
+  const int table[STENCIL_COEFS][3] = {
+#define SOFTSHELL_OFF(K, DX, DY, DZ) {DX, DY, DZ},
+      STENCIL_OFFSETS(SOFTSHELL_OFF)
+#undef SOFTSHELL_OFF
+  };
+  for (int k = 0; k < STENCIL_COEFS; ++k) off[k] = table[k][0] + table[k][1] * long(sy) + table[k][2] * long(sz);
+  r.resize(N);
+  std::vector<double> plane(std::size_t(g.nz), 0.0);
+  auto planes = [&](int z0, int z1) {
+    for (int z = z0; z < z1; ++z) {
+      double acc2 = 0;
+      for (int y = 0; y < g.ny; ++y)
+        for (int x = 0; x < g.nx; ++x) {
+          const std::size_t p = std::size_t(x) + sy * std::size_t(y) + sz * std::size_t(z);
+          double ax = double(coef[p]) * u[p];
+          if (!(x == 0 || y == 0 || z == 0 || x == g.nx - 1 || y == g.ny - 1 || z == g.nz - 1))
+            for (int k = 1; k < STENCIL_COEFS; ++k)
+              ax += double(coef[k * N + p]) * u[p + off[k]] + double(coef[k * N + p - off[k]]) * u[p - off[k]];
+          r[p] = double(b[p]) - ax;
+          acc2 += r[p] * r[p];
+        }
+      plane[std::size_t(z)] = acc2;
+    }
+  };
+  const int threads = int(std::clamp<unsigned>(std::thread::hardware_concurrency(), 1u, 64u));
+  std::vector<std::thread> pool;
+  for (int t = 1; t < threads; ++t) pool.emplace_back(planes, g.nz * t / threads, g.nz * (t + 1) / threads);
+  planes(0, g.nz / threads);
+  for (std::thread& t : pool) t.join();
+  double rr = 0;
+  for (double v : plane) rr += v;
+  return rr;
+}
+
 }  // namespace
 
 struct MultigridSolver::Impl : Multigrid {
   Impl(DeviceSystem& fine, const SolverParams& sp) : Multigrid(fine, sp), sys(fine) {}
   DeviceSystem& sys;
   std::array<cl::Buffer, 5> pcg;  // x, r, z, p, q of the conjugate gradients, allocated on first use
+  std::vector<double> u64;        // the last refined solve's float64 solution
+
+  // Iterates on A u = rhs from the fine level's u: on entry F.rhs holds rhs
+  // (the V-cycles read it), F.r = rhs - A F.u and rep.residuals.back() its
+  // relative norm; on exit F.u holds the result and rep.residuals.back()
+  // its true relative residual (evaluated on the device, float32).
+  void iterate(const cl::Buffer& rhs, double rhs_norm, double tol, SolveReport& rep,
+               progress::Stage* stage = nullptr) {
+    Level& F = fine();
+    DeviceSystem& fine_sys = sys;
+    Runtime& rt = fine_sys.runtime();
+    const std::size_t n = fine_sys.voxels();
+    const SolverParams& sp = params();
+    const int max_cycles = rep.cycles + sp.max_cycles;
+    if (!sp.krylov) {
+      while (rep.residuals.back() > tol && rep.cycles < max_cycles) {
+        vcycle(0);
+        ++rep.cycles;
+        rep.residuals.push_back(relative_residual(rhs, rhs_norm));
+        if (stage) stage->residual(rep.residuals.back(), tol, rep.cycles);
+      }
+      return;
+    }
+    if (rep.residuals.back() <= tol) return;
+    // Preconditioned conjugate gradients on A x = rhs from the current u; the
+    // multigrid's fine-level buffers serve the V-cycle, so x, r, z, p, q are
+    // separate.
+    const std::size_t bytes = n * sizeof(float);
+    if (!pcg[0]()) for (auto& buf : pcg) buf = rt.buffer(bytes);  // kept for the next solve
+    const cl::Buffer &x = pcg[0], &r = pcg[1], &z = pcg[2], &p = pcg[3], &q = pcg[4];
+    rt.queue().enqueueCopyBuffer(F.u, x, 0, 0, bytes);
+    rt.queue().enqueueCopyBuffer(F.r, r, 0, 0, bytes);  // rhs - A u, from the residual just reported
+    count(fine_sys, 2 * bytes_per_voxel::copy);
+    const double nb = rhs_norm;
+    precondition(r, z);
+    rt.queue().enqueueCopyBuffer(z, p, 0, 0, bytes);
+    double rz = fine_sys.dot(r, z);
+    count(fine_sys, bytes_per_voxel::copy + bytes_per_voxel::dot);
+    bool true_residual = false;  // is r the true residual of x (not the recursive one)?
+    while (rep.cycles < max_cycles) {
+      fine_sys.apply(p, q);
+      const double pq = fine_sys.dot(p, q);
+      count(fine_sys, bytes_per_voxel::apply + bytes_per_voxel::dot);
+      if (!(pq > 0)) break;  // breakdown: only at the float floor
+      const double a = rz / pq;
+      fine_sys.axpby(float(a), p, 1.0f, x);
+      fine_sys.axpby(float(-a), q, 1.0f, r);
+      ++rep.cycles;
+      double rel = nb > 0 ? fine_sys.norm(r) / nb : 0.0;
+      count(fine_sys, 2 * bytes_per_voxel::axpby + bytes_per_voxel::norm);
+      true_residual = false;
+      if (rel <= tol) {
+        // The recursive residual drifts from the true one in float32: stop
+        // only when the true residual agrees, else go on from it (residual
+        // replacement) rather than stop just short of tol.
+        fine_sys.residual(rhs, x, r);
+        rel = nb > 0 ? fine_sys.norm(r) / nb : 0.0;
+        count(fine_sys, bytes_per_voxel::residual + bytes_per_voxel::norm);
+        true_residual = true;
+      }
+      rep.residuals.push_back(rel);
+      if (stage) stage->residual(rel, tol, rep.cycles);
+      if (rel <= tol) break;
+      precondition(r, z);
+      const double rz_new = fine_sys.dot(r, z);
+      fine_sys.axpby(1.0f, z, float(rz_new / rz), p);
+      count(fine_sys, bytes_per_voxel::dot + bytes_per_voxel::axpby);
+      rz = rz_new;
+    }
+    // Report and judge the true residual of the final x (already in r when
+    // the loop stopped on it).
+    rt.queue().enqueueCopyBuffer(x, F.u, 0, 0, bytes);
+    count(fine_sys, bytes_per_voxel::copy);
+    if (!true_residual) rep.residuals.back() = relative_residual(rhs, rhs_norm);
+  }
+
+  // Mixed-precision iterative refinement from the float32 solution in F.u
+  // (rep.residuals.back() its float32-evaluated residual) to `tol` in
+  // float64: x64 = F.u; repeat r = b - A x64 (float64, host), stop at
+  // ||r|| / ||b|| <= tol, else solve A e = r / ||r|| in float32 on the
+  // device to kRefineInner and add ||r|| e to x64. Leaves float(x64) in F.u
+  // and x64 in u64; the residuals reported are the float64 ones.
+  void refine(double tol, SolveReport& rep) {
+    Level& F = fine();
+    Runtime& rt = sys.runtime();
+    const std::size_t n = sys.voxels(), bytes = n * sizeof(float);
+    const std::vector<float> coef = sys.download_coefficients(), b = sys.download_b();
+    std::vector<float> u32(n);
+    rt.queue().enqueueReadBuffer(F.u, CL_TRUE, 0, bytes, u32.data());
+    u64.assign(u32.begin(), u32.end());
+    double bb = 0;
+    for (float v : b) bb += double(v) * v;
+    const double nb = std::sqrt(bb);
+    std::vector<double> r;
+    double rel = std::sqrt(host_residual64(sys.grid(), coef, b, u64, r)) / (nb > 0 ? nb : 1.0);
+    rep.residuals.back() = rel;  // the float64 evaluation of the float32 solution
+    std::vector<float> rhs(n);
+    for (int step = 0; step < kMaxRefinements && rel > tol; ++step) {
+      double rn = 0;
+      for (double v : r) rn += v * v;
+      rn = std::sqrt(rn);
+      if (!(rn > 0)) break;
+      for (std::size_t i = 0; i < n; ++i) rhs[i] = float(r[i] / rn);
+      rt.queue().enqueueWriteBuffer(F.rhs, CL_FALSE, 0, bytes, rhs.data());
+      rt.queue().enqueueFillBuffer(F.u, 0.0f, 0, bytes);
+      rt.queue().enqueueCopyBuffer(F.rhs, F.r, 0, 0, bytes);  // the residual of e = 0
+      count(sys, bytes_per_voxel::fill + bytes_per_voxel::copy);
+      const double scaled_norm = sys.norm(F.rhs);
+      SolveReport inner;
+      inner.residuals.push_back(1.0);
+      inner.cycles = rep.cycles;
+      const cl::Buffer rhs_buf = F.rhs;  // precondition() swaps F.rhs for a while
+      iterate(rhs_buf, scaled_norm, kRefineInner, inner);
+      rep.cycles = inner.cycles;
+      rt.queue().enqueueReadBuffer(F.u, CL_TRUE, 0, bytes, u32.data());
+      for (std::size_t i = 0; i < n; ++i) u64[i] += rn * double(u32[i]);
+      const double prev = rel;
+      rel = std::sqrt(host_residual64(sys.grid(), coef, b, u64, r)) / (nb > 0 ? nb : 1.0);
+      rep.residuals.push_back(rel);
+      ++rep.refinements;
+      if (!(rel < 0.9 * prev)) break;  // stagnation: float64 cannot help further
+    }
+    for (std::size_t i = 0; i < n; ++i) u32[i] = float(u64[i]);
+    rt.queue().enqueueWriteBuffer(F.u, CL_TRUE, 0, bytes, u32.data());
+  }
 };
 
 MultigridSolver::MultigridSolver(DeviceSystem& fine, const SolverParams& sp)
@@ -176,11 +381,12 @@ const cl::Buffer& MultigridSolver::solution() const { return impl_->fine().u; }
 int MultigridSolver::levels() const { return impl_->levels(); }
 const SolverParams& MultigridSolver::params() const { return impl_->params(); }
 void MultigridSolver::update_point() { impl_->update_point(); }
+const std::vector<double>& MultigridSolver::solution64() const { return impl_->u64; }
 
 std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector<float>* init, bool warm,
                                           double tol_override) {
   const auto t0 = std::chrono::steady_clock::now();
-  Multigrid& mg = *impl_;
+  Impl& mg = *impl_;
   DeviceSystem& fine = impl_->sys;
   const SolverParams& sp = mg.params();
   const double tol = tol_override > 0 ? tol_override : sp.tol;
@@ -189,8 +395,11 @@ std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector
   const std::size_t n = fine.voxels();
   SolveReport rep;
   rep.levels = mg.levels();
+  mg.bytes = 0;
+  mg.u64.clear();
   mg.measure_b();
   rt.queue().enqueueCopyBuffer(fine.b(), F.rhs, 0, 0, n * sizeof(float));
+  mg.count(fine, bytes_per_voxel::norm + bytes_per_voxel::copy);
   if (init) {
     if (init->size() != n) throw std::invalid_argument("initial u has the wrong size");
     rt.queue().enqueueWriteBuffer(F.u, CL_FALSE, 0, n * sizeof(float), init->data());
@@ -204,70 +413,30 @@ std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector
     const progress::Stage fmg("full multigrid, " + std::to_string(mg.levels()) + " levels");
     mg.full_multigrid();
     rt.queue().enqueueCopyBuffer(fine.b(), F.rhs, 0, 0, n * sizeof(float));
+    mg.count(fine, bytes_per_voxel::copy);
     rep.residuals.push_back(mg.relative_residual());
   } else {
     rt.queue().enqueueFillBuffer(F.u, 0.0f, 0, n * sizeof(float));
+    mg.count(fine, bytes_per_voxel::fill);
     rep.residuals.push_back(mg.relative_residual());
   }
   mg.has_solution = false;  // F.u is scratch until the solve ends
-  progress::Stage stage(sp.krylov ? "solve (PCG)" : "solve (V-cycles)");
-  if (!sp.krylov) {
-    while (rep.residuals.back() > tol && rep.cycles < sp.max_cycles) {
-      mg.vcycle(0);
-      ++rep.cycles;
-      rep.residuals.push_back(mg.relative_residual());
-      stage.residual(rep.residuals.back(), tol, rep.cycles);
-    }
-  } else if (rep.residuals.back() > tol) {
-    // Preconditioned conjugate gradients on A x = b from the current u; the
-    // multigrid's fine-level buffers serve the V-cycle, so x, r, z, p, q are
-    // separate.
-    const std::size_t bytes = n * sizeof(float);
-    auto& pcg = impl_->pcg;
-    if (!pcg[0]()) for (auto& buf : pcg) buf = rt.buffer(bytes);  // kept for the next solve
-    const cl::Buffer &x = pcg[0], &r = pcg[1], &z = pcg[2], &p = pcg[3], &q = pcg[4];
-    rt.queue().enqueueCopyBuffer(F.u, x, 0, 0, bytes);
-    rt.queue().enqueueCopyBuffer(F.r, r, 0, 0, bytes);  // b - A u, from the residual just reported
-    const double nb = mg.b_norm();
-    mg.precondition(r, z);
-    rt.queue().enqueueCopyBuffer(z, p, 0, 0, bytes);
-    double rz = fine.dot(r, z);
-    bool true_residual = false;  // is r the true residual of x (not the recursive one)?
-    while (rep.cycles < sp.max_cycles) {
-      fine.apply(p, q);
-      const double pq = fine.dot(p, q);
-      if (!(pq > 0)) break;  // breakdown: only at the float floor
-      const double a = rz / pq;
-      fine.axpby(float(a), p, 1.0f, x);
-      fine.axpby(float(-a), q, 1.0f, r);
-      ++rep.cycles;
-      double rel = nb > 0 ? fine.norm(r) / nb : 0.0;
-      true_residual = false;
-      if (rel <= tol) {
-        // The recursive residual drifts from the true one in float32: stop
-        // only when the true residual agrees, else go on from it (residual
-        // replacement) rather than stop just short of tol.
-        fine.residual(x, r);
-        rel = nb > 0 ? fine.norm(r) / nb : 0.0;
-        true_residual = true;
-      }
-      rep.residuals.push_back(rel);
-      stage.residual(rel, tol, rep.cycles);
-      if (rel <= tol) break;
-      mg.precondition(r, z);
-      const double rz_new = fine.dot(r, z);
-      fine.axpby(1.0f, z, float(rz_new / rz), p);
-      rz = rz_new;
-    }
-    // Report and judge the true residual of the final x (already in r when
-    // the loop stopped on it).
-    rt.queue().enqueueCopyBuffer(x, F.u, 0, 0, bytes);
-    if (!true_residual) rep.residuals.back() = mg.relative_residual();
+  // Below kRefineBelow, float32 alone would stall at its rounding floor:
+  // iterate to kRefineBelow, then refine in float64.
+  const bool refine = tol < kRefineBelow;
+  {
+    progress::Stage stage(sp.krylov ? "solve (PCG)" : "solve (V-cycles)");
+    mg.iterate(fine.b(), mg.b_norm(), refine ? kRefineBelow : tol, rep, &stage);
+  }
+  if (refine && std::isfinite(rep.residuals.back())) {
+    const progress::Stage stage("refine (float64 residuals)");
+    mg.refine(tol, rep);
   }
   rep.converged = rep.residuals.back() <= tol;
   std::vector<float> u(n);
   rt.queue().enqueueReadBuffer(F.u, CL_TRUE, 0, n * sizeof(float), u.data());
   mg.has_solution = true;
+  rep.bytes = mg.bytes;
   rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (report) *report = rep;
   return u;

@@ -211,7 +211,11 @@ class DeviceSystem {
 
 // Multigrid solver settings and report (docs/numerics.md, "Multigrid").
 struct SolverParams {
-  double tol = 1e-4;        // stop at ||b - A u|| / ||b|| <= tol
+  // Stop at ||b - A u|| / ||b|| <= tol. Below 1e-4 the solve iterates in
+  // float32 to 1e-4, then refines in float64 (mixed-precision iterative
+  // refinement, docs/solver.md): the residuals reported from there on are
+  // float64 ones of the float64 solution (MultigridSolver::solution64()).
+  double tol = 1e-4;
   int max_cycles = 30;      // V-cycles; more means "not converged"
   int pre_sweeps = 2, post_sweeps = 2;
   bool jacobi = false;      // smoother: weighted Jacobi instead of Gauss-Seidel
@@ -227,8 +231,10 @@ struct SolverParams {
 struct SolveReport {
   std::vector<double> residuals;  // relative residual: initial, after FMG, after each cycle / iteration
   int cycles = 0, levels = 0;
+  int refinements = 0;  // float64 refinement steps (tol below 1e-4), each a float32 solve of its own
   bool converged = false;
   double seconds = 0;
+  double bytes = 0;  // bytes the solve moved at the least, under the byte model of docs/benchmarks.md
 };
 
 // The multigrid hierarchy of a fine level (coarse levels by rediscretisation,
@@ -250,6 +256,9 @@ class MultigridSolver {
                            bool warm = false, double tol_override = 0);
   // After fine.update_point(): carries the new mu and rho down every level.
   void update_point();
+  // The float64 solution of the last solve when it was refined (tol below
+  // 1e-4; its float32 rounding is what solve() returned), else empty.
+  const std::vector<double>& solution64() const;
   int levels() const;
   const SolverParams& params() const;
   // The last solve's solution on the device (the fine level's u, fixed

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <limits>
 #include <random>
@@ -605,6 +606,86 @@ class CliMask : public test::CliTest {
     return file("in.nrrd");
   }
 };
+
+// ---- threads ---------------------------------------------------------------------------------------------
+
+TEST(HostThreads, MaskNearFieldFillAndIsoAreTheSameForAnyThreadCount) {
+  // The host stages of `classify --iso auto --mask auto` split their passes
+  // over threads; their results must not depend on how many: a face
+  // phantom with an unswept wedge of zeros (the fill, the growth) and a
+  // bright layered band under the probe (the near field), every stage with
+  // 1 thread (the baseline) against 2, 3 and 7.
+  PhantomParams pp;
+  pp.size = 48;
+  pp.seed = test::seed();
+  Volume v = make_phantom(test::runtime(), pp).volume;
+  for (std::size_t z = 0; z < v.dims[2]; ++z)
+    for (std::size_t y = 0; y < v.dims[1]; ++y)
+      for (std::size_t x = 0; x < v.dims[0]; ++x) {
+        if (x + y < 14) v.at(x, y, z) = 0;                               // unswept wedge
+        else if (z >= 1 && z < 4) v.at(x, y, z) = float(std::max(200.0f, v.at(x, y, z)));  // bright near field
+      }
+  struct Run {
+    std::vector<std::uint8_t> mask, band;
+    MaskReport mr;
+    NearFieldReport nr;
+    int beam = -1;
+    Volume filled;
+    AutoIsoReport ir;
+    double iso = 0;
+    Volume levelled;
+  };
+  auto run = [&](int threads) {
+    Run r;
+    MaskParams mp;
+    mp.threads = threads;
+    r.mask = scanned_mask(v, mp, &r.mr);
+    r.beam = beam_axis_of(v, &r.mask, threads);
+    NearFieldParams np;
+    np.threads = threads;
+    r.band = near_field_band(v, &r.mask, np, &r.nr);
+    std::vector<std::uint8_t> m = r.mask;
+    for (std::size_t i = 0; i < m.size(); ++i)
+      if (r.band[i]) m[i] = 0;
+    r.filled = fill_unscanned(v, m, 0, threads);
+    AutoIsoParams ap;
+    ap.want_field = true;
+    ap.threads = threads;
+    r.iso = auto_iso(v, &m, ap, &r.ir);
+    r.levelled = level_isovalue(r.filled, r.ir.field, r.iso);
+    return r;
+  };
+  const Run one = run(1);
+  // The case exercises every stage.
+  ASSERT_GT(one.mr.unscanned, 0u);
+  ASSERT_TRUE(one.nr.found);
+  ASSERT_GT(one.ir.crests, 0u);
+  ASSERT_EQ(one.ir.field.size(), v.voxels());
+  auto same_floats = [](const std::vector<float>& a, const std::vector<float>& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
+  };
+  for (int threads : {2, 3, 7}) {
+    SCOPED_TRACE(threads);
+    const Run r = run(threads);
+    EXPECT_EQ(r.mask, one.mask);
+    EXPECT_EQ(r.mr.unscanned, one.mr.unscanned);
+    EXPECT_EQ(r.mr.enclosed_share, one.mr.enclosed_share);
+    EXPECT_EQ(r.beam, one.beam);
+    EXPECT_EQ(r.band, one.band);
+    EXPECT_EQ(r.nr.depth_mm, one.nr.depth_mm);
+    EXPECT_TRUE(same_floats(r.filled.data, one.filled.data));
+    EXPECT_EQ(r.iso, one.iso);  // bit for bit
+    EXPECT_EQ(r.ir.edge_iso, one.ir.edge_iso);
+    EXPECT_EQ(r.ir.ridge_iso, one.ir.ridge_iso);
+    EXPECT_EQ(r.ir.crests, one.ir.crests);
+    EXPECT_EQ(r.ir.count, one.ir.count);
+    EXPECT_TRUE(r.ir.mean_gradient.size() == one.ir.mean_gradient.size() &&
+                std::memcmp(r.ir.mean_gradient.data(), one.ir.mean_gradient.data(),
+                            one.ir.mean_gradient.size() * sizeof(double)) == 0);
+    EXPECT_TRUE(same_floats(r.ir.field, one.ir.field));
+    EXPECT_TRUE(same_floats(r.levelled.data, one.levelled.data));
+  }
+}
 
 TEST_F(CliMask, AutoMaskFixesUnscannedVoxelsAndIsReported) {
   const std::string in = write_sweep();

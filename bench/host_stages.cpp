@@ -1,0 +1,104 @@
+// Where a classification's time goes: the host stages of `softshell classify
+// --iso auto --mask auto` (mask, near field, automatic isovalue, fill,
+// levelling) against the device classification, in one run, as shares of
+// the whole (docs/benchmarks.md, "Host stages").
+//
+//   softshell_host_stages VOLUME [--reps R] [--threads T] [--device D]
+//
+// T (0: every core) is passed to the multi-threaded host stages; 1 gives
+// the single-threaded baseline. Each stage's time is the minimum of R runs.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "auto_iso.hpp"
+#include "cl_runtime.hpp"
+#include "error.hpp"
+#include "io.hpp"
+#include "mask.hpp"
+#include "variational.hpp"
+
+using namespace softshell;
+
+namespace {
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string in, device;
+  int reps = 3, threads = 0;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--reps" && i + 1 < argc) reps = std::atoi(argv[++i]);
+    else if (a == "--threads" && i + 1 < argc) threads = std::atoi(argv[++i]);
+    else if (a == "--device" && i + 1 < argc) device = argv[++i];
+    else if (in.empty() && a[0] != '-') in = a;
+    else {
+      std::cerr << "usage: softshell_host_stages VOLUME [--reps R] [--threads T] [--device D]\n";
+      return 2;
+    }
+  }
+  if (in.empty() || reps < 1 || threads < 0) {
+    std::cerr << "usage: softshell_host_stages VOLUME [--reps R] [--threads T] [--device D]\n";
+    return 2;
+  }
+  try {
+    Runtime rt(device);
+    const Volume v0 = read_volume(in);
+    const char* names[] = {"mask", "near field", "auto iso", "fill unscanned", "level iso", "classify (device)"};
+    std::vector<double> best(6, 1e300);
+    for (int r = 0; r < reps; ++r) {
+      Volume v = v0;
+      std::vector<double> t(6);
+      auto t0 = Clock::now();
+      MaskParams mp;
+      mp.threads = threads;
+      MaskReport mr;
+      std::vector<std::uint8_t> mask = scanned_mask(v, mp, &mr);
+      if (mr.rejected || mr.unscanned == 0) mask.clear();
+      t[0] = since(t0);
+      t0 = Clock::now();
+      NearFieldParams np;
+      np.threads = threads;
+      remove_near_field(v, mask, np);
+      t[1] = since(t0);
+      t0 = Clock::now();
+      AutoIsoParams ap;
+      ap.rule = AutoIsoRule::Local;
+      ap.want_field = true;
+      ap.threads = threads;
+      AutoIsoReport rep;
+      const double iso = auto_iso(v, mask.empty() ? nullptr : &mask, ap, &rep);
+      t[2] = since(t0);
+      t0 = Clock::now();
+      if (!mask.empty()) fill_unscanned_in_place(v, mask);
+      t[3] = since(t0);
+      t0 = Clock::now();
+      v = level_isovalue(v, rep.field, iso);
+      t[4] = since(t0);
+      t0 = Clock::now();
+      VariationalParams p;
+      p.v_iso = v.intensity_map().to_unit(iso);
+      SolveReport sr;
+      classify_variational(rt, v, p, SolverParams{}, &sr, nullptr, mask.empty() ? nullptr : &mask);
+      t[5] = since(t0);
+      for (int k = 0; k < 6; ++k) best[k] = std::min(best[k], t[k]);
+    }
+    double total = 0;
+    for (double b : best) total += b;
+    std::printf("%s: %zux%zux%zu, threads %d (0: every core), min of %d runs\n", in.c_str(), v0.dims[0], v0.dims[1],
+                v0.dims[2], threads, reps);
+    for (int k = 0; k < 6; ++k) std::printf("  %-18s %8.3f s  %5.1f %%\n", names[k], best[k], 100 * best[k] / total);
+    std::printf("  %-18s %8.3f s\n", "total", total);
+  } catch (const std::exception& e) {
+    std::cerr << "softshell_host_stages: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,49 @@
+// Splitting host loops over threads (std::thread): contiguous, ordered
+// ranges, so a caller that keeps per-range results and combines them in
+// range order gets the same bits for any thread count.
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+#include <thread>
+#include <vector>
+
+namespace softshell {
+
+// The threads to use: `requested` when positive, else every core.
+inline int host_threads(int requested) {
+  if (requested > 0) return requested;
+  return int(std::max(1u, std::thread::hardware_concurrency()));
+}
+
+// The number of ranges parallel_ranges() makes of n items for `parts`.
+inline int range_count(std::size_t n, int parts) {
+  return int(std::max<std::size_t>(1, std::min<std::size_t>(std::size_t(std::max(parts, 1)), n)));
+}
+
+// Calls f(k, begin, end) for range_count(n, parts) contiguous ranges of
+// [0, n), range k = [n k / count, n (k + 1) / count) on its own thread (k = 0
+// on the caller's), and waits for all of them.
+template <class F>
+void parallel_ranges_indexed(std::size_t n, int parts, F&& f) {
+  const int count = range_count(n, parts);
+  const std::size_t c = std::size_t(count);
+  if (count == 1) {
+    f(0, std::size_t(0), n);
+    return;
+  }
+  std::vector<std::thread> pool;
+  pool.reserve(c - 1);
+  for (int k = 1; k < count; ++k)
+    pool.emplace_back([&f, n, c, k] { f(k, n * std::size_t(k) / c, n * std::size_t(k + 1) / c); });
+  f(0, std::size_t(0), n / c);
+  for (std::thread& t : pool) t.join();
+}
+
+// As above, f(begin, end).
+template <class F>
+void parallel_ranges(std::size_t n, int parts, F&& f) {
+  parallel_ranges_indexed(n, parts, [&f](int, std::size_t b, std::size_t e) { f(b, e); });
+}
+
+}  // namespace softshell
