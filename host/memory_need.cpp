@@ -34,6 +34,10 @@ constexpr double kLevoyDevice = 7 * 4.0;
 // Host: the volume (float) and the result downloaded (float); with a mask,
 // its bytes (the unscanned fill works in place).
 constexpr double kHostVolume = 4.0;
+// Float64 refinement (host/multigrid.cpp, refine): the stencil and b
+// downloaded (STENCIL_COEFS + 1 floats), the float32 and float64 solutions,
+// the float64 residual and the float32 right-hand side.
+constexpr double kRefineHost = (STENCIL_COEFS + 1) * 4.0 + 4.0 + 8.0 + 8.0 + 4.0;
 
 std::string per_voxel(double bytes) {
   std::ostringstream s;
@@ -44,12 +48,12 @@ std::string per_voxel(double bytes) {
 
 }  // namespace
 
-MemoryNeed classify_memory_need(const Dims3& dims, Classifier method, bool mask) {
+MemoryNeed classify_memory_need(const Dims3& dims, Classifier method, bool mask, bool refine) {
   const double n = double(dims[0]) * double(dims[1]) * double(dims[2]);
   MemoryNeed m;
   if (method == Classifier::Variational) {
     m.device_per_voxel = kVariationalFine + kVariationalCoarse;
-    m.host_per_voxel = 2 * kHostVolume + (mask ? 1.0 : 0.0);
+    m.host_per_voxel = 2 * kHostVolume + (mask ? 1.0 : 0.0) + (refine ? kRefineHost : 0.0);
     m.largest_buffer = std::uint64_t(n) * STENCIL_COEFS * sizeof(float);
   } else {
     m.device_per_voxel = kLevoyDevice;
@@ -62,13 +66,13 @@ MemoryNeed classify_memory_need(const Dims3& dims, Classifier method, bool mask)
 }
 
 void check_classify_memory(const Runtime& rt, const std::string& path, const Dims3& dims, Classifier method,
-                           bool mask) {
-  check_classify_memory(rt.info(), path, dims, method, mask);
+                           bool mask, bool refine) {
+  check_classify_memory(rt.info(), path, dims, method, mask, refine);
 }
 
 void check_classify_memory(const DeviceInfo& d, const std::string& path, const Dims3& dims, Classifier method,
-                           bool mask) {
-  const MemoryNeed m = classify_memory_need(dims, method, mask);
+                           bool mask, bool refine) {
+  const MemoryNeed m = classify_memory_need(dims, method, mask, refine);
   const std::string what = "classifying " + dims_text(dims) + " voxels";
   // PoCL and other CPU devices allocate their buffers in host memory.
   const bool shared = d.type == "CPU";

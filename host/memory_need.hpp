@@ -6,8 +6,9 @@
 // (host/variational.cpp, host/multigrid.cpp, host/levoy.cpp): 127 bytes per
 // voxel for the variational classifier with a mask (118 on the device),
 // 37 for Levoy's, checked against the peak resident memory measured at
-// 128^3 and 256^3 (docs/benchmarks.md, "Memory": 120.7 and 31 bytes per
-// voxel). Change them with the buffers.
+// 128^3 and 256^3 (docs/benchmarks.md, "Memory": 119.4 and 31 bytes per
+// voxel). A solve refined in float64 (--tol below 1e-4) holds 68 bytes per
+// voxel more on the host while it refines. Change them with the buffers.
 #pragma once
 
 #include <cstdint>
@@ -29,18 +30,19 @@ struct MemoryNeed {
 enum class Classifier { Variational, Levoy };
 
 // What classifying a volume of `dims` needs; `mask`: a scanned-region mask
-// is in use (its bytes and the filled copy of the volume).
-MemoryNeed classify_memory_need(const Dims3& dims, Classifier method, bool mask);
+// is in use (its bytes and the filled copy of the volume); `refine`: the
+// solve is refined in float64 (SolverParams::tol below 1e-4).
+MemoryNeed classify_memory_need(const Dims3& dims, Classifier method, bool mask, bool refine = false);
 
 // Throws InputError (exit 2) naming `path`, the need and the limit, when the
 // need does not fit: host memory (75 % of usable_memory_bytes(); on a CPU
 // device its buffers are host memory too), the device's global memory, or
 // its largest allocation.
 void check_classify_memory(const Runtime& rt, const std::string& path, const Dims3& dims, Classifier method,
-                           bool mask);
+                           bool mask, bool refine = false);
 // The same against a device's description (for tests: any device).
 struct DeviceInfo;
 void check_classify_memory(const DeviceInfo& device, const std::string& path, const Dims3& dims, Classifier method,
-                           bool mask);
+                           bool mask, bool refine = false);
 
 }  // namespace softshell

@@ -781,6 +781,10 @@ TEST(RobustMemory, DeviceLimitsAreCheckedWithTheNumbers) {
   }
   // Levoy's largest buffer is one float per voxel.
   EXPECT_NO_THROW(check_classify_memory(gpu, "v.nrrd", {256, 256, 256}, Classifier::Levoy, false));
+  // Refinement in float64 (--tol below 1e-4) adds its host arrays.
+  EXPECT_NEAR(classify_memory_need({100, 100, 100}, Classifier::Variational, true, true).host_per_voxel -
+                  classify_memory_need({100, 100, 100}, Classifier::Variational, true, false).host_per_voxel,
+              68.0, 1e-9);
 }
 
 // ---- the automatic isovalue on data it cannot use -------------------------------------------
