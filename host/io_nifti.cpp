@@ -104,6 +104,7 @@ struct NiftiInfo {
   VolumeHeader header;
   std::string data_path;          // the .nii itself or the .img beside a .hdr
   std::uint64_t data_offset = 0;  // vox_offset (in the decompressed stream)
+  ScalarType file_type = ScalarType::UInt8;  // the stored samples' type (header.type is float when scaled)
   bool swap = false;              // samples in the other byte order
   double slope = 1.0, inter = 0.0;
   bool scaled = false;
@@ -145,6 +146,21 @@ NiftiInfo open_nifti(const std::string& path) {
     else nifti_swap_as_nifti2(&raw.h2);
   }
 
+  // What niftilib's conversion would refuse with a message on stderr whatever its debug
+  // level (datatype, dim[0], dim[1]) is refused here first.
+  const std::int64_t dim0 = version == 1 ? raw.h1.dim[0] : raw.h2.dim[0];
+  const std::int64_t dim1 = version == 1 ? raw.h1.dim[1] : raw.h2.dim[1];
+  const int datatype = version == 1 ? raw.h1.datatype : raw.h2.datatype;
+  if (dim0 < 1 || dim0 > 7)
+    throw input_error(path, "invalid NIfTI-" + std::to_string(version) + " header: dim[0] = " + std::to_string(dim0) +
+                                " (expected 1 to 7)");
+  if (dim1 < 1)
+    throw input_error(path, "invalid NIfTI-" + std::to_string(version) + " header: dim[1] = " + std::to_string(dim1));
+  if (!scalar_type_of(datatype)) {
+    throw input_error(path, std::string("unsupported NIfTI datatype '") + nifti_datatype_string(datatype) + "' (" +
+                                std::to_string(datatype) + "; expected a scalar integer or floating-point type)");
+  }
+
   // niftilib interprets the (now native-order) header: dims, datatype, the transforms.
   NimPtr nim;
   {
@@ -154,7 +170,6 @@ NiftiInfo open_nifti(const std::string& path) {
     if (good) nim.reset(version == 1 ? nifti_convert_n1hdr2nim(raw.h1, nullptr) : nifti_convert_n2hdr2nim(raw.h2, nullptr));
   }
   if (!nim) {
-    const std::int64_t dim0 = version == 1 ? raw.h1.dim[0] : raw.h2.dim[0];
     throw input_error(path, "invalid NIfTI-" + std::to_string(version) + " header (dim[0] = " + std::to_string(dim0) +
                                 "; dims, datatype or sizes out of range)");
   }
@@ -232,9 +247,11 @@ NiftiInfo open_nifti(const std::string& path) {
     info.inter = n.scl_inter;
   }
   info.swap = swap;
+  info.file_type = h.type;
 
   const std::size_t voxels = checked_voxels(path, h.dims, h.type);
   const std::uint64_t expected = std::uint64_t(voxels) * scalar_type_size(h.type);
+  if (info.scaled) h.type = ScalarType::Float32;  // what read_volume returns
   h.files = {path};
   info.data_path = path;
   if (one_file) {
@@ -287,8 +304,8 @@ Volume read_nifti(const std::string& path) {
   if (info.data_offset > 0 && gzseek(g.get(), static_cast<z_off_t>(std::min<std::uint64_t>(info.data_offset, LONG_MAX)),
                                      SEEK_SET) < 0)
     throw input_error(path, "data truncated: the file ends before vox_offset " + std::to_string(info.data_offset));
-  const std::size_t elem = scalar_type_size(h.type);
-  Volume v(h.dims, h.spacing, info.scaled ? ScalarType::Float32 : h.type);
+  const std::size_t elem = scalar_type_size(info.file_type);
+  Volume v(h.dims, h.spacing, h.type);
   v.origin = h.origin;
   v.frame = h.frame;
   // Decoded a chunk at a time: no second copy of the volume in file bytes.
@@ -301,7 +318,7 @@ Volume read_nifti(const std::string& path) {
       throw input_error(path, "data truncated: expected " + std::to_string(v.voxels() * elem) + " bytes, found " +
                                   std::to_string(done * elem + got));
     }
-    decode_samples(bytes.data(), n, h.type, info.swap, v.data.data() + done);
+    decode_samples(bytes.data(), n, info.file_type, info.swap, v.data.data() + done);
     done += n;
   }
   if (info.scaled)
