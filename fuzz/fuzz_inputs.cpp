@@ -2,6 +2,7 @@
 #include "fuzz_inputs.hpp"
 
 #include <bzlib.h>
+#include <zlib.h>
 #include <dirent.h>
 #include <unistd.h>
 
@@ -201,6 +202,8 @@ bool run_metaimage(const std::uint8_t* data, std::size_t size) {
 bool run_nifti(const std::uint8_t* data, std::size_t size) {
   return run_reader(place(data, size, "v.nii", "v.hdr", "v.img"));
 }
+
+bool run_vti(const std::uint8_t* data, std::size_t size) { return run_reader(place(data, size, "v.vti", "v.vti")); }
 
 bool run_raw(const std::uint8_t* data, std::size_t size) {
   // The option parsers on the first line.
@@ -504,6 +507,48 @@ std::vector<Seed> seeds(const std::string& harness) {
     NiftiSpec p;
     p.pair = true;
     s.push_back({"pair.hdr", nifti_header(p) + std::string(kDataSeparator, 4) + std::string(8, '\x11')});
+  } else if (harness == "vti") {
+    const std::string head = "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" version=\"1.0\" byte_order=\"LittleEndian\"";
+    auto image = [](const std::string& extra, const std::string& arrays, const std::string& tail) {
+      return ">\n<ImageData WholeExtent=\"0 2 0 1 0 1\" Origin=\"1 2 3\" Spacing=\"0.5 0.5 1\"" + extra +
+             ">\n<Piece Extent=\"0 2 0 1 0 1\">\n<PointData Scalars=\"s\">\n" + arrays +
+             "\n</PointData>\n</Piece>\n</ImageData>\n" + tail + "</VTKFile>\n";
+    };
+    s.push_back({"ascii.vti", head + image(" Direction=\"0 -1 0 1 0 0 0 0 1\"",
+                                           "<DataArray type=\"Float32\" Name=\"s\" format=\"ascii\">0 1 2 3 4 5 6 7 8 9 10 11"
+                                           "</DataArray>", "")});
+    std::string u16;
+    for (int i = 0; i < 12; ++i) u16 += char(i * 21), u16 += char(i);
+    const std::string block = std::string("\x18\0\0\0", 4) + u16;
+    static const char* a = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    auto b64 = [&](const std::string& in) {
+      std::string out;
+      for (std::size_t i = 0; i < in.size(); i += 3) {
+        unsigned v = static_cast<unsigned char>(in[i]) << 16;
+        if (i + 1 < in.size()) v |= static_cast<unsigned char>(in[i + 1]) << 8;
+        if (i + 2 < in.size()) v |= static_cast<unsigned char>(in[i + 2]);
+        out += a[(v >> 18) & 63], out += a[(v >> 12) & 63];
+        out += i + 1 < in.size() ? a[(v >> 6) & 63] : '=';
+        out += i + 2 < in.size() ? a[v & 63] : '=';
+      }
+      return out;
+    };
+    s.push_back({"binary.vti", head + image("", "<DataArray type=\"UInt16\" Name=\"s\" format=\"binary\">" + b64(block) +
+                                                    "</DataArray>", "")});
+    s.push_back({"appended-raw.vti", head + " header_type=\"UInt32\"" +
+                                         image("", "<DataArray type=\"UInt16\" Name=\"s\" format=\"appended\" offset=\"0\"/>",
+                                               "<AppendedData encoding=\"raw\">\n_" + block + "\n</AppendedData>\n")});
+    s.push_back({"appended-base64.vti", head + image("", "<DataArray type=\"UInt16\" Name=\"s\" format=\"appended\" offset=\"0\"/>",
+                                                     "<AppendedData encoding=\"base64\">\n_" + b64(block) +
+                                                         "\n</AppendedData>\n")});
+    uLongf n = compressBound(uLong(u16.size()));
+    std::string z(n, '\0');
+    compress(reinterpret_cast<Bytef*>(z.data()), &n, reinterpret_cast<const Bytef*>(u16.data()), uLong(u16.size()));
+    z.resize(n);
+    const std::string zhead = std::string("\x01\0\0\0\x18\0\0\0\0\0\0\0", 12) + char(n) + std::string(3, '\0');
+    s.push_back({"zlib.vti", head + " compressor=\"vtkZLibDataCompressor\"" +
+                                 image("", "<DataArray type=\"UInt16\" Name=\"s\" format=\"appended\" offset=\"0\"/>",
+                                       "<AppendedData encoding=\"raw\">_" + zhead + z + "</AppendedData>\n")});
   } else if (harness == "raw") {
     for (int t = 0; t < 10; ++t) {
       std::string b(8, '\0');

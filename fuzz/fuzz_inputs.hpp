@@ -38,6 +38,8 @@ bool run_raw(const std::uint8_t* data, std::size_t size);
 // header "v.hdr" and its data "v.img"; the same checks. Without NIfTI in the
 // build every input is refused (returns false).
 bool run_nifti(const std::uint8_t* data, std::size_t size);
+// VTK XML ImageData: "v.vti"; the same checks.
+bool run_vti(const std::uint8_t* data, std::size_t size);
 // The classify pipeline on a tiny volume (dims 3..8 per axis): the first
 // 32 bytes choose dims, spacing, sample type, the method, the mask rule,
 // the isovalue (auto or a value) and the parameters, the rest are the
@@ -73,6 +75,6 @@ struct Seed {
   std::string name;
   std::string bytes;
 };
-std::vector<Seed> seeds(const std::string& harness);  // "nrrd", "metaimage", "raw", "nifti", "classify"
+std::vector<Seed> seeds(const std::string& harness);  // "nrrd", "metaimage", "raw", "nifti", "vti", "classify"
 
 }  // namespace softshell::fuzz

@@ -677,8 +677,8 @@ Volume read_raw(const std::string& path, const RawSpec& spec) {
   return v;
 }
 
-// NRRD by content (its magic) or extension, MetaImage and NIfTI by extension.
-enum class Format { Nrrd, MetaImage, Nifti };
+// NRRD by content (its magic) or extension, MetaImage, NIfTI and VTK ImageData by extension.
+enum class Format { Nrrd, MetaImage, Nifti, Vti };
 Format format_of(const std::string& path) {
   char magic[8] = {};
   {
@@ -689,6 +689,7 @@ Format format_of(const std::string& path) {
   // Content first: a NRRD file is a NRRD file whatever it is called.
   if (std::memcmp(magic, "NRRD000", 7) == 0 || ext == ".nrrd" || ext == ".nhdr") return Format::Nrrd;
   if (ext == ".mha" || ext == ".mhd") return Format::MetaImage;
+  if (ext == ".vti") return Format::Vti;
   const std::string name = lower(fs::path(path).filename().string());
   const bool nii_gz = name.size() > 7 && name.compare(name.size() - 7, 7, ".nii.gz") == 0;
   if (ext == ".nii" || ext == ".hdr" || nii_gz) {
@@ -697,7 +698,7 @@ Format format_of(const std::string& path) {
     return Format::Nifti;
   }
   throw input_error(path,
-                    "unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, or --raw X,Y,Z --type T)");
+                    "unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, or --raw X,Y,Z --type T)");
 }
 
 }  // namespace
@@ -786,6 +787,7 @@ Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw) {
     case Format::Nrrd: return io_detail::read_nrrd(path);
     case Format::MetaImage: return io_detail::read_metaimage(path);
     case Format::Nifti: return io_detail::read_nifti(path);
+    case Format::Vti: return io_detail::read_vti(path);
   }
   return {};
 }
@@ -816,6 +818,7 @@ VolumeHeader read_volume_header(const std::string& path, const std::optional<Raw
     case Format::Nrrd: return io_detail::read_nrrd_header(path);
     case Format::MetaImage: return io_detail::read_metaimage_header(path);
     case Format::Nifti: return io_detail::read_nifti_header(path);
+    case Format::Vti: return io_detail::read_vti_header(path);
   }
   return {};
 }

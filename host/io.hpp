@@ -42,7 +42,7 @@ Vec3d parse_vec3(const std::string& text, const std::string& what);
 
 // Reads a 3-D scalar volume. With `raw`, the file is read as headerless raw
 // data; otherwise the format is chosen by content (NRRD magic) and extension
-// (.nrrd/.nhdr, .mha/.mhd, .nii/.nii.gz/.hdr). Checks, before allocating, that the voxel count
+// (.nrrd/.nhdr, .mha/.mhd, .nii/.nii.gz/.hdr, .vti). Checks, before allocating, that the voxel count
 // does not overflow, that the samples fit in this machine's memory and that
 // the file holds the bytes its header declares.
 Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw = std::nullopt);
@@ -229,6 +229,9 @@ Volume read_metaimage(const std::string& path);
 // NIfTI (host/io_nifti.cpp; only when nifti_supported()).
 Volume read_nifti(const std::string& path);
 VolumeHeader read_nifti_header(const std::string& path);
+// VTK XML ImageData (host/io_vti.cpp).
+Volume read_vti(const std::string& path);
+VolumeHeader read_vti_header(const std::string& path);
 VolumeHeader read_metaimage_header(const std::string& path);
 // `detached`: .mhd header plus "<stem>.raw" (".zraw" when compressed).
 void write_metaimage(const std::string& path, const Volume& v, const WriteOptions& opt,
