@@ -144,6 +144,14 @@ TEST_F(Nifti, SformWinsAndScalingAndUnitsApply) {
     EXPECT_NEAR(v.origin[1], -20, 1e-4);
     EXPECT_EQ(v.source_type, ScalarType::Float32);
     for (int i = 0; i < 24; ++i) ASSERT_FLOAT_EQ(v.data[i], 2 * (float(i) * 0.25f) - 1);
+    // Scaled integers read as float, and the header says so too.
+    NiftiSpec k = small(version);
+    k.scl_slope = 0.5, k.scl_inter = 10;
+    write("k.nii", fuzz::nifti_header(k) + u8_samples(24));
+    const Volume kv = read_volume(file("k.nii"));
+    EXPECT_EQ(kv.source_type, ScalarType::Float32);
+    EXPECT_EQ(read_volume_header(file("k.nii")).type, ScalarType::Float32);
+    EXPECT_FLOAT_EQ(kv.data[3], 0.5f * float(3 * 7 + 1) + 10);
   }
 }
 
