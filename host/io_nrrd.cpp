@@ -280,8 +280,16 @@ WorldFrame frame_of(const Nrrd* n) {
 // Dims, type, spacing and origin of a loaded header, validated.
 VolumeHeader geometry(const Nrrd* n, const std::string& path) {
   if (n->dim != 3) {
+    std::string hint;
+    if (n->dim == 4) {
+      // 3D Slicer's Sequences module (and PLUS's .igs.nrrd) store 3D+t as a 4-D NRRD whose
+      // slowest axis is a list or time.
+      const int k = n->axis[3].kind;
+      const bool frames = k == nrrdKindList || k == nrrdKindTime || k == nrrdKindDomain;
+      if (frames) hint = "; a sequence of " + std::to_string(n->axis[3].size) + " 3-D frames? softshell reads one 3-D volume per file";
+    }
     throw input_error(path, "expected a 3-D scalar volume, found " + std::to_string(n->dim) + "-D data (sizes " +
-                                sizes_text(n) + ")");
+                                sizes_text(n) + ")" + hint);
   }
   const auto t = scalar_type_of(n->type);
   if (!t) {

@@ -307,6 +307,10 @@ TEST_F(WorldIo, PlusTrackedFrameSequenceIsRefused) {
                           "encoding: raw\nSeq_Frame0000_ImageToReferenceTransform:=1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\n\n" +
                               std::string(24, '\x40'));
   expect_one_line_error(run({"info", file("sweep.igs.nrrd")}), {"tracked-frame sequence"});
+  // A 3D+t sequence as 3D Slicer's Sequences module writes it: a 4-D NRRD with a list axis.
+  write("beat.seq.nrrd", "NRRD0004\ntype: uint8\ndimension: 4\nsizes: 2 2 2 3\nkinds: domain domain domain list\n"
+                         "encoding: raw\n\n" + std::string(24, '\x01'));
+  expect_one_line_error(run({"info", file("beat.seq.nrrd")}), {"found 4-D data", "sequence of 3 3-D frames"});
   // A reconstructed volume that keeps PLUS's lone "Seq_Frame0000_ImageStatus" is a volume.
   EXPECT_FALSE(io_detail::is_tracked_frame_key("Seq_Frame0000_ImageStatus"));
   EXPECT_TRUE(io_detail::is_tracked_frame_key("Seq_Frame0000_ProbeToTrackerTransform"));
