@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <array>
 #include <cerrno>
+#include <climits>
 #include <cmath>
 #include <cstring>
 #include <map>
@@ -365,13 +366,25 @@ std::string array_bytes(const std::string& path, const VtiInfo& v, std::uint64_t
     const std::uint64_t csize = get_uint(block, std::size_t(3 + b) * hb, hb, v.big_endian);
     const std::uint64_t usize = (b + 1 == nblocks && last) ? last : bsize;
     if (csize > block.size() - at) throw input_error(path, "data truncated: compressed block " + std::to_string(b));
-    std::string u(static_cast<std::size_t>(usize), '\0');
-    uLongf got = static_cast<uLongf>(usize);
-    const int rc = uncompress(reinterpret_cast<Bytef*>(u.data()), &got, reinterpret_cast<const Bytef*>(block.data() + at),
-                              static_cast<uLong>(csize));
-    if (rc != Z_OK || got != usize)
+    if (usize > kMaxInflateRatio * csize + 1024)
+      throw input_error(path, "corrupt compression header: block " + std::to_string(b) + " of " + std::to_string(csize) +
+                                  " bytes cannot inflate to " + std::to_string(usize));
+    // Only what the extent still needs is inflated (a header may promise more).
+    const std::size_t want = static_cast<std::size_t>(std::min<std::uint64_t>(usize, expected - out.size()));
+    if (want > UINT_MAX) throw input_error(path, "compressed block " + std::to_string(b) + " larger than 4 GiB");
+    const std::size_t old = out.size();
+    out.resize(old + want);
+    z_stream zs{};
+    if (inflateInit(&zs) != Z_OK) throw input_error(path, "zlib initialisation failed");
+    zs.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(block.data() + at));
+    zs.avail_in = static_cast<uInt>(std::min<std::uint64_t>(csize, UINT_MAX));
+    zs.next_out = reinterpret_cast<Bytef*>(out.data() + old);
+    zs.avail_out = static_cast<uInt>(want);
+    const int rc = inflate(&zs, Z_FINISH);
+    const std::size_t got = want - zs.avail_out;
+    inflateEnd(&zs);
+    if ((rc != Z_STREAM_END && rc != Z_BUF_ERROR && rc != Z_OK) || got != want)
       throw input_error(path, "corrupt compressed block " + std::to_string(b) + " (zlib error " + std::to_string(rc) + ")");
-    out += u;
     at += static_cast<std::size_t>(csize);
   }
   if (out.size() < expected) throw input_error(path, "data truncated after decompression");

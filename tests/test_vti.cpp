@@ -209,5 +209,14 @@ TEST_F(Vti, BadInputGetsOneLineAndExit2) {
   EXPECT_FALSE(fs::exists(file("u.nrrd")));
 }
 
+// Found by fuzz_vti: a block header that promises 4 GiB from 32 compressed bytes.
+TEST_F(Vti, ReproHugeBlockIsRefusedAtOnce) {
+  const std::string repro = std::string(SOFTSHELL_SOURCE_DIR) + "/tests/data/repro/vti_zlib_last_block_4g.vti";
+  write("huge.vti", test::slurp(repro));
+  const test::RunResult r = run({"info", file("huge.vti")});
+  expect_one_line_error(r, {"huge.vti", "corrupt compression header", "cannot inflate to 4294967294"});
+  EXPECT_LT(r.max_rss_kb, 300 * 1024) << "the promised size was allocated";
+}
+
 }  // namespace
 }  // namespace softshell
