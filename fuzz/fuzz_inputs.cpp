@@ -462,6 +462,10 @@ std::vector<Seed> seeds(const std::string& harness) {
                                "space: right-anterior-superior\nspace directions: (0.5,0,0) (0,0.5,0) (0,0,1)\n"
                                "space origin: (1,2,3)\n\n"
                                "0 1.5 -2 3e2\n4 5 6 7\n"});
+    s.push_back({"oblique-lps.nrrd", "NRRD0005\ntype: short\ndimension: 3\nspace: left-posterior-superior\nsizes: 2 2 2\n"
+                                     "space directions: (0.3,0.4,0) (-0.8,0.6,0) (0,0,2)\nspace origin: (-5,7.5,100)\n"
+                                     "measurement frame: (1,0,0) (0,0,-1) (0,1,0)\nendian: little\nencoding: raw\n\n" +
+                                         std::string("\x01\x00\x02\x00\x03\x00\x04\x00\x05\x00\x06\x00\x07\x00\x08\x00", 16)});
     s.push_back({"hex.nrrd", "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: hex\n\n0102030405060708\n"});
     s.push_back({"bzip2.nrrd", head + "endian: little\nencoding: bzip2\n\n" + bzip2(raw)});
     s.push_back({"skips.nrrd", "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 1\nencoding: raw\nline skip: 1\n"
@@ -481,6 +485,9 @@ std::vector<Seed> seeds(const std::string& harness) {
                                        "ElementByteOrderMSB = True\nHeaderSize = -1\nElementType = MET_SHORT\n"
                                        "ElementDataFile = v.raw\n" + std::string(kDataSeparator, 4) + "garbage" +
                                        std::string("\x01\x02\x03\x04\x05\x06\x07\x08", 8)});
+    s.push_back({"rotated.mha", "ObjectType = Image\nNDims = 3\nTransformMatrix = 0 1 0 -1 0 0 0 0 1\nOffset = 10 -20 30\n"
+                                "AnatomicalOrientation = ALI\nElementSpacing = 0.5 0.25 2\nDimSize = 2 2 2\n"
+                                "ElementType = MET_UCHAR\nElementDataFile = LOCAL\nabcdefgh"});
     s.push_back({"elementsize.mha", "NDims = 3\nDimSize = 2 2 2\nElementSize = 0.3 0.3 0.6\nOffset = 1 2 3\n"
                                     "TransformMatrix = 1 0 0 0 1 0 0 0 1\nElementType = MET_CHAR\nElementDataFile = LOCAL\n"
                                     "ABCDEFGH"});
