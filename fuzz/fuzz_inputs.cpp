@@ -2,6 +2,7 @@
 #include "fuzz_inputs.hpp"
 
 #include <bzlib.h>
+#include <zlib.h>
 #include <dirent.h>
 #include <unistd.h>
 
@@ -71,7 +72,8 @@ void put(const std::string& path, const char* data, std::size_t size) {
 
 // Writes the input as a header file (and its data file after the
 // separator); returns the header's path.
-std::string place(const std::uint8_t* data, std::size_t size, const char* attached, const char* detached) {
+std::string place(const std::uint8_t* data, std::size_t size, const char* attached, const char* detached,
+                  const char* data_name = "v.raw") {
   const std::string dir = reset_scratch();
   const char* bytes = reinterpret_cast<const char*>(data);
   const std::string all(bytes, size);
@@ -81,7 +83,7 @@ std::string place(const std::uint8_t* data, std::size_t size, const char* attach
     return dir + "/" + attached;
   }
   put(dir + "/" + detached, bytes, sep);
-  put(dir + "/v.raw", bytes + sep + 4, size - sep - 4);
+  put(dir + "/" + data_name, bytes + sep + 4, size - sep - 4);
   return dir + "/" + detached;
 }
 
@@ -114,6 +116,15 @@ void check_volume(const std::string& path, const Volume& v) {
   }
   if (v.voxels() > (1u << 16)) return;
   const std::string dir = scratch();
+  // Positions are compared in LPS: a RAS or LAS volume is written to MetaImage converted.
+  const auto lps_point = [](const Volume& vol, const Vec3d& p) {
+    Vec3d w = vol.index_to_world(p);
+    if (vol.frame.space == "right-anterior-superior") w[0] = -w[0], w[1] = -w[1];
+    if (vol.frame.space == "left-anterior-superior") w[1] = -w[1];
+    return w;
+  };
+  double extent = 0;
+  for (int a = 0; a < 3; ++a) extent += std::fabs(v.origin[a]) + v.spacing[a] * double(v.dims[a]);
   for (const char* name : {"o.nrrd", "o.mha", "o.mhd", "z.nrrd", "z.mha", "z.mhd"}) {
     WriteOptions w;
     w.compress = name[0] == 'z';
@@ -123,8 +134,16 @@ void check_volume(const std::string& path, const Volume& v) {
     if (back.dims != v.dims || back.source_type != v.source_type || !same_bits(back.data, v.data))
       fail(std::string("samples changed through ") + name);
     for (int a = 0; a < 3; ++a)
-      if (!close(back.spacing[a], v.spacing[a]) || !close(back.origin[a], v.origin[a]))
-        fail(std::string("geometry changed through ") + name);
+      if (!close(back.spacing[a], v.spacing[a])) fail(std::string("spacing changed through ") + name);
+    for (const Vec3d p : {Vec3d{0, 0, 0}, Vec3d{double(v.dims[0] - 1), double(v.dims[1] - 1), double(v.dims[2] - 1)},
+                          Vec3d{double(v.dims[0] - 1), 0, 0}, Vec3d{0, double(v.dims[1] - 1), 0}}) {
+      const Vec3d a = lps_point(back, p), b = lps_point(v, p);
+      for (int c = 0; c < 3; ++c)
+        if (!(std::fabs(a[c] - b[c]) <= 1e-6 * extent)) fail(std::string("world position changed through ") + name);
+    }
+    if (std::string(name).find(".nrrd") != std::string::npos &&
+        back.frame.space != (v.frame.space.empty() ? "left-posterior-superior" : v.frame.space))
+      fail(std::string("space changed through ") + name);
   }
 }
 
@@ -179,6 +198,12 @@ bool run_nrrd(const std::uint8_t* data, std::size_t size) { return run_reader(pl
 bool run_metaimage(const std::uint8_t* data, std::size_t size) {
   return run_reader(place(data, size, "v.mha", "v.mhd"));
 }
+
+bool run_nifti(const std::uint8_t* data, std::size_t size) {
+  return run_reader(place(data, size, "v.nii", "v.hdr", "v.img"));
+}
+
+bool run_vti(const std::uint8_t* data, std::size_t size) { return run_reader(place(data, size, "v.vti", "v.vti")); }
 
 bool run_raw(const std::uint8_t* data, std::size_t size) {
   // The option parsers on the first line.
@@ -411,6 +436,56 @@ std::string bzip2(const std::string& in) {
 
 }  // namespace
 
+std::string nifti_header(const NiftiSpec& n) {
+  const bool two = n.version == 2;
+  std::string h(two ? 540 : 348, '\0');
+  auto put_bytes = [&](std::size_t off, const void* p, std::size_t len) {
+    std::string b(static_cast<const char*>(p), len);
+    if (n.big_endian) std::reverse(b.begin(), b.end());
+    h.replace(off, len, b);
+  };
+  auto i16 = [&](std::size_t off, double v) { const std::int16_t x = std::int16_t(v); put_bytes(off, &x, 2); };
+  auto i32 = [&](std::size_t off, double v) { const std::int32_t x = std::int32_t(v); put_bytes(off, &x, 4); };
+  auto i64 = [&](std::size_t off, double v) { const std::int64_t x = std::int64_t(v); put_bytes(off, &x, 8); };
+  auto f32 = [&](std::size_t off, double v) { const float x = float(v); put_bytes(off, &x, 4); };
+  auto f64 = [&](std::size_t off, double v) { put_bytes(off, &v, 8); };
+  if (!two) {
+    i32(0, 348);
+    for (int i = 0; i < 8; ++i) i16(40 + 2 * i, double(n.dim[i]));
+    i16(70, n.datatype);
+    i16(72, n.bitpix);
+    for (int i = 0; i < 8; ++i) f32(76 + 4 * i, n.pixdim[i]);
+    f32(108, n.pair ? 0 : 352);
+    f32(112, n.scl_slope);
+    f32(116, n.scl_inter);
+    h[123] = char(n.xyzt_units);
+    i16(252, n.qform_code);
+    i16(254, n.sform_code);
+    for (int i = 0; i < 3; ++i) f32(256 + 4 * i, n.quatern[i]), f32(268 + 4 * i, n.qoffset[i]);
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) f32(280 + 16 * r + 4 * c, n.srow[r][c]);
+    h.replace(344, 4, n.pair ? std::string("ni1\0", 4) : std::string("n+1\0", 4));
+  } else {
+    i32(0, 540);
+    h.replace(4, 8, n.pair ? std::string("ni2\0\r\n\032\n", 8) : std::string("n+2\0\r\n\032\n", 8));
+    i16(12, n.datatype);
+    i16(14, n.bitpix);
+    for (int i = 0; i < 8; ++i) i64(16 + 8 * i, double(n.dim[i]));
+    for (int i = 0; i < 8; ++i) f64(104 + 8 * i, n.pixdim[i]);
+    i64(168, n.pair ? 0 : 544);
+    f64(176, n.scl_slope);
+    f64(184, n.scl_inter);
+    i32(344, n.qform_code);
+    i32(348, n.sform_code);
+    for (int i = 0; i < 3; ++i) f64(352 + 8 * i, n.quatern[i]), f64(376 + 8 * i, n.qoffset[i]);
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) f64(400 + 32 * r + 8 * c, n.srow[r][c]);
+    i32(500, n.xyzt_units);
+  }
+  if (!n.pair) h += std::string(4, '\0');  // no extensions
+  return h;
+}
+
 std::vector<Seed> seeds(const std::string& harness) {
   std::vector<Seed> s;
   const Dims3 d{5, 4, 3};
@@ -427,6 +502,10 @@ std::vector<Seed> seeds(const std::string& harness) {
                                "space: right-anterior-superior\nspace directions: (0.5,0,0) (0,0.5,0) (0,0,1)\n"
                                "space origin: (1,2,3)\n\n"
                                "0 1.5 -2 3e2\n4 5 6 7\n"});
+    s.push_back({"oblique-lps.nrrd", "NRRD0005\ntype: short\ndimension: 3\nspace: left-posterior-superior\nsizes: 2 2 2\n"
+                                     "space directions: (0.3,0.4,0) (-0.8,0.6,0) (0,0,2)\nspace origin: (-5,7.5,100)\n"
+                                     "measurement frame: (1,0,0) (0,0,-1) (0,1,0)\nendian: little\nencoding: raw\n\n" +
+                                         std::string("\x01\x00\x02\x00\x03\x00\x04\x00\x05\x00\x06\x00\x07\x00\x08\x00", 16)});
     s.push_back({"hex.nrrd", "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: hex\n\n0102030405060708\n"});
     s.push_back({"bzip2.nrrd", head + "endian: little\nencoding: bzip2\n\n" + bzip2(raw)});
     s.push_back({"skips.nrrd", "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 1\nencoding: raw\nline skip: 1\n"
@@ -446,9 +525,77 @@ std::vector<Seed> seeds(const std::string& harness) {
                                        "ElementByteOrderMSB = True\nHeaderSize = -1\nElementType = MET_SHORT\n"
                                        "ElementDataFile = v.raw\n" + std::string(kDataSeparator, 4) + "garbage" +
                                        std::string("\x01\x02\x03\x04\x05\x06\x07\x08", 8)});
+    s.push_back({"rotated.mha", "ObjectType = Image\nNDims = 3\nTransformMatrix = 0 1 0 -1 0 0 0 0 1\nOffset = 10 -20 30\n"
+                                "AnatomicalOrientation = ALI\nElementSpacing = 0.5 0.25 2\nDimSize = 2 2 2\n"
+                                "ElementType = MET_UCHAR\nElementDataFile = LOCAL\nabcdefgh"});
     s.push_back({"elementsize.mha", "NDims = 3\nDimSize = 2 2 2\nElementSize = 0.3 0.3 0.6\nOffset = 1 2 3\n"
                                     "TransformMatrix = 1 0 0 0 1 0 0 0 1\nElementType = MET_CHAR\nElementDataFile = LOCAL\n"
                                     "ABCDEFGH"});
+  } else if (harness == "nifti") {
+    NiftiSpec n;
+    n.dim[1] = 3, n.dim[2] = 2, n.dim[3] = 2;
+    n.pixdim[1] = 0.5, n.pixdim[2] = 0.75, n.pixdim[3] = 2;
+    s.push_back({"uint8.nii", nifti_header(n) + std::string("\x01\x02\x03\x04\x05\x06\x07\x08\x09\x0a\x0b\x0c", 12)});
+    n.qform_code = 1, n.quatern[0] = 0.1, n.quatern[1] = -0.2, n.quatern[2] = 0.3, n.qoffset[0] = 5, n.qoffset[2] = -7;
+    n.datatype = 4, n.bitpix = 16, n.big_endian = true;
+    std::string be;
+    for (int i = 0; i < 12; ++i) be += char(0), be += char(i * 20);
+    s.push_back({"int16-qform-big-endian.nii", nifti_header(n) + be});
+    NiftiSpec m;
+    m.version = 2, m.sform_code = 2, m.datatype = 16, m.bitpix = 32;
+    m.srow[0][1] = -0.5, m.srow[1][0] = 0.5, m.srow[2][2] = 1.5, m.srow[0][3] = 10, m.srow[1][3] = -20;
+    m.scl_slope = 2, m.scl_inter = -1;
+    std::string f;
+    for (int i = 0; i < 8; ++i) {
+      const float x = float(i) * 0.25f;
+      f.append(reinterpret_cast<const char*>(&x), 4);
+    }
+    s.push_back({"float-sform-nifti2.nii", nifti_header(m) + f});
+    NiftiSpec p;
+    p.pair = true;
+    s.push_back({"pair.hdr", nifti_header(p) + std::string(kDataSeparator, 4) + std::string(8, '\x11')});
+  } else if (harness == "vti") {
+    const std::string head = "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" version=\"1.0\" byte_order=\"LittleEndian\"";
+    auto image = [](const std::string& extra, const std::string& arrays, const std::string& tail) {
+      return ">\n<ImageData WholeExtent=\"0 2 0 1 0 1\" Origin=\"1 2 3\" Spacing=\"0.5 0.5 1\"" + extra +
+             ">\n<Piece Extent=\"0 2 0 1 0 1\">\n<PointData Scalars=\"s\">\n" + arrays +
+             "\n</PointData>\n</Piece>\n</ImageData>\n" + tail + "</VTKFile>\n";
+    };
+    s.push_back({"ascii.vti", head + image(" Direction=\"0 -1 0 1 0 0 0 0 1\"",
+                                           "<DataArray type=\"Float32\" Name=\"s\" format=\"ascii\">0 1 2 3 4 5 6 7 8 9 10 11"
+                                           "</DataArray>", "")});
+    std::string u16;
+    for (int i = 0; i < 12; ++i) u16 += char(i * 21), u16 += char(i);
+    const std::string block = std::string("\x18\0\0\0", 4) + u16;
+    static const char* a = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    auto b64 = [&](const std::string& in) {
+      std::string out;
+      for (std::size_t i = 0; i < in.size(); i += 3) {
+        unsigned v = static_cast<unsigned char>(in[i]) << 16;
+        if (i + 1 < in.size()) v |= static_cast<unsigned char>(in[i + 1]) << 8;
+        if (i + 2 < in.size()) v |= static_cast<unsigned char>(in[i + 2]);
+        out += a[(v >> 18) & 63], out += a[(v >> 12) & 63];
+        out += i + 1 < in.size() ? a[(v >> 6) & 63] : '=';
+        out += i + 2 < in.size() ? a[v & 63] : '=';
+      }
+      return out;
+    };
+    s.push_back({"binary.vti", head + image("", "<DataArray type=\"UInt16\" Name=\"s\" format=\"binary\">" + b64(block) +
+                                                    "</DataArray>", "")});
+    s.push_back({"appended-raw.vti", head + " header_type=\"UInt32\"" +
+                                         image("", "<DataArray type=\"UInt16\" Name=\"s\" format=\"appended\" offset=\"0\"/>",
+                                               "<AppendedData encoding=\"raw\">\n_" + block + "\n</AppendedData>\n")});
+    s.push_back({"appended-base64.vti", head + image("", "<DataArray type=\"UInt16\" Name=\"s\" format=\"appended\" offset=\"0\"/>",
+                                                     "<AppendedData encoding=\"base64\">\n_" + b64(block) +
+                                                         "\n</AppendedData>\n")});
+    uLongf n = compressBound(uLong(u16.size()));
+    std::string z(n, '\0');
+    compress(reinterpret_cast<Bytef*>(z.data()), &n, reinterpret_cast<const Bytef*>(u16.data()), uLong(u16.size()));
+    z.resize(n);
+    const std::string zhead = std::string("\x01\0\0\0\x18\0\0\0\0\0\0\0", 12) + char(n) + std::string(3, '\0');
+    s.push_back({"zlib.vti", head + " compressor=\"vtkZLibDataCompressor\"" +
+                                 image("", "<DataArray type=\"UInt16\" Name=\"s\" format=\"appended\" offset=\"0\"/>",
+                                       "<AppendedData encoding=\"raw\">_" + zhead + z + "</AppendedData>\n")});
   } else if (harness == "raw") {
     for (int t = 0; t < 10; ++t) {
       std::string b(8, '\0');

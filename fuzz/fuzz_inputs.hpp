@@ -34,6 +34,12 @@ bool run_metaimage(const std::uint8_t* data, std::size_t size);
 // order, dims (1..16 each) and spacing; the rest is the file. The first
 // line (up to 64 bytes) is also given to the --raw / --spacing parsers.
 bool run_raw(const std::uint8_t* data, std::size_t size);
+// NIfTI: "v.nii" (NIfTI-1 or -2, plain or gzip), or with a separator the
+// header "v.hdr" and its data "v.img"; the same checks. Without NIfTI in the
+// build every input is refused (returns false).
+bool run_nifti(const std::uint8_t* data, std::size_t size);
+// VTK XML ImageData: "v.vti"; the same checks.
+bool run_vti(const std::uint8_t* data, std::size_t size);
 // The classify pipeline on a tiny volume (dims 3..8 per axis): the first
 // kClassifyHeader bytes choose dims, spacing, sample type, the method, the
 // mask rule, the near-field removal, the isovalue (a value, or auto by the
@@ -47,6 +53,25 @@ bool run_raw(const std::uint8_t* data, std::size_t size);
 constexpr std::size_t kClassifyHeader = 48;
 bool run_classify(const std::uint8_t* data, std::size_t size);
 
+// A NIfTI file's bytes, written field by field (no niftilib here): what the
+// seeds and the tests (tests/test_nifti.cpp) feed the reader.
+struct NiftiSpec {
+  int version = 1;                                          // 1 or 2
+  std::int64_t dim[8] = {3, 2, 2, 2, 1, 1, 1, 1};
+  int datatype = 2;                                         // DT_UINT8
+  int bitpix = 8;
+  double pixdim[8] = {1, 1, 1, 1, 1, 1, 1, 1};              // pixdim[0]: qfac
+  double scl_slope = 0, scl_inter = 0;
+  int qform_code = 0, sform_code = 0;
+  double quatern[3] = {0, 0, 0}, qoffset[3] = {0, 0, 0};
+  double srow[3][4] = {{0, 0, 0, 0}, {0, 0, 0, 0}, {0, 0, 0, 0}};
+  int xyzt_units = 2;                                       // NIFTI_UNITS_MM
+  bool big_endian = false;
+  bool pair = false;  // magic "ni1"/"ni2": header only, the data in a .img file
+};
+// The header (and, for a single file, the 4 bytes to vox_offset), without samples.
+std::string nifti_header(const NiftiSpec& spec);
+
 // Seed inputs per harness, as files: name -> bytes. Valid files of every
 // kind each reader takes (every NRRD encoding, attached and detached,
 // MetaImage plain and compressed, each raw type) and a few classify setups.
@@ -54,6 +79,6 @@ struct Seed {
   std::string name;
   std::string bytes;
 };
-std::vector<Seed> seeds(const std::string& harness);  // "nrrd", "metaimage", "raw", "classify"
+std::vector<Seed> seeds(const std::string& harness);  // "nrrd", "metaimage", "raw", "nifti", "vti", "classify"
 
 }  // namespace softshell::fuzz

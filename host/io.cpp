@@ -677,8 +677,8 @@ Volume read_raw(const std::string& path, const RawSpec& spec) {
   return v;
 }
 
-// NRRD by content (its magic) or extension, MetaImage by extension.
-enum class Format { Nrrd, MetaImage };
+// NRRD by content (its magic) or extension, MetaImage, NIfTI and VTK ImageData by extension.
+enum class Format { Nrrd, MetaImage, Nifti, Vti };
 Format format_of(const std::string& path) {
   char magic[8] = {};
   {
@@ -689,11 +689,47 @@ Format format_of(const std::string& path) {
   // Content first: a NRRD file is a NRRD file whatever it is called.
   if (std::memcmp(magic, "NRRD000", 7) == 0 || ext == ".nrrd" || ext == ".nhdr") return Format::Nrrd;
   if (ext == ".mha" || ext == ".mhd") return Format::MetaImage;
+  if (ext == ".vti") return Format::Vti;
+  const std::string name = lower(fs::path(path).filename().string());
+  const bool nii_gz = name.size() > 7 && name.compare(name.size() - 7, 7, ".nii.gz") == 0;
+  if (ext == ".nii" || ext == ".hdr" || nii_gz) {
+    if (!nifti_supported())
+      throw input_error(path, "NIfTI input is not part of this build (install libnifti2-dev and rebuild softshell)");
+    return Format::Nifti;
+  }
   throw input_error(path,
-                    "unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, or --raw X,Y,Z --type T)");
+                    "unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, or --raw X,Y,Z --type T)");
 }
 
 }  // namespace
+
+// ---- tracked-frame sequences ------------------------------------------------------
+
+namespace io_detail {
+
+bool is_tracked_frame_key(const std::string& key) {
+  if (key.rfind("Seq_Frame", 0) != 0) return false;
+  std::size_t i = 9, digits = 0;
+  unsigned long frame = 0;
+  while (i < key.size() && std::isdigit(static_cast<unsigned char>(key[i])) && digits < 9) {
+    frame = frame * 10 + static_cast<unsigned long>(key[i] - '0');
+    ++i, ++digits;
+  }
+  if (digits == 0 || i >= key.size() || key[i] != '_') return false;
+  const std::string name = key.substr(i + 1);
+  return frame > 0 || name.find("Transform") != std::string::npos;
+}
+
+InputError tracked_frame_error(const std::string& path, const std::string& key) {
+  std::string shown;
+  for (char c : key.substr(0, 48)) shown += (static_cast<unsigned char>(c) >= 0x20 && c != 0x7f) ? c : '?';
+  return input_error(path, "a PLUS tracked-frame sequence (2-D ultrasound frames, each with its own pose: key " +
+                               shown +
+                               "), not a 3-D volume; reconstruct a volume from it first (PLUS's VolumeReconstructor "
+                               "or Slicer's SlicerIGT Volume Reconstruction) and classify that");
+}
+
+}  // namespace io_detail
 
 // ---- geometry and samples ------------------------------------------------------
 
@@ -747,8 +783,24 @@ std::size_t replace_non_finite(Volume& v, float value) {
 
 Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw) {
   if (raw) return read_raw(path, *raw);
-  return format_of(path) == Format::Nrrd ? io_detail::read_nrrd(path) : io_detail::read_metaimage(path);
+  switch (format_of(path)) {
+    case Format::Nrrd: return io_detail::read_nrrd(path);
+    case Format::MetaImage: return io_detail::read_metaimage(path);
+    case Format::Nifti: return io_detail::read_nifti(path);
+    case Format::Vti: return io_detail::read_vti(path);
+  }
+  return {};
 }
+
+#ifndef SOFTSHELL_HAVE_NIFTI
+bool nifti_supported() { return false; }
+namespace io_detail {
+Volume read_nifti(const std::string& path) { throw input_error(path, "NIfTI input is not part of this build"); }
+VolumeHeader read_nifti_header(const std::string& path) { throw input_error(path, "NIfTI input is not part of this build"); }
+}  // namespace io_detail
+#else
+bool nifti_supported() { return true; }
+#endif
 
 VolumeHeader read_volume_header(const std::string& path, const std::optional<RawSpec>& raw) {
   if (raw) {
@@ -762,8 +814,13 @@ VolumeHeader read_volume_header(const std::string& path, const std::optional<Raw
     h.files = {path};
     return h;
   }
-  return format_of(path) == Format::Nrrd ? io_detail::read_nrrd_header(path)
-                                         : io_detail::read_metaimage_header(path);
+  switch (format_of(path)) {
+    case Format::Nrrd: return io_detail::read_nrrd_header(path);
+    case Format::MetaImage: return io_detail::read_metaimage_header(path);
+    case Format::Nifti: return io_detail::read_nifti_header(path);
+    case Format::Vti: return io_detail::read_vti_header(path);
+  }
+  return {};
 }
 
 void write_volume(const std::string& path, const Volume& v, const WriteOptions& opt) {

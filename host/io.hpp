@@ -22,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "error.hpp"
 #include "volume.hpp"
 
 namespace softshell {
@@ -41,10 +42,13 @@ Vec3d parse_vec3(const std::string& text, const std::string& what);
 
 // Reads a 3-D scalar volume. With `raw`, the file is read as headerless raw
 // data; otherwise the format is chosen by content (NRRD magic) and extension
-// (.nrrd/.nhdr, .mha/.mhd). Checks, before allocating, that the voxel count
+// (.nrrd/.nhdr, .mha/.mhd, .nii/.nii.gz/.hdr, .vti). Checks, before allocating, that the voxel count
 // does not overflow, that the samples fit in this machine's memory and that
 // the file holds the bytes its header declares.
 Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw = std::nullopt);
+
+// True when this build reads NIfTI (.nii, .nii.gz, .hdr/.img; niftilib was found).
+bool nifti_supported();
 
 // A volume file's header: what read_volume() would return, without the
 // samples, and the files a read opens.
@@ -53,6 +57,7 @@ struct VolumeHeader {
   ScalarType type = ScalarType::UInt8;
   Vec3d spacing{1.0, 1.0, 1.0};
   Vec3d origin{0.0, 0.0, 0.0};
+  WorldFrame frame;
   std::vector<std::string> files;  // the header itself, then its detached data file(s)
 };
 // Parses the header only (and checks that its data files are acceptable);
@@ -208,10 +213,25 @@ void install_signal_cleanup();
 // `max_age_seconds` < 0: AtomicFile::kStaleTempSeconds.
 std::size_t remove_stale_temporaries(const std::string& target, long max_age_seconds = -1);
 
+// PLUS tracked-frame sequences (.igs.mha, .igs.nrrd: 2-D frames stacked
+// along the third axis, each with its own pose) carry per-frame header keys
+// "Seq_FrameNNNN_<name>". True for a key that marks a sequence: one of a
+// frame after the first, or a per-frame transform. (PLUS's reconstructed
+// volumes keep a lone "Seq_Frame0000_ImageStatus", which is not one.)
+bool is_tracked_frame_key(const std::string& key);
+// The one-line refusal for such a file (InputError naming `path`).
+InputError tracked_frame_error(const std::string& path, const std::string& key);
+
 Volume read_nrrd(const std::string& path);
 VolumeHeader read_nrrd_header(const std::string& path);
 void write_nrrd(const std::string& path, const Volume& v, const WriteOptions& opt);
 Volume read_metaimage(const std::string& path);
+// NIfTI (host/io_nifti.cpp; only when nifti_supported()).
+Volume read_nifti(const std::string& path);
+VolumeHeader read_nifti_header(const std::string& path);
+// VTK XML ImageData (host/io_vti.cpp).
+Volume read_vti(const std::string& path);
+VolumeHeader read_vti_header(const std::string& path);
 VolumeHeader read_metaimage_header(const std::string& path);
 // `detached`: .mhd header plus "<stem>.raw" (".zraw" when compressed).
 void write_metaimage(const std::string& path, const Volume& v, const WriteOptions& opt,

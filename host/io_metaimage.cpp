@@ -5,6 +5,7 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <climits>
 #include <cmath>
@@ -66,6 +67,11 @@ std::string excerpt(const std::string& s, std::size_t max = 40) {
   }
   if (s.size() > max) out += "...";
   return out;
+}
+
+std::string upper_ascii(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  return s;
 }
 
 std::vector<std::string> words(const std::string& s) {
@@ -287,6 +293,8 @@ MetaImage open_metaimage(const std::string& path) {
   MetaImage m;
   m.header_file = open_for_reading(path);
   const Header h = p.read_header(m.header_file.get());
+  for (const auto& kv : h.keys)
+    if (is_tracked_frame_key(kv.first)) throw tracked_frame_error(path, kv.first);
 
   if (const std::string* ot = p.find(h, "ObjectType"); ot && *ot != "Image")
     p.fail("ObjectType = " + excerpt(*ot) + " is not supported (expected Image)");
@@ -346,9 +354,32 @@ MetaImage open_metaimage(const std::string& path) {
     }
   }
   check_geometry(path, spacing, origin);
-  // TransformMatrix (orientation) is accepted but not applied: softshell
-  // works on the voxel grid; only spacing and origin matter.
-  if (const std::string* tm = p.find(h, "TransformMatrix")) p.reals("TransformMatrix", *tm, 9);
+  // TransformMatrix: the unit directions of the three index axes, one after
+  // another (ITK's MetaImageIO reads axis i from numbers 3i..3i+2). Rows
+  // that are not unit length are normalised; a degenerate matrix (a zero
+  // row, dependent rows) says nothing usable and leaves the identity.
+  WorldFrame frame;
+  for (const char* key : {"TransformMatrix", "Rotation", "Orientation"}) {
+    const std::string* tm = p.find(h, key);
+    if (!tm) continue;
+    const auto x = p.reals(key, *tm, 9);
+    Mat3 axes{};
+    bool ok = true;
+    for (int a = 0; a < 3 && ok; ++a) {
+      const double len = std::sqrt(x[3 * a] * x[3 * a] + x[3 * a + 1] * x[3 * a + 1] + x[3 * a + 2] * x[3 * a + 2]);
+      ok = std::isfinite(len) && len > 0.0;
+      // Unit rows (ITK writes direction cosines) are kept bit for bit.
+      const double scale = std::fabs(len - 1.0) <= 1e-12 ? 1.0 : len;
+      for (int c = 0; c < 3 && ok; ++c) axes[a][c] = x[3 * a + c] / scale;
+    }
+    if (ok && std::fabs(determinant(axes)) > 1e-6) frame.axes = axes;
+    break;
+  }
+  if (const std::string* ao = p.find(h, "AnatomicalOrientation")) {
+    // Kept to be written back when it is a three-letter code ("RAI").
+    const std::string code = upper_ascii(*ao);
+    if (code.size() == 3 && code.find_first_not_of("RLAPSI") == std::string::npos) frame.anatomical_orientation = code;
+  }
 
   for (const char* key : {"BinaryDataByteOrderMSB", "ElementByteOrderMSB"}) {
     if (const std::string* b = p.find(h, key)) {
@@ -379,6 +410,7 @@ MetaImage open_metaimage(const std::string& path) {
   m.header.type = *type;
   m.header.spacing = spacing;
   m.header.origin = origin;
+  m.header.frame = frame;
   m.header.files = {path};
 
   // Where the samples live: after the header (LOCAL) or in another file.
@@ -463,6 +495,7 @@ Volume read_metaimage(const std::string& path) {
 
   Volume v(m.header.dims, m.header.spacing, m.header.type);
   v.origin = m.header.origin;
+  v.frame = m.header.frame;
   decode_samples(bytes.data(), v.voxels(), m.header.type, m.msb != host_is_big_endian(), v.data.data());
   return v;
 }
@@ -502,9 +535,19 @@ void write_metaimage(const std::string& path, const Volume& v, const WriteOption
       << "BinaryDataByteOrderMSB = False\n"
       << "CompressedData = " << (opt.compress ? "True" : "False") << "\n";
   if (opt.compress) hdr << "CompressedDataSize = " << packed.size() << "\n";
-  hdr << "TransformMatrix = 1 0 0 0 1 0 0 0 1\n"
-      << "Offset = " << three(v.origin) << "\n"
-      << "ElementSpacing = " << three(v.spacing) << "\n"
+  // MetaImage's world is ITK's LPS: a RAS or LAS volume is converted (the
+  // same physical placement); other spaces are written as they are.
+  Vec3d origin = v.origin;
+  const WorldFrame frame = v.frame.to_lps(origin);
+  hdr << "TransformMatrix = " << three(frame.axes[0]) << " " << three(frame.axes[1]) << " " << three(frame.axes[2])
+      << "\n"
+      << "Offset = " << three(origin) << "\n";
+  if (frame.anatomical()) {
+    hdr << "AnatomicalOrientation = "
+        << (frame.anatomical_orientation.empty() ? lps_orientation_code(frame.axes) : frame.anatomical_orientation)
+        << "\n";
+  }
+  hdr << "ElementSpacing = " << three(v.spacing) << "\n"
       << "DimSize = " << v.dims[0] << " " << v.dims[1] << " " << v.dims[2] << "\n"
       << "ElementType = " << element_type_name(type) << "\n"
       << "ElementDataFile = " << data_file << "\n";

@@ -182,7 +182,12 @@ HeaderScan scan_header(const std::string& path) {
     if (colon == std::string::npos) continue;  // Teem reports it
     // A key/value pair has ":=" at its first colon; a field may hold ":="
     // further on (Teem parses it as the field: found by fuzzing).
-    if (colon + 1 < line.size() && line[colon + 1] == '=') continue;
+    if (colon + 1 < line.size() && line[colon + 1] == '=') {
+      // A key/value pair: a PLUS tracked-frame sequence's keys refuse the file.
+      const std::string kv_key = trim(line.substr(0, colon));
+      if (is_tracked_frame_key(kv_key)) throw tracked_frame_error(path, kv_key);
+      continue;
+    }
     std::string key;
     for (char c : line.substr(0, colon))
       if (c != ' ' && c != '\t') key += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
@@ -238,11 +243,56 @@ double axis_spacing(const Nrrd* n, unsigned ax) {
   return std::isfinite(sp) && sp > 0.0 ? sp : 1.0;
 }
 
+// The orientation of a loaded header: unit axes from a 3-D space's "space
+// directions" (identity when there is no 3-D space, when an axis has no
+// direction or when they are degenerate), the space's name, the
+// measurement frame.
+WorldFrame frame_of(const Nrrd* n) {
+  WorldFrame f;
+  if (n->spaceDim != 3) return f;  // no space, or one with time: grid-aligned, unnamed
+  if (n->space != nrrdSpaceUnknown) f.space = airEnumStr(nrrdSpace, n->space);
+  Mat3 axes{};
+  bool ok = true;
+  for (unsigned ax = 0; ax < 3 && ok; ++ax) {
+    const double* d = n->axis[ax].spaceDirection;
+    const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    ok = std::isfinite(len) && len > 0.0;
+    for (unsigned c = 0; c < 3 && ok; ++c) axes[ax][c] = d[c] / len;
+  }
+  if (ok && std::fabs(determinant(axes)) > 1e-6) {
+    f.axes = axes;
+    WorldFrame::Exact e;
+    e.axes = axes;
+    for (unsigned ax = 0; ax < 3; ++ax)
+      for (unsigned c = 0; c < 3; ++c) e.directions[ax][c] = n->axis[ax].spaceDirection[c];
+    f.as_read = e;
+  }
+  if (AIR_EXISTS(n->measurementFrame[0][0])) {
+    Mat3 mf{};
+    bool finite = true;
+    for (unsigned i = 0; i < 3; ++i)
+      for (unsigned j = 0; j < 3; ++j) {
+        mf[i][j] = n->measurementFrame[i][j];
+        finite = finite && std::isfinite(mf[i][j]);
+      }
+    if (finite) f.measurement_frame = mf;
+  }
+  return f;
+}
+
 // Dims, type, spacing and origin of a loaded header, validated.
 VolumeHeader geometry(const Nrrd* n, const std::string& path) {
   if (n->dim != 3) {
+    std::string hint;
+    if (n->dim == 4) {
+      // 3D Slicer's Sequences module (and PLUS's .igs.nrrd) store 3D+t as a 4-D NRRD whose
+      // slowest axis is a list or time.
+      const int k = n->axis[3].kind;
+      const bool frames = k == nrrdKindList || k == nrrdKindTime || k == nrrdKindDomain;
+      if (frames) hint = "; a sequence of " + std::to_string(n->axis[3].size) + " 3-D frames? softshell reads one 3-D volume per file";
+    }
     throw input_error(path, "expected a 3-D scalar volume, found " + std::to_string(n->dim) + "-D data (sizes " +
-                                sizes_text(n) + ")");
+                                sizes_text(n) + ")" + hint);
   }
   const auto t = scalar_type_of(n->type);
   if (!t) {
@@ -267,6 +317,8 @@ VolumeHeader geometry(const Nrrd* n, const std::string& path) {
     }
   }
   check_geometry(path, h.spacing, h.origin);
+  h.frame = frame_of(n);
+  if (h.frame.as_read) h.frame.as_read->spacing = h.spacing;  // what the writer will compare with
   return h;
 }
 
@@ -456,6 +508,7 @@ Volume read_nrrd(const std::string& path) {
   v.source_type = h.type;
   v.spacing = h.spacing;
   v.origin = h.origin;
+  v.frame = h.frame;
   v.data.resize(v.voxels());
   // After nrrdLoad the data is in host byte order.
   decode_samples(static_cast<const unsigned char*>(n->data), v.voxels(), h.type, false, v.data.data());
@@ -481,15 +534,28 @@ void write_nrrd(const std::string& path, const Volume& v, const WriteOptions& op
                     v.dims[2]) != 0) {
       throw input_error(path, "cannot write: " + take_biff_message());
     }
-    // A 3-D world space without anatomical claims: softshell does not track
-    // patient orientation, only spacing and origin.
-    nrrdSpaceSet(n.get(), nrrdSpace3DRightHanded);
+    // The volume's world: its own space when it names one Teem knows, else
+    // left-posterior-superior (ITK's physical space, what MetaImage and
+    // raw inputs mean), so 3D Slicer and ITK place it the same way.
+    int space = nrrdSpaceLeftPosteriorSuperior;
+    if (!v.frame.space.empty()) {
+      space = airEnumVal(nrrdSpace, v.frame.space.c_str());
+      if (space == nrrdSpaceUnknown || nrrdSpaceDimension(space) != 3)
+        throw input_error(path, "cannot write: unknown 3-D space '" + v.frame.space + "'");
+    }
+    nrrdSpaceSet(n.get(), space);
     double dirs[3][NRRD_SPACE_DIM_MAX];
     for (int a = 0; a < 3; ++a) {
       nrrdSpaceVecSetNaN(dirs[a]);
-      for (int c = 0; c < 3; ++c) dirs[a][c] = a == c ? v.spacing[a] : 0.0;
+      const auto& e = v.frame.as_read;
+      const bool same = e && e->spacing[a] == v.spacing[a] && e->axes[a] == v.frame.axes[a];
+      for (int c = 0; c < 3; ++c) dirs[a][c] = same ? e->directions[a][c] : v.spacing[a] * v.frame.axes[a][c];
     }
     nrrdAxisInfoSet_va(n.get(), nrrdAxisInfoSpaceDirection, dirs[0], dirs[1], dirs[2]);
+    if (v.frame.measurement_frame) {
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) n->measurementFrame[i][j] = (*v.frame.measurement_frame)[i][j];
+    }
     const int kinds[3] = {nrrdKindSpace, nrrdKindSpace, nrrdKindSpace};
     nrrdAxisInfoSet_nva(n.get(), nrrdAxisInfoKind, kinds);
     const int centers[3] = {nrrdCenterCell, nrrdCenterCell, nrrdCenterCell};

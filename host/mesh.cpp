@@ -170,6 +170,35 @@ Mesh marching_cubes_reference(const Volume& v, double level) {
   return mesh;
 }
 
+void mesh_to_world(Mesh& mesh, const Volume& v) {
+  if (v.frame.axes_are_identity()) return;
+  const Mat3& a = v.frame.axes;  // rows: world directions of the grid axes
+  // Normals transform by the inverse transpose of the linear map g -> sum_k g_k a[k].
+  const Mat3 inv = inverse(a);
+  for (std::size_t i = 0; i < mesh.vertex_count(); ++i) {
+    float* p = &mesh.positions[3 * i];
+    const Vec3d w = v.grid_to_world({double(p[0]), double(p[1]), double(p[2])});
+    for (int c = 0; c < 3; ++c) p[c] = float(w[c]);
+    float* n = &mesh.normals[3 * i];
+    // n' = A^{-T} n with A's columns the axes: A = a^T, so A^{-T} = a^{-1}: n'_c = sum_k inv[c][k] n_k.
+    double m[3] = {0, 0, 0}, len = 0;
+    for (int c = 0; c < 3; ++c) {
+      for (int k = 0; k < 3; ++k) m[c] += inv[c][k] * double(n[k]);
+      len += m[c] * m[c];
+    }
+    len = std::sqrt(len);
+    for (int c = 0; c < 3; ++c) n[c] = len > 0 ? float(m[c] / len) : n[c];
+  }
+  if (determinant(a) < 0)
+    for (std::size_t t = 0; t < mesh.triangle_count(); ++t) std::swap(mesh.triangles[3 * t + 1], mesh.triangles[3 * t + 2]);
+}
+
+std::string ply_space_comment(const Volume& v) {
+  if (v.frame.space.empty() || v.frame.space == "left-posterior-superior") return "SPACE=LPS";
+  if (v.frame.space == "right-anterior-superior") return "SPACE=RAS";
+  return "";
+}
+
 // ---------------------------------------------------------------------------------------------
 // PLY
 
@@ -178,8 +207,13 @@ void write_ply_binary(const std::string& path, const Mesh& mesh, const std::stri
   std::string header = "ply\nformat binary_little_endian 1.0\n";
   if (!comment.empty()) {
     std::string c = comment;
-    std::replace(c.begin(), c.end(), '\n', ' ');
-    header += "comment " + c + "\n";
+    std::replace(c.begin(), c.end(), '\r', ' ');
+    std::size_t start = 0;
+    while (start <= c.size()) {  // one "comment" line per line of it
+      const std::size_t end = std::min(c.find('\n', start), c.size());
+      header += "comment " + c.substr(start, end - start) + "\n";
+      start = end + 1;
+    }
   }
   header += "element vertex " + std::to_string(mesh.vertex_count()) +
             "\nproperty float x\nproperty float y\nproperty float z\n"

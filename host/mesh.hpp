@@ -52,8 +52,21 @@ Mesh marching_cubes(Runtime& rt, const Volume& v, double level, MeshTiming* timi
 // The same algorithm on the host, in float64, one cell at a time (the tests' reference).
 Mesh marching_cubes_reference(const Volume& v, double level);
 
+// Moves a mesh from grid millimetres (origin + spacing * index: where marching_cubes puts it)
+// into the world of `v` (Volume::grid_to_world): positions through the volume's axes about its
+// origin, normals through the inverse transpose and renormalised, and the triangles' winding
+// reversed when the axes are left-handed (a mirror), so triangles stay counter-clockwise around
+// their normals. Nothing changes when the axes are the identity.
+void mesh_to_world(Mesh& mesh, const Volume& v);
+
+// The PLY comment that tells 3D Slicer the mesh's coordinate system ("SPACE=LPS" or
+// "SPACE=RAS", Slicer's own convention), for a mesh in `v`'s world; empty when that world
+// is not a patient space.
+std::string ply_space_comment(const Volume& v);
+
 // Binary little-endian PLY: vertex float x y z nx ny nz, face list uchar int vertex_indices;
-// written atomically (nothing is left behind on failure). `comment` goes into the header.
+// written atomically (nothing is left behind on failure). `comment` goes into the header, one
+// "comment" line per line of it.
 void write_ply_binary(const std::string& path, const Mesh& mesh, const std::string& comment = "");
 // Reads what write_ply_binary writes (binary little-endian, those properties); InputError
 // naming the file and the problem otherwise.

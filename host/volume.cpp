@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <limits>
 #include <sstream>
+#include <stdexcept>
 
 namespace softshell {
 
@@ -197,9 +198,98 @@ Volume Volume::with_data(std::vector<float> samples, ScalarType t) const {
   out.dims = dims;
   out.spacing = spacing;
   out.origin = origin;
+  out.frame = frame;
   out.source_type = t;
   out.data = std::move(samples);
   return out;
+}
+
+// ---- the world frame ------------------------------------------------------------
+
+bool WorldFrame::anatomical() const {
+  return space.empty() || space == "left-posterior-superior" || space == "right-anterior-superior" ||
+         space == "left-anterior-superior";
+}
+
+WorldFrame WorldFrame::to_lps(Vec3d& origin) const {
+  WorldFrame out = *this;
+  // Components to negate: RAS -> LPS flips x and y; LAS -> LPS flips y.
+  int flips = 0;
+  if (space == "right-anterior-superior") flips = 2;
+  else if (space == "left-anterior-superior") flips = 1;
+  else return out;
+  auto flip = [&](Vec3d& v) {  // + 0.0: no "-0" in written headers
+    if (flips == 2) v[0] = -v[0] + 0.0;
+    v[1] = -v[1] + 0.0;
+  };
+  for (Vec3d& a : out.axes) flip(a);
+  flip(origin);
+  out.space = "left-posterior-superior";
+  out.measurement_frame.reset();  // its meaning is tied to the old space
+  out.anatomical_orientation.clear();
+  return out;
+}
+
+std::string lps_orientation_code(const Mat3& axes_lps) {
+  // The side each axis points to, then the opposite letter (ITK names the
+  // side the axis comes from).
+  static const char kFrom[3][2] = {{'R', 'L'}, {'A', 'P'}, {'I', 'S'}};  // [component][direction > 0]
+  std::string code;
+  for (const Vec3d& a : axes_lps) {
+    int best = 0;
+    for (int c = 1; c < 3; ++c)
+      if (std::fabs(a[c]) > std::fabs(a[best])) best = c;
+    code += kFrom[best][a[best] > 0 ? 0 : 1];
+  }
+  return code;
+}
+
+double determinant(const Mat3& m) {
+  return m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+         m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+}
+
+Mat3 inverse(const Mat3& m) {
+  const double det = determinant(m);
+  if (!(std::fabs(det) >= 1e-12)) throw std::invalid_argument("inverse: singular 3x3 matrix");
+  Mat3 r{};
+  r[0][0] = (m[1][1] * m[2][2] - m[1][2] * m[2][1]) / det;
+  r[0][1] = (m[0][2] * m[2][1] - m[0][1] * m[2][2]) / det;
+  r[0][2] = (m[0][1] * m[1][2] - m[0][2] * m[1][1]) / det;
+  r[1][0] = (m[1][2] * m[2][0] - m[1][0] * m[2][2]) / det;
+  r[1][1] = (m[0][0] * m[2][2] - m[0][2] * m[2][0]) / det;
+  r[1][2] = (m[0][2] * m[1][0] - m[0][0] * m[1][2]) / det;
+  r[2][0] = (m[1][0] * m[2][1] - m[1][1] * m[2][0]) / det;
+  r[2][1] = (m[0][1] * m[2][0] - m[0][0] * m[2][1]) / det;
+  r[2][2] = (m[0][0] * m[1][1] - m[0][1] * m[1][0]) / det;
+  return r;
+}
+
+Vec3d Volume::index_to_world(const Vec3d& ijk) const {
+  Vec3d w = origin;
+  for (int a = 0; a < 3; ++a)
+    for (int c = 0; c < 3; ++c) w[c] += ijk[a] * spacing[a] * frame.axes[a][c];
+  return w;
+}
+
+Vec3d Volume::world_to_index(const Vec3d& xyz) const {
+  // world - origin = sum_a ijk[a] * (spacing[a] axes[a]) = M^T ijk, M's rows the scaled axes.
+  Mat3 m{};
+  for (int a = 0; a < 3; ++a)
+    for (int c = 0; c < 3; ++c) m[a][c] = spacing[a] * frame.axes[a][c];
+  const Mat3 inv = inverse(m);  // ijk = (M^T)^-1 d = (M^-1)^T d
+  Vec3d d{}, ijk{};
+  for (int c = 0; c < 3; ++c) d[c] = xyz[c] - origin[c];
+  for (int a = 0; a < 3; ++a)
+    for (int c = 0; c < 3; ++c) ijk[a] += inv[c][a] * d[c];
+  return ijk;
+}
+
+Vec3d Volume::grid_to_world(const Vec3d& g) const {
+  Vec3d w = origin;
+  for (int a = 0; a < 3; ++a)
+    for (int c = 0; c < 3; ++c) w[c] += (g[a] - origin[a]) * frame.axes[a][c];
+  return w;
 }
 
 // ---- statistics ----------------------------------------------------------------
@@ -284,6 +374,16 @@ std::string describe_volume(const Volume& v, const std::string& path) {
      << group_thousands(v.voxels()) << " voxels)\n";
   os << "spacing:            " << join3(v.spacing, " x ") << " mm\n";
   os << "origin:             (" << join3(v.origin, ", ") << ") mm  (centre of voxel 0,0,0)\n";
+  os << "world:              " << (v.frame.space.empty() ? "not named (taken as left-posterior-superior)" : v.frame.space);
+  if (!v.frame.anatomical_orientation.empty()) os << ", AnatomicalOrientation " << v.frame.anatomical_orientation;
+  os << "\n";
+  os << "axes:               ";
+  if (v.frame.axes_are_identity()) {
+    os << "identity (grid axes along the world's x, y, z)\n";
+  } else {
+    os << "(" << join3(v.frame.axes[0], ", ") << ") (" << join3(v.frame.axes[1], ", ") << ") ("
+       << join3(v.frame.axes[2], ", ") << ")  (unit directions of i, j, k in the world)\n";
+  }
   const Vec3d extent{v.dims[0] * v.spacing[0], v.dims[1] * v.spacing[1],
                      v.dims[2] * v.spacing[2]};
   os << "extent:             " << join3(extent, " x ") << " mm  (dims x spacing)\n";

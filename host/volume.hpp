@@ -1,8 +1,9 @@
 // Volume: a 3-D scalar field on a regular grid, held on the host as float
 // samples in the file's own intensity units, x fastest:
 //   index(x, y, z) = x + nx * (y + ny * z).
-// Spacing and origin are in millimetres. The scalar type the data came from is
-// remembered so outputs can be written back in it.
+// Spacing and origin are in millimetres; `frame` places the grid in the
+// world (orientation, the world's name). The scalar type the data came from
+// is remembered so outputs can be written back in it.
 #pragma once
 
 #include <array>
@@ -30,6 +31,60 @@ double scalar_type_max(ScalarType t);
 
 using Dims3 = std::array<std::size_t, 3>;
 using Vec3d = std::array<double, 3>;
+using Mat3 = std::array<Vec3d, 3>;  // three vectors (rows in code, axes in meaning: see WorldFrame)
+
+inline constexpr Mat3 kIdentityAxes{{{1.0, 0.0, 0.0}, {0.0, 1.0, 0.0}, {0.0, 0.0, 1.0}}};
+
+// Where the voxel grid lies in the world (the scanner's or the patient's
+// coordinates), the index-to-world transform of ITK, Slicer and NRRD:
+//   world(i, j, k) = origin + i * spacing[0] * axes[0] + j * spacing[1] * axes[1] + k * spacing[2] * axes[2]
+// axes[a] is the unit vector of index axis a in world coordinates (NRRD's
+// "space directions" divided by their lengths; MetaImage's TransformMatrix
+// lists the same three vectors in the same order; ITK's direction matrix has
+// them as columns). The classifier works on the grid (spacing only); the
+// frame is carried from input to output and used where geometry is written
+// in world terms (meshes). docs/formats.md, "Orientation".
+struct WorldFrame {
+  Mat3 axes = kIdentityAxes;
+  // The world's name in NRRD's words: "left-posterior-superior" (ITK,
+  // DICOM, MetaImage), "right-anterior-superior" (NIfTI, Slicer's display),
+  // "left-anterior-superior", "scanner-xyz", "3D-right-handed",
+  // "3D-left-handed"; empty when the file names none (MetaImage, raw,
+  // phantoms): written as left-posterior-superior, ITK's physical space.
+  std::string space;
+  // NRRD's "measurement frame", as Teem holds it, kept only to be written
+  // back (softshell's samples are scalars; it does not apply to them).
+  std::optional<Mat3> measurement_frame;
+  // MetaImage's AnatomicalOrientation as read (e.g. "RAI"); empty: derived
+  // from the axes when written.
+  std::string anatomical_orientation;
+  // The file's own direction vectors (NRRD's space directions, spacing
+  // times axis), written back as they were while spacing and axes are
+  // unchanged: unit axes times spacing can differ from them in the last bit.
+  struct Exact {
+    Vec3d spacing;
+    Mat3 axes, directions;
+  };
+  std::optional<Exact> as_read;
+
+  bool axes_are_identity() const { return axes == kIdentityAxes; }
+  // True when the world is LPS, RAS or LAS (a patient space), or unnamed
+  // (taken as LPS).
+  bool anatomical() const;
+  // The frame with the same physical meaning in LPS coordinates (axes and
+  // `origin` flipped as RAS/LAS require); `origin` is updated in place. Other
+  // spaces are returned as they are (ITK's rule: no conversion defined).
+  WorldFrame to_lps(Vec3d& origin) const;
+};
+
+// "RAI"-style code of ITK's AnatomicalOrientation for axes given in LPS
+// coordinates: per index axis, the letter of the side it comes *from*
+// (identity axes -> "RAI"), by the dominant component of each axis.
+std::string lps_orientation_code(const Mat3& axes_lps);
+// Determinant of the three axes (rows); < 0: a left-handed grid.
+double determinant(const Mat3& m);
+// Inverse of m (rows); throws std::invalid_argument when |det| < 1e-12.
+Mat3 inverse(const Mat3& m);
 
 // Maps file intensities to [0, 1] for classification and back, so parameters
 // such as v_iso carry across 8-bit, 16-bit and float data.
@@ -49,7 +104,8 @@ struct IntensityMap {
 struct Volume {
   Dims3 dims{0, 0, 0};
   Vec3d spacing{1.0, 1.0, 1.0};  // mm
-  Vec3d origin{0.0, 0.0, 0.0};   // mm, position of voxel (0,0,0)
+  Vec3d origin{0.0, 0.0, 0.0};   // mm, world position of voxel (0,0,0)'s centre
+  WorldFrame frame;              // orientation of the grid in the world (identity: axis-aligned)
   ScalarType source_type = ScalarType::Float32;
   std::vector<float> data;       // dims[0]*dims[1]*dims[2] samples
 
@@ -64,8 +120,17 @@ struct Volume {
   float at(std::size_t x, std::size_t y, std::size_t z) const { return data[index(x, y, z)]; }
 
   IntensityMap intensity_map() const;
-  // Same geometry, float32, given samples (moved in).
+  // Same geometry (dims, spacing, origin, frame), given samples (moved in).
   Volume with_data(std::vector<float> samples, ScalarType t) const;
+
+  // World position (mm) of a continuous index (voxel centres at integers).
+  Vec3d index_to_world(const Vec3d& ijk) const;
+  // Continuous index of a world position (the inverse).
+  Vec3d world_to_index(const Vec3d& xyz) const;
+  // World position of a point given in grid millimetres, origin + spacing *
+  // index: what softshell's grid-based code (Marching Cubes, renderers)
+  // produces. Equals the input when the axes are the identity.
+  Vec3d grid_to_world(const Vec3d& grid_mm) const;
 };
 
 // Summary statistics for `softshell info` and for tests.

@@ -11,19 +11,22 @@
 #include <iterator>
 
 #include "fuzz_inputs.hpp"
+#include "io.hpp"
 
 namespace softshell {
 namespace {
 
 namespace fs = std::filesystem;
 
-const char* const kHarnesses[] = {"nrrd", "metaimage", "raw", "classify"};
+const char* const kHarnesses[] = {"nrrd", "metaimage", "raw", "nifti", "vti", "classify"};
 
 bool run(const std::string& harness, const std::string& bytes) {
   const auto* p = reinterpret_cast<const std::uint8_t*>(bytes.data());
   if (harness == "nrrd") return fuzz::run_nrrd(p, bytes.size());
   if (harness == "metaimage") return fuzz::run_metaimage(p, bytes.size());
   if (harness == "raw") return fuzz::run_raw(p, bytes.size());
+  if (harness == "nifti") return fuzz::run_nifti(p, bytes.size());
+  if (harness == "vti") return fuzz::run_vti(p, bytes.size());
   return fuzz::run_classify(p, bytes.size());
 }
 
@@ -31,6 +34,7 @@ TEST(FuzzSeeds, EverySeedIsAcceptedAndWritten) {
   const char* env = std::getenv("SOFTSHELL_FUZZ_SEEDS");
   const fs::path root = env && *env ? fs::path(env) : fs::path(::testing::TempDir()) / "softshell-fuzz-seeds";
   for (const char* harness : kHarnesses) {
+    if (std::string(harness) == "nifti" && !nifti_supported()) continue;  // a build without niftilib
     const auto seeds = fuzz::seeds(harness);
     EXPECT_GE(seeds.size(), 4u) << harness;
     fs::create_directories(root / harness);

@@ -385,7 +385,7 @@ TEST(IoWrite, NrrdHeaderCarriesSpaceDirectionsAndOrigin) {
   const Volume v = test_volume(ScalarType::UInt8, {3, 4, 5}, {0.5, 0.25, 2}, {-1.5, 2, 30});
   write_volume(dir.file("v.nrrd"), v);
   const std::string text = read_bytes(dir.file("v.nrrd"));
-  EXPECT_NE(text.find("space: 3D-right-handed"), std::string::npos) << text.substr(0, 400);
+  EXPECT_NE(text.find("space: left-posterior-superior"), std::string::npos) << text.substr(0, 400);
   EXPECT_NE(text.find("space directions: (0.5,0,0) (0,0.25,0) (0,0,2)"), std::string::npos);
   EXPECT_NE(text.find("space origin: (-1.5,2,30)"), std::string::npos);
   EXPECT_NE(text.find("encoding: raw"), std::string::npos);
@@ -749,7 +749,7 @@ TEST(IoDispatch, UnreadablePathsAndUnknownFormats) {
   write_bytes(dir.file("v.xyz"), "hello");
   expect_input_error([&] { read_volume(dir.file("v.xyz")); },
                      {dir.file("v.xyz") +
-                      ": unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, or --raw X,Y,Z --type T)"});
+                      ": unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, or --raw X,Y,Z --type T)"});
   write_bytes(dir.file("empty.mha"), "");
   expect_input_error([&] { read_volume(dir.file("empty.mha")); }, {"empty.mha: "});
   // Extensions are matched case-insensitively.

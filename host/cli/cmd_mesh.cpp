@@ -21,6 +21,7 @@ namespace {
 
 struct MeshOptions {
   std::string in, out, device;
+  std::string coordinates = "world";
   double level = std::nan("");
   bool quiet = false;
   RawOptions raw;
@@ -42,7 +43,9 @@ int run_mesh(const MeshOptions& o) {
   std::optional<progress::Stage> stage(std::in_place, "mesh");
   Runtime rt(o.device);
   MeshTiming mt;
-  const Mesh mesh = marching_cubes(rt, v, o.level, &mt);
+  Mesh mesh = marching_cubes(rt, v, o.level, &mt);
+  const bool world = o.coordinates == "world";
+  if (world) mesh_to_world(mesh, v);
   if (mesh.empty()) {
     const auto [lo, hi] = std::minmax_element(v.data.begin(), v.data.end());
     std::ostringstream msg;
@@ -51,8 +54,10 @@ int run_mesh(const MeshOptions& o) {
   }
   const auto tw = Clock::now();
   std::ostringstream comment;
-  comment << "softshell marching cubes of " << o.in << " at level " << o.level
-          << "; mm; normals point towards lower values";
+  comment << "softshell marching cubes of " << o.in << " at level " << o.level << "; mm, "
+          << (world ? "the volume's world coordinates" : "grid coordinates (origin + spacing * index)")
+          << "; normals point towards lower values";
+  if (world && !ply_space_comment(v).empty()) comment << '\n' << ply_space_comment(v);
   write_ply_binary(o.out, mesh, comment.str());
   stage.reset();
   const double write_s = seconds_since(tw);
@@ -91,6 +96,12 @@ void add_mesh_command(CLI::App& app, Action& action) {
       ->required()
       ->check(real_range(-INFINITY, INFINITY));
   sub->add_option("-o,--output", o->out, "Output mesh (.ply, binary little-endian)")->required();
+  sub->add_option("--coordinates", o->coordinates,
+                  "world: positions in the volume's world coordinates (its origin, spacing and orientation: "
+                  "the mesh overlays the volume in 3D Slicer, ITK, ParaView); grid: origin + spacing * index, "
+                  "ignoring the orientation (the same as world for axis-aligned volumes)")
+      ->check(CLI::IsMember({"world", "grid"}))
+      ->default_str("world");
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   o->raw.add_to(sub);
   o->non_finite.add_to(sub);

@@ -1,0 +1,430 @@
+// Orientation end to end (docs/formats.md, "Orientation"): the index-to-world transform of
+// NRRD (space, space directions, space origin, measurement frame) and MetaImage
+// (TransformMatrix, Offset, AnatomicalOrientation) is read, carried through the commands and
+// written back; meshes come out in world coordinates. Also the refusal of PLUS tracked-frame
+// sequences. Every input here is written by the test, its transform known.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "cli_fixture.hpp"
+#include "error.hpp"
+#include "io.hpp"
+#include "mesh.hpp"
+#include "test_support.hpp"
+#include "volume.hpp"
+
+namespace softshell {
+namespace {
+
+using test::CliTest;
+using test::RunResult;
+namespace fs = std::filesystem;
+
+// A proper rotation: 35 degrees about (1, 2, 3) / |.|, by Rodrigues' formula. Rows are the
+// rotated x, y, z axes (the frame's axes).
+Mat3 oblique_axes(double degrees = 35.0) {
+  const double n = std::sqrt(14.0), k[3] = {1 / n, 2 / n, 3 / n};
+  const double t = degrees * M_PI / 180.0, c = std::cos(t), s = std::sin(t);
+  Mat3 r{};
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      const double cross = (i == j) ? 0.0 : ((j == (i + 1) % 3) ? -k[3 - i - j] : k[3 - i - j]);
+      r[i][j] = c * (i == j) + (1 - c) * k[i] * k[j] + s * cross;
+    }
+  return r;
+}
+
+std::string num(double x) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.17g", x);
+  return buf;
+}
+
+// Header text of an attached raw uint8 NRRD with the given geometry, written by hand so the
+// reader is checked against a known transform, not against softshell's writer.
+std::string nrrd_header(const Dims3& d, const Vec3d& sp, const Mat3& axes, const Vec3d& origin, const std::string& space,
+                        const std::string& extra = "") {
+  std::string h = "NRRD0005\ntype: uint8\ndimension: 3\nspace: " + space + "\nsizes: " + std::to_string(d[0]) + " " +
+                  std::to_string(d[1]) + " " + std::to_string(d[2]) + "\nspace directions:";
+  for (int a = 0; a < 3; ++a)
+    h += " (" + num(sp[a] * axes[a][0]) + "," + num(sp[a] * axes[a][1]) + "," + num(sp[a] * axes[a][2]) + ")";
+  h += "\nkinds: domain domain domain\nendian: little\nencoding: raw\nspace origin: (" + num(origin[0]) + "," +
+       num(origin[1]) + "," + num(origin[2]) + ")\n" + extra + "\n";
+  return h;
+}
+
+// A bright ball of radius `r_mm` (in mm, about the grid's centre) on a dark background, with a
+// one-voxel linear edge: uint8 samples.
+std::string ball_samples(const Dims3& d, const Vec3d& sp, double r_mm) {
+  std::string s;
+  for (std::size_t z = 0; z < d[2]; ++z)
+    for (std::size_t y = 0; y < d[1]; ++y)
+      for (std::size_t x = 0; x < d[0]; ++x) {
+        const double dx = (double(x) - 0.5 * double(d[0] - 1)) * sp[0], dy = (double(y) - 0.5 * double(d[1] - 1)) * sp[1],
+                     dz = (double(z) - 0.5 * double(d[2] - 1)) * sp[2];
+        const double r = std::sqrt(dx * dx + dy * dy + dz * dz);
+        const double f = std::clamp((r_mm - r) / 0.7 + 0.5, 0.0, 1.0);
+        s += char(static_cast<unsigned char>(std::lround(20 + 180 * f)));
+      }
+  return s;
+}
+
+void expect_same_frame(const Volume& a, const Volume& b, double tol = 0.0) {
+  EXPECT_EQ(a.dims, b.dims);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(a.spacing[i], b.spacing[i], tol * std::fabs(b.spacing[i])) << "spacing " << i;
+    EXPECT_NEAR(a.origin[i], b.origin[i], tol * (1 + std::fabs(b.origin[i]))) << "origin " << i;
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(a.frame.axes[i][c], b.frame.axes[i][c], tol) << "axis " << i << "," << c;
+  }
+  EXPECT_EQ(a.frame.space, b.frame.space);
+  EXPECT_EQ(a.frame.anatomical_orientation, b.frame.anatomical_orientation);
+  ASSERT_EQ(a.frame.measurement_frame.has_value(), b.frame.measurement_frame.has_value());
+  if (a.frame.measurement_frame)
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) EXPECT_EQ((*a.frame.measurement_frame)[i][j], (*b.frame.measurement_frame)[i][j]);
+}
+
+// Trilinear interpolation of v at a continuous index (clamped to the grid).
+double trilinear(const Volume& v, const Vec3d& p) {
+  std::size_t i0[3];
+  double t[3];
+  for (int a = 0; a < 3; ++a) {
+    const double c = std::clamp(p[a], 0.0, double(v.dims[a] - 1));
+    i0[a] = std::min<std::size_t>(std::size_t(c), v.dims[a] - 2);
+    t[a] = c - double(i0[a]);
+  }
+  double s = 0;
+  for (int k = 0; k < 8; ++k) {
+    const std::size_t x = i0[0] + (k & 1), y = i0[1] + ((k >> 1) & 1), z = i0[2] + ((k >> 2) & 1);
+    const double w = ((k & 1) ? t[0] : 1 - t[0]) * (((k >> 1) & 1) ? t[1] : 1 - t[1]) * (((k >> 2) & 1) ? t[2] : 1 - t[2]);
+    s += w * v.at(x, y, z);
+  }
+  return s;
+}
+
+// ---- the transform itself ------------------------------------------------------------------
+
+TEST(WorldFrame, IndexToWorldAndBack) {
+  Volume v({5, 6, 7}, {0.5, 0.75, 1.25});
+  v.origin = {-3, 4.5, 100};
+  v.frame.axes = oblique_axes();
+  EXPECT_NEAR(determinant(v.frame.axes), 1.0, 1e-12);
+  for (const Vec3d p : {Vec3d{0, 0, 0}, Vec3d{4, 5, 6}, Vec3d{1.5, -2, 3.25}}) {
+    const Vec3d w = v.index_to_world(p);
+    // By definition: origin + sum_a p[a] spacing[a] axes[a].
+    for (int c = 0; c < 3; ++c) {
+      double e = v.origin[c];
+      for (int a = 0; a < 3; ++a) e += p[a] * v.spacing[a] * v.frame.axes[a][c];
+      EXPECT_NEAR(w[c], e, 1e-12);
+    }
+    const Vec3d back = v.world_to_index(w);
+    for (int a = 0; a < 3; ++a) EXPECT_NEAR(back[a], p[a], 1e-12);
+    // Grid millimetres map like the index they stand for.
+    Vec3d g;
+    for (int a = 0; a < 3; ++a) g[a] = v.origin[a] + v.spacing[a] * p[a];
+    const Vec3d wg = v.grid_to_world(g);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(wg[c], w[c], 1e-12);
+  }
+  EXPECT_EQ(lps_orientation_code(kIdentityAxes), "RAI");  // what ITK writes for the identity
+  EXPECT_EQ(lps_orientation_code({{{-1, 0, 0}, {0, 0, 1}, {0, -1, 0}}}), "LIP");  // from L, from I, from P
+  // RAS -> LPS: x and y change sign, the physical point stays.
+  WorldFrame ras;
+  ras.space = "right-anterior-superior";
+  ras.axes = oblique_axes();
+  Vec3d o{1, 2, 3};
+  const WorldFrame lps = ras.to_lps(o);
+  EXPECT_EQ(lps.space, "left-posterior-superior");
+  EXPECT_EQ(o, (Vec3d{-1, -2, 3}));
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_EQ(lps.axes[a][0], -ras.axes[a][0]);
+    EXPECT_EQ(lps.axes[a][1], -ras.axes[a][1]);
+    EXPECT_EQ(lps.axes[a][2], ras.axes[a][2]);
+  }
+}
+
+// ---- NRRD ------------------------------------------------------------------------------------
+
+class WorldIo : public CliTest {};
+
+TEST_F(WorldIo, ObliqueLpsNrrdIsReadAndWrittenBackExactly) {
+  const Dims3 d{4, 3, 2};
+  const Vec3d sp{0.5, 0.7, 0.9}, org{-12.5, 30.25, 7};
+  const Mat3 axes = oblique_axes();
+  std::string samples(24, '\0');
+  for (int i = 0; i < 24; ++i) samples[i] = char(i * 10);
+  const std::string mf = "measurement frame: (1,0,0) (0,0,-1) (0,1,0)\n";
+  write("in.nrrd", nrrd_header(d, sp, axes, org, "left-posterior-superior", mf) + samples);
+  const Volume v = read_volume(file("in.nrrd"));
+  EXPECT_EQ(v.frame.space, "left-posterior-superior");
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_NEAR(v.spacing[a], sp[a], 1e-14);
+    EXPECT_EQ(v.origin[a], org[a]);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(v.frame.axes[a][c], axes[a][c], 1e-14);
+  }
+  ASSERT_TRUE(v.frame.measurement_frame.has_value());
+  // The header's file order: the first vector is (1,0,0), the second (0,0,-1).
+  EXPECT_EQ((*v.frame.measurement_frame)[1][2], -1.0);
+  // Written and read again: the same transform, space and measurement frame.
+  write_volume(file("out.nrrd"), v);
+  const Volume w = read_volume(file("out.nrrd"));
+  expect_same_frame(w, v, 0.0);
+  const std::string text = test::slurp(file("out.nrrd"));
+  EXPECT_NE(text.find("space: left-posterior-superior\n"), std::string::npos) << text.substr(0, 600);
+  EXPECT_NE(text.find("measurement frame: (1,0,0) (0,0,-1) (0,1,0)"), std::string::npos) << text.substr(0, 600);
+  EXPECT_EQ(w.data, v.data);
+  // A second generation is byte-identical to the first.
+  write_volume(file("out2.nrrd"), w);
+  EXPECT_EQ(test::slurp(file("out2.nrrd")), text);
+}
+
+TEST_F(WorldIo, RasAndOtherSpacesKeepTheirName) {
+  const Dims3 d{2, 2, 2};
+  for (const char* space : {"right-anterior-superior", "left-anterior-superior", "scanner-xyz", "3D-right-handed"}) {
+    SCOPED_TRACE(space);
+    write("in.nrrd", nrrd_header(d, {1, 2, 3}, oblique_axes(-20), {5, -6, 7}, space) + std::string(8, '\x05'));
+    const Volume v = read_volume(file("in.nrrd"));
+    EXPECT_EQ(v.frame.space, space);
+    write_volume(file("out.nrrd"), v);
+    expect_same_frame(read_volume(file("out.nrrd")), v, 1e-15);
+    EXPECT_NE(test::slurp(file("out.nrrd")).find(std::string("space: ") + space + "\n"), std::string::npos);
+  }
+}
+
+TEST_F(WorldIo, VolumesWithoutASpaceAreWrittenAsLps) {
+  // A phantom or raw volume names no space: written as ITK's physical space.
+  Volume v({3, 4, 5}, {0.5, 0.25, 2}, ScalarType::UInt8);
+  v.origin = {-1.5, 2, 30};
+  write_volume(file("v.nrrd"), v);
+  const std::string text = test::slurp(file("v.nrrd"));
+  EXPECT_NE(text.find("space: left-posterior-superior\n"), std::string::npos) << text.substr(0, 400);
+  EXPECT_NE(text.find("space directions: (0.5,0,0) (0,0.25,0) (0,0,2)"), std::string::npos) << text.substr(0, 400);
+  // A NRRD without a space (per-axis spacings only) reads as axis-aligned and unnamed.
+  write("plain.nrrd", "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nspacings: 1 2 3\nencoding: raw\n\n" +
+                          std::string(8, '\x01'));
+  const Volume p = read_volume(file("plain.nrrd"));
+  EXPECT_TRUE(p.frame.axes_are_identity());
+  EXPECT_EQ(p.frame.space, "");
+  // Degenerate directions say nothing: the grid is taken as axis-aligned.
+  write("flat.nrrd", "NRRD0004\ntype: uint8\ndimension: 3\nspace: left-posterior-superior\nsizes: 2 2 2\n"
+                     "space directions: (1,0,0) (2,0,0) (0,0,1)\nencoding: raw\n\n" + std::string(8, '\x01'));
+  EXPECT_TRUE(read_volume(file("flat.nrrd")).frame.axes_are_identity());
+}
+
+// ---- MetaImage -------------------------------------------------------------------------------
+
+std::string mha_header(const Mat3& axes, const Vec3d& org, const std::string& extra) {
+  std::string h = "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\nTransformMatrix =";
+  for (int a = 0; a < 3; ++a)
+    for (int c = 0; c < 3; ++c) h += " " + num(axes[a][c]);
+  h += "\nOffset = " + num(org[0]) + " " + num(org[1]) + " " + num(org[2]) + "\n" + extra +
+       "ElementSpacing = 0.5 0.75 1.5\nDimSize = 3 2 2\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n";
+  return h;
+}
+
+TEST_F(WorldIo, RotatedMetaImageRoundTrip) {
+  const Mat3 axes = oblique_axes(50);
+  write("in.mha", mha_header(axes, {11.5, -7.25, 3}, "AnatomicalOrientation = RAI\n") + std::string(12, '\x07'));
+  const Volume v = read_volume(file("in.mha"));
+  for (int a = 0; a < 3; ++a)
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(v.frame.axes[a][c], axes[a][c], 1e-15);
+  EXPECT_EQ(v.origin, (Vec3d{11.5, -7.25, 3}));
+  EXPECT_EQ(v.frame.anatomical_orientation, "RAI");
+  EXPECT_EQ(v.frame.space, "");
+  for (const char* ext : {".mha", ".mhd"}) {
+    SCOPED_TRACE(ext);
+    const std::string out = file(std::string("out") + ext);
+    write_volume(out, v);
+    const Volume w = read_volume(out);
+    expect_same_frame(w, v, 1e-15);
+    const std::string text = test::slurp(out);
+    EXPECT_NE(text.find("AnatomicalOrientation = RAI\n"), std::string::npos) << text;
+    EXPECT_EQ(text.find("TransformMatrix = 1 0 0"), std::string::npos) << text;
+  }
+  // MetaImage -> NRRD -> MetaImage: the NRRD states LPS (MetaImage's world) and the transform
+  // survives both steps.
+  write_volume(file("mid.nrrd"), v);
+  const Volume n = read_volume(file("mid.nrrd"));
+  EXPECT_EQ(n.frame.space, "left-posterior-superior");
+  for (int a = 0; a < 3; ++a)
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(n.frame.axes[a][c], axes[a][c], 1e-15);
+  // Without AnatomicalOrientation in the input, the written one is derived from the axes.
+  write("plain.mha", mha_header({{{0, 1, 0}, {-1, 0, 0}, {0, 0, 1}}}, {0, 0, 0}, "") + std::string(12, '\x07'));
+  write_volume(file("plain_out.mha"), read_volume(file("plain.mha")));
+  EXPECT_NE(test::slurp(file("plain_out.mha")).find("AnatomicalOrientation = ALI\n"), std::string::npos);
+}
+
+TEST_F(WorldIo, RasNrrdWrittenAsMetaImageKeepsItsPlaceInLps) {
+  write("ras.nrrd", nrrd_header({3, 2, 2}, {1, 2, 3}, oblique_axes(), {10, 20, 30}, "right-anterior-superior") +
+                        std::string(12, '\x03'));
+  const Volume ras = read_volume(file("ras.nrrd"));
+  write_volume(file("lps.mha"), ras);
+  const Volume lps = read_volume(file("lps.mha"));
+  // Every voxel centre is the same physical point: (x, y, z) in RAS is (-x, -y, z) in LPS.
+  for (const Vec3d p : {Vec3d{0, 0, 0}, Vec3d{2, 1, 1}, Vec3d{1, 0, 1}}) {
+    const Vec3d a = ras.index_to_world(p), b = lps.index_to_world(p);
+    EXPECT_NEAR(b[0], -a[0], 1e-12);
+    EXPECT_NEAR(b[1], -a[1], 1e-12);
+    EXPECT_NEAR(b[2], a[2], 1e-12);
+  }
+}
+
+// ---- PLUS tracked-frame sequences ------------------------------------------------------------
+
+TEST_F(WorldIo, PlusTrackedFrameSequenceIsRefused) {
+  const std::string seq =
+      "ObjectType = Image\nNDims = 3\nAnatomicalOrientation = RAI\nBinaryData = True\n"
+      "BinaryDataByteOrderMSB = False\nCompressedData = False\nDimSize = 4 3 2\nElementSpacing = 1 1 1\n"
+      "ElementType = MET_UCHAR\nKinds = domain domain list\nUltrasoundImageOrientation = MF\n"
+      "Seq_Frame0000_FrameNumber = 0\nSeq_Frame0000_ImageToReferenceTransform = 1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\n"
+      "Seq_Frame0000_ImageToReferenceTransformStatus = OK\nSeq_Frame0000_Timestamp = 1.0\n"
+      "Seq_Frame0001_FrameNumber = 1\nSeq_Frame0001_ImageToReferenceTransform = 1 0 0 2 0 1 0 0 0 0 1 0 0 0 0 1\n"
+      "Seq_Frame0001_Timestamp = 1.1\nElementDataFile = LOCAL\n" +
+      std::string(24, '\x40');
+  write("sweep.igs.mha", seq);
+  try {
+    read_volume(file("sweep.igs.mha"));
+    FAIL() << "a tracked-frame sequence was read as a volume";
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("PLUS tracked-frame sequence"), std::string::npos) << m;
+    EXPECT_NE(m.find("VolumeReconstructor"), std::string::npos) << m;
+    EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+  }
+  // The same from the command line: exit 2, one line, nothing written.
+  const RunResult r = run({"info", file("sweep.igs.mha")});
+  expect_one_line_error(r, {"sweep.igs.mha", "tracked-frame sequence", "reconstruct a volume"});
+  const RunResult c = run({"classify", file("sweep.igs.mha"), "--iso", "100", "-o", file("u.nrrd")});
+  expect_one_line_error(c, {"tracked-frame sequence"});
+  EXPECT_FALSE(fs::exists(file("u.nrrd")));
+  // PLUS's own sequence NRRD (.igs.nrrd) keeps the frames' keys as key/value pairs.
+  write("sweep.igs.nrrd", "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 3 2\nkinds: domain domain list\n"
+                          "encoding: raw\nSeq_Frame0000_ImageToReferenceTransform:=1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\n\n" +
+                              std::string(24, '\x40'));
+  expect_one_line_error(run({"info", file("sweep.igs.nrrd")}), {"tracked-frame sequence"});
+  // A 3D+t sequence as 3D Slicer's Sequences module writes it: a 4-D NRRD with a list axis.
+  write("beat.seq.nrrd", "NRRD0004\ntype: uint8\ndimension: 4\nsizes: 2 2 2 3\nkinds: domain domain domain list\n"
+                         "encoding: raw\n\n" + std::string(24, '\x01'));
+  expect_one_line_error(run({"info", file("beat.seq.nrrd")}), {"found 4-D data", "sequence of 3 3-D frames"});
+  // A reconstructed volume that keeps PLUS's lone "Seq_Frame0000_ImageStatus" is a volume.
+  EXPECT_FALSE(io_detail::is_tracked_frame_key("Seq_Frame0000_ImageStatus"));
+  EXPECT_TRUE(io_detail::is_tracked_frame_key("Seq_Frame0000_ProbeToTrackerTransform"));
+  EXPECT_TRUE(io_detail::is_tracked_frame_key("Seq_Frame0012_Timestamp"));
+  EXPECT_FALSE(io_detail::is_tracked_frame_key("Seq_FrameXYZ_Transform"));
+}
+
+// ---- end to end: classify and mesh an oblique volume -----------------------------------------
+
+TEST_F(WorldIo, ObliqueVolumeClassifiedAndMeshedOverlaysItsInput) {
+  const Dims3 d{24, 24, 24};
+  const Vec3d sp{0.5, 0.6, 0.7}, org{-20.5, 14.25, -3};
+  const Mat3 axes = oblique_axes();
+  const double radius = 4.0;
+  write("in.nrrd", nrrd_header(d, sp, axes, org, "left-posterior-superior", "measurement frame: (1,0,0) (0,1,0) (0,0,1)\n") +
+                       ball_samples(d, sp, radius));
+  const Volume in = read_volume(file("in.nrrd"));
+
+  // classify and lowpass carry the input's transform to their outputs.
+  RunResult r = run({"classify", file("in.nrrd"), "--iso", "110", "--mask", "none", "-o", file("u.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const Volume u = read_volume(file("u.nrrd"));
+  expect_same_frame(u, in, 0.0);  // exact: the input's own space directions are written back
+  r = run({"lowpass", file("in.nrrd"), "--sigma", "1", "-o", file("lp.mha")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const Volume lp = read_volume(file("lp.mha"));
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_NEAR(lp.origin[a], in.origin[a], 1e-12);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(lp.frame.axes[a][c], in.frame.axes[a][c], 1e-15);
+  }
+
+  // The world mesh of the input: its vertices lie on the ball in world space (centre mapped
+  // through the transform), and map back through the inverse transform onto the input's
+  // iso-surface.
+  r = run({"mesh", file("in.nrrd"), "--level", "110", "-o", file("in.ply")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(test::slurp(file("in.ply")).find("comment SPACE=LPS\n"), std::string::npos);
+  const Mesh mi = read_ply_binary(file("in.ply"));
+  ASSERT_GT(mi.vertex_count(), 100u);
+  const Vec3d centre = in.index_to_world({11.5, 11.5, 11.5});
+  double worst_r = 0, worst_level = 0;
+  for (std::size_t i = 0; i < mi.vertex_count(); ++i) {
+    const Vec3d p{mi.positions[3 * i], mi.positions[3 * i + 1], mi.positions[3 * i + 2]};
+    const double dr = std::hypot(p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]) - radius;
+    worst_r = std::max(worst_r, std::fabs(dr));
+    worst_level = std::max(worst_level, std::fabs(trilinear(in, in.world_to_index(p)) - 110.0));
+  }
+  EXPECT_LT(worst_r, 0.5) << "input mesh off the ball in world space";
+  EXPECT_LT(worst_level, 0.05) << "input mesh does not map back onto the iso-surface";
+  // Normals still point out of the region above the level (outwards from the ball here).
+  EXPECT_GT(mesh_signed_volume(mi), 0.0);
+  EXPECT_NEAR(mesh_signed_volume(mi), 4.0 / 3.0 * M_PI * radius * radius * radius, 0.1 * 4.0 / 3.0 * M_PI * 64);
+
+  // The opacity's 0.5 mesh: on the classified shell (u = 0.5 through the inverse transform)
+  // and around the input's surface in world space.
+  r = run({"mesh", file("u.nrrd"), "--level", "0.5", "-o", file("u.ply")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const Mesh mu = read_ply_binary(file("u.ply"));
+  ASSERT_GT(mu.vertex_count(), 100u);
+  double worst_u = 0, worst_ur = 0;
+  for (std::size_t i = 0; i < mu.vertex_count(); ++i) {
+    const Vec3d p{mu.positions[3 * i], mu.positions[3 * i + 1], mu.positions[3 * i + 2]};
+    worst_u = std::max(worst_u, std::fabs(trilinear(u, u.world_to_index(p)) - 0.5));
+    worst_ur = std::max(worst_ur, std::fabs(std::hypot(p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]) - radius));
+  }
+  EXPECT_LT(worst_u, 1e-3);
+  EXPECT_LT(worst_ur, 2.5) << "the opacity's surface is not around the input's";
+
+  // --coordinates grid: the same mesh before the transform (origin + spacing * index).
+  r = run({"mesh", file("in.nrrd"), "--level", "110", "--coordinates", "grid", "-o", file("grid.ply")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const Mesh mg = read_ply_binary(file("grid.ply"));
+  ASSERT_EQ(mg.vertex_count(), mi.vertex_count());
+  double worst_g = 0;
+  for (std::size_t i = 0; i < mg.vertex_count(); ++i) {
+    const Vec3d w = in.grid_to_world({mg.positions[3 * i], mg.positions[3 * i + 1], mg.positions[3 * i + 2]});
+    for (int c = 0; c < 3; ++c) worst_g = std::max(worst_g, std::fabs(w[c] - mi.positions[3 * i + c]));
+  }
+  EXPECT_LT(worst_g, 1e-4);
+  expect_one_line_error(run({"mesh", file("in.nrrd"), "--level", "110", "--coordinates", "index", "-o", file("x.ply")}),
+                        {"--coordinates"});
+}
+
+TEST(WorldMesh, MirroredAxesKeepNormalsOutAndWindingConsistent) {
+  Volume v = test::shell_volume(16);
+  Mesh grid = marching_cubes_reference(v, 0.5);
+  ASSERT_FALSE(grid.empty());
+  v.origin = {3, -2, 5};
+  v.frame.axes = oblique_axes();
+  for (double& c : v.frame.axes[1]) c = -c;  // a mirror: det -1
+  ASSERT_LT(determinant(v.frame.axes), 0);
+  // marching_cubes_reference ignores the frame (grid millimetres); move it into the world.
+  Mesh shifted = grid;
+  for (std::size_t i = 0; i < shifted.positions.size(); ++i) shifted.positions[i] += float(v.origin[i % 3]);
+  Mesh world = shifted;
+  mesh_to_world(world, v);
+  EXPECT_NEAR(mesh_signed_volume(world), mesh_signed_volume(grid), 1e-3 * std::fabs(mesh_signed_volume(grid)));
+  EXPECT_NEAR(mesh_area(world), mesh_area(grid), 1e-3 * mesh_area(grid));
+  EXPECT_TRUE(mesh_topology(world).closed() == mesh_topology(grid).closed());
+  EXPECT_EQ(mesh_topology(world).misoriented_edges, 0u);
+  // Each normal still points to where the field is lower: along the normal, the triangle's
+  // own winding agrees with it (normal . face normal > 0 on average).
+  double agree = 0;
+  for (std::size_t t = 0; t < world.triangle_count(); ++t) {
+    const float* a = &world.positions[3 * world.triangles[3 * t]];
+    const float* b = &world.positions[3 * world.triangles[3 * t + 1]];
+    const float* c = &world.positions[3 * world.triangles[3 * t + 2]];
+    const double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    const double fn[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+    const float* n = &world.normals[3 * world.triangles[3 * t]];
+    agree += fn[0] * n[0] + fn[1] * n[1] + fn[2] * n[2] > 0 ? 1 : -1;
+  }
+  EXPECT_GT(agree, 0.9 * double(world.triangle_count()));
+}
+
+}  // namespace
+}  // namespace softshell
