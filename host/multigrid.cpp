@@ -259,7 +259,9 @@ struct MultigridSolver::Impl : Multigrid {
     Runtime& rt = fine_sys.runtime();
     const std::size_t n = fine_sys.voxels();
     const SolverParams& sp = params();
-    const int max_cycles = rep.cycles + sp.max_cycles;
+    // SolverParams::max_cycles bounds the whole solve, refinement included
+    // (rep.cycles carries the cycles already spent).
+    const int max_cycles = sp.max_cycles;
     if (!sp.krylov) {
       while (rep.residuals.back() > tol && rep.cycles < max_cycles) {
         vcycle(0);
@@ -343,7 +345,7 @@ struct MultigridSolver::Impl : Multigrid {
     double rel = std::sqrt(host_residual64(sys.grid(), coef, b, u64, r)) / (nb > 0 ? nb : 1.0);
     rep.residuals.back() = rel;  // the float64 evaluation of the float32 solution
     std::vector<float> rhs(n);
-    for (int step = 0; step < kMaxRefinements && rel > tol; ++step) {
+    for (int step = 0; step < kMaxRefinements && rel > tol && rep.cycles < params().max_cycles; ++step) {
       double rn = 0;
       for (double v : r) rn += v * v;
       rn = std::sqrt(rn);
