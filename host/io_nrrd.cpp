@@ -177,6 +177,12 @@ HeaderScan scan_header(const std::string& path) {
   for (int n = 2; next_line(); ++n) {
     if (n > kMaxHeaderLines) throw input_error(path, "header longer than 100000 lines");
     if (line.empty()) break;  // end of the header
+    // A header is text: Teem reads a line only up to a NUL, so a field
+    // name followed by a NUL is a field to Teem but not to the scan below
+    // (a per-axis field before "dimension" reached Teem's leaking error
+    // path that way: found by fuzzing).
+    if (line.find('\0') != std::string::npos)
+      throw input_error(path, "header line " + std::to_string(n) + " contains a NUL byte: not a NRRD header");
     if (line[0] == '#') continue;  // a comment
     const auto colon = line.find(':');
     if (colon == std::string::npos) continue;  // Teem reports it

@@ -303,6 +303,12 @@ TEST_F(Robust, ReproTeemErrorPaths) {
                         {"field 'kinds' comes before 'dimension'"});
   expect_one_line_error(run({"info", write("b.nrrd", "NRRD0004\nblock size: 4\n" + tail)}),
                         {"'block size' given for type 'uchar'"});
+  // A field name ending in a NUL (Teem reads the line up to it: a
+  // per-axis field before "dimension"), found by the 1 M-execution run.
+  expect_one_line_error(run({"info", repro("nrrd_nul_in_field_name.nrrd")}),
+                        {"header line 3 contains a NUL byte: not a NRRD header"});
+  expect_one_line_error(run({"info", write("nul.nrrd", std::string("NRRD0004\nkinds\0: x\n", 19) + tail)}),
+                        {"header line 2 contains a NUL byte"});
   const unsigned char gz[] = {0x1f, 0x8b, 8, 0, 0, 0, 0, 0, 0, 3, 0x63, 0x65, 0x63, 0x63, 0x67, 0x63, 0x67, 0xe7, 4, 0, 0};
   write("g.raw", std::string(reinterpret_cast<const char*>(gz), sizeof gz));
   expect_one_line_error(
@@ -316,7 +322,7 @@ TEST(RobustRepro, EveryReproFileIsCovered) {
       "README.md",         "autoiso_segv.nrrd", "base.nrrd",     "big4g_z.mha",       "big_ascii.nrrd",
       "big_gz.nrrd",       "big_raw.nrrd",      "big_z.mha",     "d.raw",             "detached_data_clobbered.sh",
       "fifo.mhd",          "fifo.nhdr",         "metres_spacing_64.nrrd", "nan_voxel.nrrd", "spacing_1e-3.nrrd",
-      "stdin.nhdr",        "teem_leak.nhdr",    "teem_overread_list.nhdr",
+      "stdin.nhdr",        "teem_leak.nhdr",    "teem_overread_list.nhdr", "nrrd_nul_in_field_name.nrrd",
       "vti_zlib_last_block_4g.vti"};  // tests/test_vti.cpp: Vti.ReproHugeBlockIsRefusedAtOnce
   for (const auto& e : fs::directory_iterator(repro(""))) {
     const std::string name = e.path().filename().string();
