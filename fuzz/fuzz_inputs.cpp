@@ -33,8 +33,31 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// The input being run, kept so fail() can save it: libFuzzer writes its
+// crash artifact from a SIGABRT handler, which LLVM inside PoCL replaces
+// with its own once it has compiled a kernel (a classify failure left no
+// artifact).
+const std::uint8_t* g_input = nullptr;
+std::size_t g_input_size = 0;
+
+void current_input(const std::uint8_t* data, std::size_t size) { g_input = data, g_input_size = size; }
+
 [[noreturn]] void fail(const std::string& what) {
   std::cerr << "softshell fuzz: " << what << std::endl;
+  // SOFTSHELL_FUZZ_ARTIFACT (scripts/fuzz.sh sets it): a path prefix; the
+  // input goes to PREFIX failed-<FNV-1a hash>.
+  if (const char* prefix = std::getenv("SOFTSHELL_FUZZ_ARTIFACT"); prefix && g_input) {
+    std::uint64_t h = 1469598103934665603ull;
+    for (std::size_t i = 0; i < g_input_size; ++i) h = (h ^ g_input[i]) * 1099511628211ull;
+    char name[32];
+    std::snprintf(name, sizeof name, "failed-%016llx", static_cast<unsigned long long>(h));
+    const std::string path = std::string(prefix) + name;
+    if (FILE* f = std::fopen(path.c_str(), "wb")) {
+      std::fwrite(g_input, 1, g_input_size, f);
+      std::fclose(f);
+      std::cerr << "softshell fuzz: input saved to " << path << std::endl;
+    }
+  }
   std::abort();
 }
 
@@ -193,19 +216,28 @@ void check_opacity(const Volume& u, const Volume& v) {
 
 }  // namespace
 
-bool run_nrrd(const std::uint8_t* data, std::size_t size) { return run_reader(place(data, size, "v.nrrd", "v.nhdr")); }
+bool run_nrrd(const std::uint8_t* data, std::size_t size) {
+  current_input(data, size);
+  return run_reader(place(data, size, "v.nrrd", "v.nhdr"));
+}
 
 bool run_metaimage(const std::uint8_t* data, std::size_t size) {
+  current_input(data, size);
   return run_reader(place(data, size, "v.mha", "v.mhd"));
 }
 
 bool run_nifti(const std::uint8_t* data, std::size_t size) {
+  current_input(data, size);
   return run_reader(place(data, size, "v.nii", "v.hdr", "v.img"));
 }
 
-bool run_vti(const std::uint8_t* data, std::size_t size) { return run_reader(place(data, size, "v.vti", "v.vti")); }
+bool run_vti(const std::uint8_t* data, std::size_t size) {
+  current_input(data, size);
+  return run_reader(place(data, size, "v.vti", "v.vti"));
+}
 
 bool run_raw(const std::uint8_t* data, std::size_t size) {
+  current_input(data, size);
   // The option parsers on the first line.
   const std::string text(reinterpret_cast<const char*>(data), std::min<std::size_t>(size, 64));
   const std::string line = text.substr(0, text.find('\n'));
@@ -246,6 +278,7 @@ bool run_raw(const std::uint8_t* data, std::size_t size) {
 }
 
 bool run_classify(const std::uint8_t* data, std::size_t size) {
+  current_input(data, size);
   std::uint8_t b[kClassifyHeader] = {};
   std::memcpy(b, data, std::min<std::size_t>(size, kClassifyHeader));
   const std::uint8_t* samples = data + std::min<std::size_t>(size, kClassifyHeader);
