@@ -1,7 +1,9 @@
 // Levoy's classifier: upload, optional lowpass, gradient, per-voxel opacity.
 #include "levoy.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <string>
 
 #include "error.hpp"
 #include "filter.hpp"
@@ -54,6 +56,16 @@ Volume classify_levoy(Runtime& rt, const Volume& v, const LevoyParams& p, LevoyR
     report->classify = event_seconds(cls);
     report->download = event_seconds(down);
   }
+  // Samples near float's limits overflow the lowpass or the gradient to
+  // infinity, and the opacity to NaN (found by fuzzing): refused rather
+  // than written.
+  for (float a : out)
+    if (!std::isfinite(a)) {
+      float big = 0;
+      for (float x : v.data) big = std::max(big, std::fabs(x));
+      throw InputError("the data's values (up to " + std::to_string(big) +
+                       " in magnitude) overflow float arithmetic in the lowpass or the gradients; rescale the data");
+    }
   return v.with_data(std::move(out), ScalarType::Float32);
 }
 

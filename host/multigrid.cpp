@@ -5,6 +5,7 @@
 // kRefineBelow, mixed-precision iterative refinement (float64 residuals and
 // solution on the host, float32 correction solves on the device).
 #include <algorithm>
+#include <limits>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -437,6 +438,15 @@ std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector
   rep.converged = rep.residuals.back() <= tol;
   std::vector<float> u(n);
   rt.queue().enqueueReadBuffer(F.u, CL_TRUE, 0, n * sizeof(float), u.data());
+  // A relative residual says nothing when ||b|| is not finite (it is then
+  // taken as 0): a system whose b or solution overflowed is not converged,
+  // whatever the residual read (data at the ends of float's range, found
+  // by fuzzing the classify pipeline).
+  if (!std::isfinite(mg.b_norm()) ||
+      std::any_of(u.begin(), u.end(), [](float x) { return !std::isfinite(x); })) {
+    rep.converged = false;
+    rep.residuals.back() = std::numeric_limits<double>::quiet_NaN();
+  }
   mg.has_solution = true;
   rep.bytes = mg.bytes;
   rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

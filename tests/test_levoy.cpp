@@ -7,6 +7,7 @@
 #include "error.hpp"
 #include "io.hpp"
 #include "levoy.hpp"
+#include "variational.hpp"
 #include "reference.hpp"
 #include "test_support.hpp"
 
@@ -82,6 +83,34 @@ TEST(Levoy, TentOnALinearRamp) {
   for (std::size_t x = 0; x < 41; ++x) {
     const double want = std::max(0.0, 1.0 - std::abs(0.5 * x - 10.0) / 2.0);
     EXPECT_NEAR(u.at(x, 2, 1), want, 1e-5) << "x = " << x;
+  }
+}
+
+// Float samples at the ends of float's range: the lowpass and gradients
+// overflow, and the classifiers answer instead of writing NaN (fuzzing).
+TEST(Levoy, SamplesThatOverflowFloatArithmeticAreAnInputErrorNotNaN) {
+  Volume v({8, 8, 8}, {1, 1, 1}, ScalarType::Float32);
+  for (std::size_t i = 0; i < v.data.size(); ++i) v.data[i] = (i % 3 == 0) ? 3.0e38f : -3.0e38f;
+  LevoyParams p;
+  p.iso = 0;
+  p.sigma_mm = 1;
+  try {
+    const Volume u = classify_levoy(test::runtime(), v, p);
+    for (float x : u.data) ASSERT_TRUE(std::isfinite(x));
+  } catch (const InputError&) {
+  }
+  // The variational classifier: not converged (the CLI's exit 3), never a
+  // converged opacity holding NaN.
+  VariationalParams vp;
+  vp.v_iso = v.intensity_map().to_unit(0.0);
+  SolverParams sp;
+  sp.max_cycles = 20;
+  SolveReport rep;
+  try {
+    const Volume u = classify_variational(test::runtime(), v, vp, sp, &rep);
+    if (rep.converged)
+      for (float x : u.data) ASSERT_TRUE(std::isfinite(x));
+  } catch (const InputError&) {
   }
 }
 
