@@ -469,24 +469,25 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     // samples per depth bin, per range of planes, joined (the medians below
     // do not depend on the order of a bin's samples).
     const std::size_t nx = d[0], ny = d[1], nz = d[2];
-    auto line_depth = [&](std::size_t x, std::size_t y, std::size_t z, std::size_t& l, long& depth) {
-      const std::size_t c[3] = {x, y, z};
-      l = c[u_ax] + c[w_ax] * d[u_ax], depth = long(c[ax]);
-    };
-    const int parts = range_count(nz, threads);
-    std::vector<std::vector<long>> pskin(static_cast<std::size_t>(parts), std::vector<long>(lines, -1));
-    parallel_ranges_indexed(nz, threads, [&](int k, std::size_t z0, std::size_t z1) {
-      std::vector<long>& sk = pskin[std::size_t(k)];
+    // Every scanned voxel of planes [z0, z1) in memory order, with its beam
+    // line and depth index: f(i, l, depth).
+    auto each_scanned = [&](std::size_t z0, std::size_t z1, auto&& f) {
       for (std::size_t z = z0; z < z1; ++z)
         for (std::size_t y = 0; y < ny; ++y)
           for (std::size_t x = 0; x < nx; ++x) {
             const std::size_t i = (z * ny + y) * nx + x;
             if (scanned && !(*scanned)[i]) continue;
-            std::size_t l;
-            long depth;
-            line_depth(x, y, z, l, depth);
-            if (sk[l] < 0 || depth < sk[l]) sk[l] = depth;
+            const std::size_t c[3] = {x, y, z};
+            f(i, c[u_ax] + c[w_ax] * d[u_ax], long(c[ax]));
           }
+    };
+    const int parts = range_count(nz, threads);
+    std::vector<std::vector<long>> pskin(static_cast<std::size_t>(parts), std::vector<long>(lines, -1));
+    parallel_ranges_indexed(nz, threads, [&](int k, std::size_t z0, std::size_t z1) {
+      std::vector<long>& sk = pskin[std::size_t(k)];
+      each_scanned(z0, z1, [&](std::size_t, std::size_t l, long depth) {
+        if (sk[l] < 0 || depth < sk[l]) sk[l] = depth;
+      });
     });
     for (const auto& sk : pskin)
       for (std::size_t l = 0; l < lines; ++l)
@@ -495,18 +496,11 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     std::vector<std::size_t> pall(static_cast<std::size_t>(parts), 0);
     parallel_ranges_indexed(nz, threads, [&](int k, std::size_t z0, std::size_t z1) {
       auto& pb = pbins[std::size_t(k)];
-      for (std::size_t z = z0; z < z1; ++z)
-        for (std::size_t y = 0; y < ny; ++y)
-          for (std::size_t x = 0; x < nx; ++x) {
-            const std::size_t i = (z * ny + y) * nx + x;
-            if (scanned && !(*scanned)[i]) continue;
-            std::size_t l;
-            long depth;
-            line_depth(x, y, z, l, depth);
-            const auto bin = std::size_t(double(depth - skin[l]) * hz / 0.5);
-            if (bin < bins) pb[bin].push_back(lp[i]);
-            ++pall[std::size_t(k)];
-          }
+      each_scanned(z0, z1, [&](std::size_t i, std::size_t l, long depth) {
+        const auto bin = std::size_t(double(depth - skin[l]) * hz / 0.5);
+        if (bin < bins) pb[bin].push_back(lp[i]);
+        ++pall[std::size_t(k)];
+      });
     });
     for (int k = 0; k < parts; ++k) {
       all += pall[std::size_t(k)];
