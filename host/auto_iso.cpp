@@ -321,12 +321,19 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
       }
       const Dims3 dcoarse{dc[0], dc[1], dc[2]};
       const std::size_t nc = dc[0] * dc[1] * dc[2];
+      // The edges' isovalues enter as t = (value - local_iso) / spread, in
+      // [-1, 1]: sums and blurs of t cannot overflow however large the
+      // samples (float data near 3.4e38), and the field, a weighted mean of
+      // the t and of the prior's 0, maps back into [min, max] of the values.
+      double lo_local = local_iso, hi_local = local_iso;
+      for (float x : locals) lo_local = std::min(lo_local, double(x)), hi_local = std::max(hi_local, double(x));
+      const double spread = std::max({hi_local - local_iso, local_iso - lo_local, 1e-30});
       std::vector<float> fn(nc, 0.0f), fd(nc, 0.0f);
       for (std::size_t k = 0; k < locals.size(); ++k) {
         const std::size_t i = local_at[k];
         const std::size_t x = i % d[0], y = (i / d[0]) % d[1], z = i / (d[0] * d[1]);
         const std::size_t c = x / f[0] + dc[0] * (y / f[1] + dc[1] * (z / f[2]));
-        fn[c] += locals[k], fd[c] += 1.0f;
+        fn[c] += float((double(locals[k]) - local_iso) / spread), fd[c] += 1.0f;
       }
       for (int axis = 0; axis < 3; ++axis)
         // Unnormalised Gaussian: the density of edges per cell stays comparable to the prior.
@@ -338,7 +345,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
       for (int axis = 0; axis < 3; ++axis) gauss_volume *= std::sqrt(2 * M_PI) * sigma_vox[axis];
       const double prior = params.field_prior / gauss_volume * double(f[0] * f[1] * f[2]);
       std::vector<float> coarse(nc);
-      for (std::size_t c = 0; c < nc; ++c) coarse[c] = float((double(fn[c]) + prior * local_iso) / (double(fd[c]) + prior));
+      for (std::size_t c = 0; c < nc; ++c) coarse[c] = float(double(fn[c]) / (double(fd[c]) + prior));
       field.resize(n);
       // Trilinear from cell centres: voxel x sits at (x + 0.5) / f - 0.5 cells.
       auto weights = [&](int a, std::size_t x, std::size_t& c0, std::size_t& c1, float& t) {
@@ -364,7 +371,8 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
             const float a01 = at(x0, y0, z1) + tx * (at(x1, y0, z1) - at(x0, y0, z1));
             const float a11 = at(x0, y1, z1) + tx * (at(x1, y1, z1) - at(x0, y1, z1));
             const float b0 = a00 + ty * (a10 - a00), b1 = a01 + ty * (a11 - a01);
-            field[x + d[0] * (y + d[1] * z)] = b0 + tz * (b1 - b0);
+            const double t = double(b0 + tz * (b1 - b0));
+            field[x + d[0] * (y + d[1] * z)] = float(std::clamp(local_iso + spread * t, lo_local, hi_local));
           }
         }
       }

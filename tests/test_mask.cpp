@@ -553,6 +553,39 @@ TEST(IsoField, LevellingFloatDataAtTheEndsOfItsRangeStaysFinite) {
   EXPECT_FLOAT_EQ(lv.data[3], 0.5f);
 }
 
+TEST(IsoField, FloatDataNearTheTopOfItsRangeGivesAFiniteFieldThatFollowsTheDrift) {
+  // The drifting two-boundary volume of LocalFieldFollowsABrightnessDrift,
+  // its grey levels times 1.2e36 (tissue near 3e38, float's top): the
+  // field spreads the boundaries' isovalues by a Gaussian, and summed as
+  // they are it overflowed to infinity (found by fuzz_classify). It must
+  // stay finite, inside the range of the data, and still follow the drift.
+  const double scale = 1.2e36;
+  Volume v({40, 40, 48}, {1, 1, 1}, ScalarType::Float32);
+  std::mt19937_64 rng(test::seed() + 32);
+  std::normal_distribution<double> noise(0.0, 5.0);
+  auto gain = [](std::size_t z) { return 60.0 * double(z) / 47.0; };
+  for (std::size_t z = 0; z < 48; ++z)
+    for (std::size_t y = 0; y < 40; ++y)
+      for (std::size_t x = 0; x < 40; ++x)
+        v.at(x, y, z) = float(scale * ((z >= 12 && z < 36 ? 180.0 : 20.0) + gain(z) + noise(rng)));
+  AutoIsoParams ap;
+  ap.want_field = true;
+  AutoIsoReport rep;
+  const double iso = auto_iso(v, nullptr, ap, &rep);
+  ASSERT_EQ(rep.field.size(), v.voxels());
+  const auto [lo, hi] = std::minmax_element(v.data.begin(), v.data.end());
+  for (float f : rep.field) {
+    ASSERT_TRUE(std::isfinite(f));
+    ASSERT_GE(f, *lo);
+    ASSERT_LE(f, *hi);
+  }
+  const double top = rep.field[v.index(20, 20, 12)] / scale, bottom = rep.field[v.index(20, 20, 35)] / scale;
+  EXPECT_NEAR(top, 20 + gain(12) + 0.75 * 160, 15);
+  EXPECT_NEAR(bottom, 20 + gain(36) + 0.75 * 160, 15);
+  const Volume lv = level_isovalue(v, rep.field, iso);
+  for (float x : lv.data) ASSERT_TRUE(std::isfinite(x));
+}
+
 TEST(IsoAuto, ConstantOrEmptyInputsFailCleanly) {
   Volume c({10, 10, 10}, {1, 1, 1}, ScalarType::UInt8);
   for (float& f : c.data) f = 50;

@@ -323,7 +323,8 @@ TEST(RobustRepro, EveryReproFileIsCovered) {
       "big_gz.nrrd",       "big_raw.nrrd",      "big_z.mha",     "d.raw",             "detached_data_clobbered.sh",
       "fifo.mhd",          "fifo.nhdr",         "metres_spacing_64.nrrd", "nan_voxel.nrrd", "spacing_1e-3.nrrd",
       "stdin.nhdr",        "teem_leak.nhdr",    "teem_overread_list.nhdr", "nrrd_nul_in_field_name.nrrd",
-      "classify_converged_nan.bin",  // fuzz input: FuzzRegression.ReproInputsGetDocumentedAnswers
+      "classify_converged_nan.bin",  // fuzz inputs: FuzzRegression.ReproInputsGetDocumentedAnswers
+      "classify_iso_field_inf_1.bin", "classify_iso_field_inf_2.bin",
       "vti_zlib_last_block_4g.vti"};  // tests/test_vti.cpp: Vti.ReproHugeBlockIsRefusedAtOnce
   for (const auto& e : fs::directory_iterator(repro(""))) {
     const std::string name = e.path().filename().string();
