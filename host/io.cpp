@@ -797,6 +797,9 @@ bool nifti_supported() { return false; }
 namespace io_detail {
 Volume read_nifti(const std::string& path) { throw input_error(path, "NIfTI input is not part of this build"); }
 VolumeHeader read_nifti_header(const std::string& path) { throw input_error(path, "NIfTI input is not part of this build"); }
+void write_nifti(const std::string& path, const Volume&, const WriteOptions&, bool) {
+  throw input_error(path, "NIfTI output is not part of this build");
+}
 }  // namespace io_detail
 #else
 bool nifti_supported() { return true; }
@@ -823,10 +826,29 @@ VolumeHeader read_volume_header(const std::string& path, const std::optional<Raw
   return {};
 }
 
+namespace {
+
+bool is_nii_gz(const std::string& path) {
+  const std::string name = lower(fs::path(path).filename().string());
+  return name.size() > 7 && name.compare(name.size() - 7, 7, ".nii.gz") == 0;
+}
+
+}  // namespace
+
+bool is_volume_output(const std::string& path) {
+  const std::string ext = extension_of(path);
+  if (ext == ".nrrd" || ext == ".mha" || ext == ".mhd" || ext == ".vti") return true;
+  return nifti_supported() && (ext == ".nii" || is_nii_gz(path));
+}
+
+std::string volume_output_extensions() {
+  return nifti_supported() ? ".nrrd, .mha, .mhd, .nii, .nii.gz or .vti" : ".nrrd, .mha, .mhd or .vti";
+}
+
 void write_volume(const std::string& path, const Volume& v, const WriteOptions& opt) {
   const std::string ext = extension_of(path);
-  if (ext != ".nrrd" && ext != ".mha" && ext != ".mhd") {
-    throw input_error(path, "unsupported output extension '" + ext + "' (use .nrrd, .mha or .mhd)");
+  if (!is_volume_output(path)) {
+    throw input_error(path, "unsupported output extension '" + ext + "' (use " + volume_output_extensions() + ")");
   }
   if (v.data.size() != v.voxels() || v.voxels() == 0) {
     throw input_error(path, "cannot write: volume of dims " + dims_text(v.dims) + " holds " +
@@ -834,6 +856,10 @@ void write_volume(const std::string& path, const Volume& v, const WriteOptions& 
   }
   if (ext == ".nrrd") {
     io_detail::write_nrrd(path, v, opt);
+  } else if (ext == ".vti") {
+    io_detail::write_vti(path, v, opt);
+  } else if (ext == ".nii" || is_nii_gz(path)) {
+    io_detail::write_nifti(path, v, opt, is_nii_gz(path));
   } else {
     io_detail::write_metaimage(path, v, opt, ext == ".mhd");
   }

@@ -92,10 +92,14 @@ struct WriteOptions {
 };
 
 // Writes by extension: .nrrd (attached NRRD), .mha (MetaImage, data attached),
-// .mhd (MetaImage header + detached .raw beside it). Integer output types
+// .mhd (MetaImage header + detached .raw beside it), .nii / .nii.gz (NIfTI-1,
+// when nifti_supported()), .vti (VTK XML ImageData). Integer output types
 // round to nearest and clamp to the type's range. Throws InputError for an
 // unknown extension or an unwritable place.
 void write_volume(const std::string& path, const Volume& v, const WriteOptions& opt = {});
+// True when write_volume knows the path's extension; the list for messages.
+bool is_volume_output(const std::string& path);
+std::string volume_output_extensions();  // ".nrrd, .mha, .mhd, .nii, .nii.gz or .vti"
 
 // The files write_volume(path) creates or replaces: `path`, and for .mhd its
 // data file ("<stem>.raw", or "<stem>.zraw" when compressed: both listed).
@@ -229,8 +233,12 @@ Volume read_metaimage(const std::string& path);
 // NIfTI (host/io_nifti.cpp; only when nifti_supported()).
 Volume read_nifti(const std::string& path);
 VolumeHeader read_nifti_header(const std::string& path);
+// `gzipped`: .nii.gz. NIfTI-1, sform and qform in RAS (host/io_nifti.cpp).
+void write_nifti(const std::string& path, const Volume& v, const WriteOptions& opt, bool gzipped);
 // VTK XML ImageData (host/io_vti.cpp).
 Volume read_vti(const std::string& path);
+// Raw appended samples (zlib blocks when opt.compress), LPS world.
+void write_vti(const std::string& path, const Volume& v, const WriteOptions& opt);
 VolumeHeader read_vti_header(const std::string& path);
 VolumeHeader read_metaimage_header(const std::string& path);
 // `detached`: .mhd header plus "<stem>.raw" (".zraw" when compressed).

@@ -13,6 +13,7 @@
 #include <cerrno>
 #include <climits>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <memory>
@@ -324,6 +325,120 @@ Volume read_nifti(const std::string& path) {
   if (info.scaled)
     for (float& x : v.data) x = static_cast<float>(info.slope * double(x) + info.inter);
   return v;
+}
+
+// ---- writing -------------------------------------------------------------------
+
+namespace {
+
+// The whole of `in` as one gzip member (zlib's window bits 15 + 16).
+std::vector<unsigned char> gzip_all(const std::string& path, const std::vector<unsigned char>& in) {
+  z_stream zs{};
+  if (deflateInit2(&zs, Z_DEFAULT_COMPRESSION, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) != Z_OK)
+    throw input_error(path, "zlib initialisation failed");
+  struct End {
+    z_stream* z;
+    ~End() { deflateEnd(z); }
+  } end{&zs};
+  std::vector<unsigned char> out;
+  std::vector<unsigned char> buf(1 << 20);
+  std::size_t in_pos = 0;
+  int rc = Z_OK;
+  do {
+    if (zs.avail_in == 0 && in_pos < in.size()) {
+      const std::size_t chunk = std::min<std::size_t>(in.size() - in_pos, UINT_MAX);
+      zs.next_in = const_cast<Bytef*>(in.data() + in_pos);
+      zs.avail_in = static_cast<uInt>(chunk);
+      in_pos += chunk;
+    }
+    const int flush = (in_pos == in.size() && zs.avail_in == 0) ? Z_FINISH : Z_NO_FLUSH;
+    zs.next_out = buf.data();
+    zs.avail_out = static_cast<uInt>(buf.size());
+    rc = deflate(&zs, flush);
+    if (rc == Z_STREAM_ERROR) throw input_error(path, "cannot write: zlib compression failed");
+    out.insert(out.end(), buf.data(), buf.data() + (buf.size() - zs.avail_out));
+  } while (rc != Z_STREAM_END);
+  return out;
+}
+
+int nifti_datatype_of(ScalarType t) {
+  switch (t) {
+    case ScalarType::Int8: return DT_INT8;
+    case ScalarType::UInt8: return DT_UINT8;
+    case ScalarType::Int16: return DT_INT16;
+    case ScalarType::UInt16: return DT_UINT16;
+    case ScalarType::Int32: return DT_INT32;
+    case ScalarType::UInt32: return DT_UINT32;
+    case ScalarType::Int64: return DT_INT64;
+    case ScalarType::UInt64: return DT_UINT64;
+    case ScalarType::Float32: return DT_FLOAT32;
+    case ScalarType::Float64: return DT_FLOAT64;
+  }
+  return DT_FLOAT32;
+}
+
+}  // namespace
+
+void write_nifti(const std::string& path, const Volume& v, const WriteOptions& opt, bool gzipped) {
+  const ScalarType type = opt.type.value_or(v.source_type);
+  nifti_1_header h{};
+  h.sizeof_hdr = 348;
+  h.dim[0] = 3;
+  for (int a = 0; a < 3; ++a) {
+    if (v.dims[a] > 32767) throw input_error(path, "cannot write NIfTI-1: an axis of " + std::to_string(v.dims[a]) +
+                                                       " voxels is more than its 32767 (use .nrrd)");
+    h.dim[a + 1] = static_cast<short>(v.dims[a]);
+  }
+  for (int a = 4; a < 8; ++a) h.dim[a] = 1;
+  h.datatype = static_cast<short>(nifti_datatype_of(type));
+  h.bitpix = static_cast<short>(8 * scalar_type_size(type));
+  h.vox_offset = 352.0f;
+  h.scl_slope = 0.0f;  // no intensity scaling: the samples are the values
+  h.xyzt_units = NIFTI_UNITS_MM;
+  std::memcpy(h.magic, "n+1\0", 4);
+  std::snprintf(h.descrip, sizeof h.descrip, "softshell");
+
+  // NIfTI's world is RAS. A patient space (LPS, RAS, LAS, or none named:
+  // taken as LPS) is converted there, the same physical placement; another
+  // space (scanner-xyz, 3D-right-handed) is written as it is, with the
+  // sform code "aligned" rather than "scanner" (it names no patient frame).
+  Vec3d origin = v.origin;
+  WorldFrame frame = v.frame.to_lps(origin);
+  const bool patient = frame.anatomical();
+  if (patient) {
+    for (Vec3d& a : frame.axes) a[0] = -a[0] + 0.0, a[1] = -a[1] + 0.0;
+    origin[0] = -origin[0] + 0.0, origin[1] = -origin[1] + 0.0;
+  }
+  nifti_dmat44 m{};
+  for (int r = 0; r < 3; ++r) {
+    for (int a = 0; a < 3; ++a) m.m[r][a] = frame.axes[a][r] * v.spacing[a];
+    m.m[r][3] = origin[r];
+  }
+  m.m[3][3] = 1.0;
+  h.sform_code = h.qform_code = static_cast<short>(patient ? NIFTI_XFORM_SCANNER_ANAT : NIFTI_XFORM_ALIGNED_ANAT);
+  for (int c = 0; c < 4; ++c) {
+    h.srow_x[c] = static_cast<float>(m.m[0][c]);
+    h.srow_y[c] = static_cast<float>(m.m[1][c]);
+    h.srow_z[c] = static_cast<float>(m.m[2][c]);
+  }
+  // The qform (a rotation, a handedness and the spacings) of the same matrix.
+  double qb, qc, qd, qx, qy, qz, dx, dy, dz, qfac;
+  nifti_dmat44_to_quatern(m, &qb, &qc, &qd, &qx, &qy, &qz, &dx, &dy, &dz, &qfac);
+  h.quatern_b = static_cast<float>(qb), h.quatern_c = static_cast<float>(qc), h.quatern_d = static_cast<float>(qd);
+  h.qoffset_x = static_cast<float>(qx), h.qoffset_y = static_cast<float>(qy), h.qoffset_z = static_cast<float>(qz);
+  h.pixdim[0] = static_cast<float>(qfac < 0 ? -1.0 : 1.0);
+  for (int a = 0; a < 3; ++a) h.pixdim[a + 1] = static_cast<float>(v.spacing[a]);
+
+  // Header, the 4-byte extension flag (none), then the samples, all in this
+  // host's byte order (readers tell it from sizeof_hdr).
+  std::vector<unsigned char> bytes(352, 0);
+  std::memcpy(bytes.data(), &h, sizeof h);
+  const std::vector<unsigned char> samples = encode_samples(v.data, type);
+  bytes.insert(bytes.end(), samples.begin(), samples.end());
+  if (gzipped) bytes = gzip_all(path, bytes);
+  AtomicFile out(path);
+  out.write(bytes.data(), bytes.size());
+  out.commit();
 }
 
 }  // namespace softshell::io_detail

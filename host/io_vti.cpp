@@ -429,4 +429,92 @@ Volume read_vti(const std::string& path) {
   return out;
 }
 
+// ---- writing -------------------------------------------------------------------
+
+namespace {
+
+const char* vtk_type_name(ScalarType t) {
+  switch (t) {
+    case ScalarType::Int8: return "Int8";
+    case ScalarType::UInt8: return "UInt8";
+    case ScalarType::Int16: return "Int16";
+    case ScalarType::UInt16: return "UInt16";
+    case ScalarType::Int32: return "Int32";
+    case ScalarType::UInt32: return "UInt32";
+    case ScalarType::Int64: return "Int64";
+    case ScalarType::UInt64: return "UInt64";
+    case ScalarType::Float32: return "Float32";
+    case ScalarType::Float64: return "Float64";
+  }
+  return "Float32";
+}
+
+void put_uint64(std::string& out, std::uint64_t x) {
+  for (int b = 0; b < 8; ++b) out.push_back(static_cast<char>((x >> (8 * b)) & 0xff));
+}
+
+}  // namespace
+
+void write_vti(const std::string& path, const Volume& v, const WriteOptions& opt) {
+  const ScalarType type = opt.type.value_or(v.source_type);
+  std::vector<unsigned char> samples = encode_samples(v.data, type);
+  const std::size_t elem = scalar_type_size(type);
+  if (host_is_big_endian())
+    for (std::size_t i = 0; i + elem <= samples.size(); i += elem) std::reverse(&samples[i], &samples[i] + elem);
+  // VTK has no anatomical frame; softshell writes ITK's LPS (a RAS or LAS
+  // volume converted, the same physical placement), as for MetaImage.
+  Vec3d origin = v.origin;
+  const WorldFrame frame = v.frame.to_lps(origin);
+  std::ostringstream x;
+  x.precision(17);
+  const std::string extent = "0 " + std::to_string(v.dims[0] - 1) + " 0 " + std::to_string(v.dims[1] - 1) + " 0 " +
+                             std::to_string(v.dims[2] - 1);
+  x << "<?xml version=\"1.0\"?>\n"
+    << "<VTKFile type=\"ImageData\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\""
+    << (opt.compress ? " compressor=\"vtkZLibDataCompressor\"" : "") << ">\n"
+    << "  <ImageData WholeExtent=\"" << extent << "\" Origin=\"" << origin[0] << ' ' << origin[1] << ' ' << origin[2]
+    << "\" Spacing=\"" << v.spacing[0] << ' ' << v.spacing[1] << ' ' << v.spacing[2] << "\" Direction=\"";
+  // Row by row: entry (row c, column a) is component c of axis a.
+  for (int c = 0; c < 3; ++c)
+    for (int a = 0; a < 3; ++a) x << (c + a ? " " : "") << frame.axes[a][c] + 0.0;
+  x << "\">\n"
+    << "    <Piece Extent=\"" << extent << "\">\n"
+    << "      <PointData Scalars=\"scalars\">\n"
+    << "        <DataArray type=\"" << vtk_type_name(type) << "\" Name=\"scalars\" format=\"appended\" offset=\"0\"/>\n"
+    << "      </PointData>\n"
+    << "      <CellData/>\n"
+    << "    </Piece>\n"
+    << "  </ImageData>\n"
+    << "  <AppendedData encoding=\"raw\">\n   _";
+  std::string body = x.str();
+  if (!opt.compress) {
+    put_uint64(body, samples.size());
+    body.append(reinterpret_cast<const char*>(samples.data()), samples.size());
+  } else {
+    // vtkZLibDataCompressor: a header of block count, block size, last
+    // block's size and each block's compressed size, then the zlib blocks.
+    constexpr std::size_t kBlock = std::size_t(1) << 20;
+    const std::size_t blocks = std::max<std::size_t>(1, (samples.size() + kBlock - 1) / kBlock);
+    std::vector<std::string> packed(blocks);
+    for (std::size_t b = 0; b < blocks; ++b) {
+      const std::size_t begin = b * kBlock, n = std::min(kBlock, samples.size() - begin);
+      uLongf len = compressBound(static_cast<uLong>(n));
+      packed[b].resize(len);
+      if (compress2(reinterpret_cast<Bytef*>(packed[b].data()), &len, samples.data() + begin, static_cast<uLong>(n),
+                    Z_DEFAULT_COMPRESSION) != Z_OK)
+        throw input_error(path, "cannot write: zlib compression failed");
+      packed[b].resize(len);
+    }
+    put_uint64(body, blocks);
+    put_uint64(body, kBlock);
+    put_uint64(body, samples.size() - (blocks - 1) * kBlock);
+    for (const std::string& p : packed) put_uint64(body, p.size());
+    for (const std::string& p : packed) body += p;
+  }
+  body += "\n  </AppendedData>\n</VTKFile>\n";
+  AtomicFile out(path);
+  out.write(body.data(), body.size());
+  out.commit();
+}
+
 }  // namespace softshell::io_detail

@@ -182,7 +182,7 @@ TEST_F(CliTest, UnknownOutputExtension) {
   write_volume(file("in.nrrd"), v);
   const RunResult r = run({"lowpass", file("in.nrrd"), "--sigma", "1", "-o", file("out.xyz")});
   // Refused before any work (host/cli/cli_validate.hpp), with the extensions the writer knows.
-  expect_one_line_error(r, {"-o " + file("out.xyz") + ": unknown extension '.xyz' for a volume (writes .nrrd, .mha, .mhd)"});
+  expect_one_line_error(r, {"-o " + file("out.xyz") + ": unknown extension '.xyz' for a volume (writes .nrrd, .mha, .mhd, .nii, .nii.gz or .vti)"});
   EXPECT_EQ(listing(), std::vector<std::string>{"in.nrrd"});
 }
 

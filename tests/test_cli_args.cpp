@@ -223,9 +223,9 @@ TEST_F(CliArgs, OutputExtensionsMustMatchTheWriter) {
   RunResult r = run({"slices", in, "-o", file("s.jpg")});
   expect_one_line_error(r, {"-o " + file("s.jpg") + ": unknown extension '.jpg' for a PNG image (writes .png)"});
   r = run({"classify", in, "--iso", "100", "-o", file("u.vtk")});
-  expect_one_line_error(r, {"unknown extension '.vtk' for a volume (writes .nrrd, .mha, .mhd)"});
+  expect_one_line_error(r, {"unknown extension '.vtk' for a volume (writes .nrrd, .mha, .mhd, .nii, .nii.gz or .vti)"});
   r = run({"lowpass", in, "-o", file("u")});
-  expect_one_line_error(r, {"no extension for a volume (writes .nrrd, .mha, .mhd)"});
+  expect_one_line_error(r, {"no extension for a volume (writes .nrrd, .mha, .mhd, .nii, .nii.gz or .vti)"});
   r = run({"synthetic", "-o", file("s.png")});
   expect_one_line_error(r, {"unknown extension '.png' for a volume"});
   r = run({"figure2", in, "-o", file("f.nrrd")});

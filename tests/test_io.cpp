@@ -441,7 +441,7 @@ TEST(IoWrite, UnsupportedExtensionAndUnwritablePlace) {
   ScratchDir dir;
   const Volume v = test_volume(ScalarType::UInt8);
   expect_input_error([&] { write_volume(dir.file("out.xyz"), v); },
-                     {"out.xyz", "unsupported output extension '.xyz' (use .nrrd, .mha or .mhd)"});
+                     {"out.xyz", "unsupported output extension '.xyz' (use .nrrd, .mha, .mhd, .nii, .nii.gz or .vti)"});
   expect_input_error([&] { write_volume(dir.file("no/such/dir/out.nrrd"), v); },
                      {"out.nrrd", "No such file or directory"});
   fs::create_directory(dir.file("sub.nrrd"));

@@ -259,6 +259,76 @@ TEST_F(WorldIo, RotatedMetaImageRoundTrip) {
   EXPECT_NE(test::slurp(file("plain_out.mha")).find("AnatomicalOrientation = ALI\n"), std::string::npos);
 }
 
+// NIfTI-1 (.nii, .nii.gz) and VTK ImageData (.vti) outputs: the samples exactly, and every
+// voxel where it was in the world (NIfTI holds its transform in float32: within 1e-5 mm per mm
+// of the origin's size; VTI in 17 digits). NIfTI's world is RAS, checked on the header's own
+// bytes below, independent of softshell's reader.
+TEST_F(WorldIo, NiftiAndVtiOutputsKeepTheVolumesPlaceInTheWorld) {
+  struct Case {
+    ScalarType type;
+    std::string space;
+  };
+  const std::vector<Case> cases = {{ScalarType::UInt8, "left-posterior-superior"},
+                                   {ScalarType::UInt16, "right-anterior-superior"},
+                                   {ScalarType::Float32, ""}};
+  std::vector<std::string> outputs = {"o.vti", "oz.vti"};
+  if (nifti_supported()) outputs.insert(outputs.end(), {"o.nii", "o.nii.gz"});
+  for (const Case& c : cases) {
+    Volume v({5, 4, 3}, {0.5, 0.75, 1.25}, c.type);
+    v.origin = {-12.5, 30.25, 7.125};
+    v.frame.axes = oblique_axes(40);
+    v.frame.space = c.space;
+    for (std::size_t i = 0; i < v.voxels(); ++i) v.data[i] = c.type == ScalarType::Float32 ? 0.25f * float(i) - 3.0f : float(i * 3);
+    for (const std::string& name : outputs) {
+      SCOPED_TRACE(name + " " + scalar_type_name(c.type) + " " + c.space);
+      WriteOptions opt;
+      opt.compress = name == "oz.vti";
+      write_volume(file(name), v, opt);
+      const Volume w = read_volume(file(name));
+      ASSERT_EQ(w.dims, v.dims);
+      EXPECT_EQ(w.source_type, c.type);
+      EXPECT_EQ(w.data, v.data);
+      const double tol = name.find(".nii") != std::string::npos ? 1e-5 * 40 : 1e-12;
+      for (const Vec3d p : {Vec3d{0, 0, 0}, Vec3d{4, 3, 2}, Vec3d{4, 0, 2}, Vec3d{1.5, 2.5, 0.5}}) {
+        // Both in LPS: the read frame may be RAS (NIfTI) or unnamed (VTI, taken as LPS).
+        Vec3d ov = v.origin, ow = w.origin;
+        Volume vl = v, wl = w;
+        vl.frame = v.frame.to_lps(ov), vl.origin = ov;
+        wl.frame = w.frame.to_lps(ow), wl.origin = ow;
+        const Vec3d a = vl.index_to_world(p), b = wl.index_to_world(p);
+        for (int k = 0; k < 3; ++k) EXPECT_NEAR(a[k], b[k], tol) << "component " << k;
+      }
+    }
+  }
+  if (!nifti_supported()) return;
+  // The header's bytes (nifti1.h's layout, little-endian host): sizeof_hdr 348, magic "n+1",
+  // vox_offset 352, sform code 1 (scanner) and its rows in RAS: an LPS origin (x, y, z)
+  // reads (-x, -y, z), and each row holds spacing times the axes' RAS components.
+  Volume v({5, 4, 3}, {0.5, 0.75, 1.25}, ScalarType::UInt8);
+  v.origin = {-12.5, 30.25, 7.125};
+  v.frame.axes = oblique_axes(40);
+  v.frame.space = "left-posterior-superior";
+  write_volume(file("h.nii"), v);
+  const std::string b = test::slurp(file("h.nii"));
+  ASSERT_EQ(b.size(), 352u + v.voxels());
+  auto i32 = [&](std::size_t at) { std::int32_t x; std::memcpy(&x, b.data() + at, 4); return x; };
+  auto i16 = [&](std::size_t at) { std::int16_t x; std::memcpy(&x, b.data() + at, 2); return x; };
+  auto f32 = [&](std::size_t at) { float x; std::memcpy(&x, b.data() + at, 4); return double(x); };
+  EXPECT_EQ(i32(0), 348);
+  EXPECT_EQ(b.substr(344, 4), std::string("n+1\0", 4));
+  EXPECT_EQ(f32(108), 352.0);       // vox_offset
+  EXPECT_EQ(i16(70), 2);            // datatype DT_UINT8
+  EXPECT_EQ(i16(254), 1);           // sform_code NIFTI_XFORM_SCANNER_ANAT
+  EXPECT_EQ(i16(252), 1);           // qform_code
+  const double sign[3] = {-1, -1, 1};  // LPS -> RAS
+  for (int r = 0; r < 3; ++r) {
+    const std::size_t row = 280 + 16 * std::size_t(r);  // srow_x, srow_y, srow_z
+    for (int a = 0; a < 3; ++a) EXPECT_NEAR(f32(row + 4 * a), sign[r] * v.frame.axes[a][r] * v.spacing[a], 1e-6);
+    EXPECT_NEAR(f32(row + 12), sign[r] * v.origin[r], 1e-5);
+  }
+  for (int a = 0; a < 3; ++a) EXPECT_NEAR(f32(76 + 4 * (a + 1)), v.spacing[a], 1e-7);  // pixdim[1..3] (pixdim[0] at 76 is qfac)
+}
+
 TEST_F(WorldIo, RasNrrdWrittenAsMetaImageKeepsItsPlaceInLps) {
   write("ras.nrrd", nrrd_header({3, 2, 2}, {1, 2, 3}, oblique_axes(), {10, 20, 30}, "right-anterior-superior") +
                         std::string(12, '\x03'));

@@ -160,7 +160,7 @@ void check_output(const std::string& path, OutputKind kind, const std::string& o
   std::vector<std::string> extensions;
   const char* what = "";
   switch (kind) {
-    case OutputKind::Volume: extensions = {".nrrd", ".mha", ".mhd"}, what = "a volume"; break;
+    case OutputKind::Volume: what = "a volume"; break;  // io.hpp: is_volume_output
     case OutputKind::Png: extensions = {".png"}, what = "a PNG image"; break;
     case OutputKind::Ply: extensions = {".ply"}, what = "a PLY mesh"; break;
     case OutputKind::Directory: break;
@@ -192,10 +192,10 @@ void check_output(const std::string& path, OutputKind kind, const std::string& o
     }
   }
   const std::string ext = extension_of(path);
-  bool known = false;
+  bool known = kind == OutputKind::Volume && is_volume_output(path);
   for (const std::string& e : extensions) known = known || ext == e;
   if (!known) {
-    std::string list;
+    std::string list = kind == OutputKind::Volume ? volume_output_extensions() : "";
     for (const std::string& e : extensions) list += (list.empty() ? "" : ", ") + e;
     throw InputError(who + ": " + (ext.empty() ? std::string("no extension") : "unknown extension '" + ext + "'") +
                      " for " + what + " (writes " + list + ")");

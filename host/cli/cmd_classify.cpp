@@ -355,7 +355,7 @@ void add_classify_command(CLI::App& app, Action& action) {
   auto o = std::make_shared<ClassifyOptions>();
   auto* sub = app.add_subcommand("classify", "Opacity classification of a volume (float opacity in [0, 1])");
   sub->add_option("IN", o->in, "Input volume")->required();
-  sub->add_option("-o,--output", o->out, "Output opacity volume (.nrrd, .mha, .mhd), float")->required();
+  sub->add_option("-o,--output", o->out, "Output opacity volume (.nrrd, .mha, .mhd, .nii, .nii.gz, .vti), float")->required();
   sub->add_option("--iso", o->iso,
                   "Isovalue, in the input's own intensity units (e.g. 0-255 for 8-bit data), or auto: for the "
                   "variational method a field near the bright side of each boundary (auto-local), for levoy where the "

@@ -87,7 +87,7 @@ void add_lowpass_command(CLI::App& app, Action& action) {
   auto o = std::make_shared<LowpassOptions>();
   auto* sub = app.add_subcommand("lowpass", "Gaussian lowpass (sigma in mm, anisotropic spacing honoured)");
   sub->add_option("IN", o->in, "Input volume")->required();
-  sub->add_option("-o,--output", o->out, "Output volume (.nrrd, .mha, .mhd)")->required();
+  sub->add_option("-o,--output", o->out, "Output volume (.nrrd, .mha, .mhd, .nii, .nii.gz, .vti)")->required();
   sub->add_option("--sigma", o->sigma, "Standard deviation in millimetres")
       ->capture_default_str()
       ->check(real_range(0, INFINITY, "mm"));
