@@ -208,10 +208,20 @@ Runtime::Runtime(const std::string& request) : info_(select_device(request)) {
 }
 
 const cl::Program& Runtime::program(const std::string& file, const std::string& options) {
-  const std::string src = kernel_source(file);
+  // Embedded sources never change: the key is the file and the options, and
+  // a hit costs no source assembly. Sources read from SOFTSHELL_KERNEL_DIR
+  // may be edited while the process runs: their hash is part of the key.
+  const char* dir = std::getenv("SOFTSHELL_KERNEL_DIR");
+  const bool from_disk = dir && *dir;
+  std::string src;
   std::ostringstream key;
-  key << file << '|' << std::hex << fnv1a(src) << '|' << options;
+  key << file << '|' << options;
+  if (from_disk) {
+    src = kernel_source(file);
+    key << '|' << std::hex << fnv1a(src);
+  }
   if (auto it = programs_.find(key.str()); it != programs_.end()) return it->second;
+  if (!from_disk) src = kernel_source(file);
 
   cl::Program prog(context_, src);
   const std::string opts = "-cl-std=CL1.2 " + options;
