@@ -21,6 +21,7 @@
 #include <filesystem>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <sstream>
 
 #include "error.hpp"
@@ -249,6 +250,19 @@ double axis_spacing(const Nrrd* n, unsigned ax) {
   return std::isfinite(sp) && sp > 0.0 ? sp : 1.0;
 }
 
+// Millimetres in one of NRRD's "space units" (free text; the common names
+// of the lengths scanners and toolkits write); nullopt when unknown.
+std::optional<double> millimetres_per_unit(std::string u) {
+  u = lower(trim(u));
+  if (u == "mm" || u == "millimeter" || u == "millimeters" || u == "millimetre" || u == "millimetres") return 1.0;
+  if (u == "cm" || u == "centimeter" || u == "centimeters" || u == "centimetre" || u == "centimetres") return 10.0;
+  if (u == "m" || u == "meter" || u == "meters" || u == "metre" || u == "metres") return 1000.0;
+  if (u == "um" || u == "\xc2\xb5m" || u == "micron" || u == "microns" || u == "micrometer" || u == "micrometers" ||
+      u == "micrometre" || u == "micrometres")
+    return 1e-3;
+  return std::nullopt;
+}
+
 // The orientation of a loaded header: unit axes from a 3-D space's "space
 // directions" (identity when there is no 3-D space, when an axis has no
 // direction or when they are degenerate), the space's name, the
@@ -322,8 +336,26 @@ VolumeHeader geometry(const Nrrd* n, const std::string& path) {
       h.origin[ax] = n->axis[ax].center == nrrdCenterCell ? mn + h.spacing[ax] / 2 : mn;
     }
   }
-  check_geometry(path, h.spacing, h.origin);
   h.frame = frame_of(n);
+  // "space units" (one per world axis, NRRD0004 and later): softshell works
+  // in millimetres, so metres, centimetres and microns are scaled; the
+  // unit of every axis must be the same length (an oblique axis mixes them).
+  if (n->spaceDim > 0) {
+    std::optional<double> scale;
+    for (unsigned i = 0; i < n->spaceDim && i < NRRD_SPACE_DIM_MAX; ++i) {
+      const char* u = n->spaceUnits[i];
+      if (!u || !*u) continue;
+      const std::optional<double> s = millimetres_per_unit(u);
+      if (!s) throw input_error(path, std::string("space units: '") + u + "' not understood (expected mm, cm, m or um)");
+      if (scale && *scale != *s) throw input_error(path, "space units differ between the world's axes");
+      scale = s;
+    }
+    if (scale && *scale != 1.0) {
+      for (int a = 0; a < 3; ++a) h.spacing[a] *= *scale, h.origin[a] *= *scale;
+      h.frame.as_read.reset();  // the file's own vectors are in its unit
+    }
+  }
+  check_geometry(path, h.spacing, h.origin);
   if (h.frame.as_read) h.frame.as_read->spacing = h.spacing;  // what the writer will compare with
   return h;
 }
@@ -571,6 +603,12 @@ void write_nrrd(const std::string& path, const Volume& v, const WriteOptions& op
     for (int c = 0; c < 3; ++c) origin[c] = v.origin[c];
     if (nrrdSpaceOriginSet(n.get(), origin) != 0)
       throw input_error(path, "cannot write: " + take_biff_message());
+    // softshell's unit, stated (readers that honour it, 3D Slicer among
+    // them, then need no convention).
+    for (int c = 0; c < 3; ++c) {
+      airFree(n->spaceUnits[c]);
+      n->spaceUnits[c] = airStrdup("mm");
+    }
 
     nrrdIoStateFormatSet(nio.get(), nrrdFormatNRRD);
     if (opt.compress) {

@@ -183,6 +183,41 @@ TEST_F(WorldIo, ObliqueLpsNrrdIsReadAndWrittenBackExactly) {
   EXPECT_EQ(test::slurp(file("out2.nrrd")), text);
 }
 
+TEST_F(WorldIo, NrrdSpaceUnitsAreScaledToMillimetres) {
+  // The same grid in metres, centimetres and microns reads as in millimetres; the written
+  // NRRD states "mm" and reads back the same.
+  const Mat3 axes = oblique_axes(20);
+  const Vec3d sp_mm{0.5, 0.7, 0.9}, org_mm{-12.5, 30.25, 7};
+  for (const auto& [unit, per_mm] : std::vector<std::pair<std::string, double>>{
+           {"m", 1e-3}, {"cm", 0.1}, {"um", 1e3}, {"mm", 1.0}, {"meters", 1e-3}}) {
+    SCOPED_TRACE(unit);
+    Vec3d sp, org;
+    for (int a = 0; a < 3; ++a) sp[a] = sp_mm[a] * per_mm, org[a] = org_mm[a] * per_mm;
+    const std::string units = "space units: \"" + unit + "\" \"" + unit + "\" \"" + unit + "\"\n";
+    write("u.nrrd", nrrd_header({2, 2, 2}, sp, axes, org, "left-posterior-superior", units) + std::string(8, '\x05'));
+    const Volume v = read_volume(file("u.nrrd"));
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_NEAR(v.spacing[a], sp_mm[a], 1e-12 * sp_mm[a]);
+      EXPECT_NEAR(v.origin[a], org_mm[a], 1e-12 * 100);
+      for (int c = 0; c < 3; ++c) EXPECT_NEAR(v.frame.axes[a][c], axes[a][c], 1e-12);
+    }
+    write_volume(file("back.nrrd"), v);
+    EXPECT_NE(test::slurp(file("back.nrrd")).find("space units: \"mm\" \"mm\" \"mm\"\n"), std::string::npos);
+    const Volume w = read_volume(file("back.nrrd"));
+    expect_same_frame(w, v, 1e-12);
+  }
+  expect_one_line_error(
+      run({"info", write("f.nrrd", nrrd_header({2, 2, 2}, sp_mm, axes, org_mm, "left-posterior-superior",
+                                                "space units: \"furlong\" \"mm\" \"mm\"\n") +
+                                       std::string(8, '\x05'))}),
+      {"space units: 'furlong' not understood (expected mm, cm, m or um)"});
+  expect_one_line_error(
+      run({"info", write("mix.nrrd", nrrd_header({2, 2, 2}, sp_mm, axes, org_mm, "left-posterior-superior",
+                                                  "space units: \"m\" \"mm\" \"mm\"\n") +
+                                         std::string(8, '\x05'))}),
+      {"space units differ between the world's axes"});
+}
+
 TEST_F(WorldIo, RasAndOtherSpacesKeepTheirName) {
   const Dims3 d{2, 2, 2};
   for (const char* space : {"right-anterior-superior", "left-anterior-superior", "scanner-xyz", "3D-right-handed"}) {
