@@ -443,4 +443,26 @@ std::string describe_volume(const Volume& v, const std::string& path) {
   return os.str();
 }
 
+std::string grid_mismatch(const Volume& a, const Volume& b) {
+  auto three = [](const Vec3d& v) {
+    std::ostringstream s;
+    s << v[0] << ',' << v[1] << ',' << v[2];
+    return s.str();
+  };
+  std::string out;
+  auto add = [&](const std::string& what) { out += (out.empty() ? "" : "; ") + what; };
+  double h = 0;
+  for (int i = 0; i < 3; ++i) h = std::max(h, a.spacing[i]);
+  bool spacing = false, origin = false, axes = false;
+  for (int i = 0; i < 3; ++i) {
+    spacing = spacing || std::fabs(a.spacing[i] - b.spacing[i]) > 1e-4 * a.spacing[i];
+    origin = origin || std::fabs(a.origin[i] - b.origin[i]) > 1e-3 * h;
+    for (int c = 0; c < 3; ++c) axes = axes || std::fabs(a.frame.axes[i][c] - b.frame.axes[i][c]) > 1e-4;
+  }
+  if (spacing) add("spacing " + three(a.spacing) + " mm against " + three(b.spacing) + " mm");
+  if (origin) add("origin (" + three(a.origin) + ") against (" + three(b.origin) + ") mm");
+  if (axes) add("axes differ");
+  return out;
+}
+
 }  // namespace softshell

@@ -101,6 +101,13 @@ struct IntensityMap {
   std::string rule;              // "type range" or "robust min/max (0.5%, 99.5%)"
 };
 
+struct Volume;
+// Empty when `a` and `b` (of the same dims) place their voxels at the same
+// world positions (spacing within 1e-4 relative, origin within 1e-3 voxel,
+// axes within 1e-4); else what differs, for a message: "spacing 0.5,0.5,1
+// mm against 1,1,1 mm", "origin (...) against (...) mm", "axes differ".
+std::string grid_mismatch(const Volume& a, const Volume& b);
+
 struct Volume {
   Dims3 dims{0, 0, 0};
   Vec3d spacing{1.0, 1.0, 1.0};  // mm

@@ -425,6 +425,54 @@ TEST_F(WorldIo, PlusTrackedFrameSequenceIsRefused) {
 
 // ---- end to end: classify and mesh an oblique volume -----------------------------------------
 
+TEST_F(WorldIo, MaskInitAndTruthPlacedElsewhereAreNamedInAWarning) {
+  // Masks, initial opacities and truths are used index by index; one whose header puts its
+  // voxels elsewhere in the world was likely made for another volume: a warning says what
+  // differs, and the run goes on (exit 0). Placed the same: no warning.
+  const Dims3 d{16, 16, 16};
+  const Vec3d sp{0.5, 0.6, 0.7}, org{-20.5, 14.25, -3};
+  const Mat3 axes = oblique_axes();
+  write("in.nrrd", nrrd_header(d, sp, axes, org, "left-posterior-superior") + ball_samples(d, sp, 2.5));
+  const std::string ones(d[0] * d[1] * d[2], '\x01');
+  write("same.nrrd", nrrd_header(d, sp, axes, org, "left-posterior-superior") + ones);
+  write("moved.nrrd", nrrd_header(d, sp, axes, {org[0] + 5, org[1], org[2]}, "left-posterior-superior") + ones);
+  write("scaled.nrrd", nrrd_header(d, {1, 1, 1}, axes, org, "left-posterior-superior") + ones);
+  RunResult r = run({"classify", file("in.nrrd"), "--iso", "110", "--mask", file("same.nrrd"), "-o", file("u.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(r.err.find("warning"), std::string::npos) << r.err;
+  r = run({"classify", file("in.nrrd"), "--iso", "110", "--mask", file("moved.nrrd"), "-o", file("u2.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("warning: --mask " + file("moved.nrrd") + " lies elsewhere in the world than the volume (origin ("),
+            std::string::npos)
+      << r.err;
+  r = run({"classify", file("in.nrrd"), "--iso", "110", "--mask", "none", "--init", file("scaled.nrrd"), "-o",
+           file("u3.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("warning: --init " + file("scaled.nrrd") +
+                       " lies elsewhere in the world than the volume (spacing 0.5,0.6,0.7 mm against 1,1,1 mm)"),
+            std::string::npos)
+      << r.err;
+  // evaluate: u against a truth moved by 5 mm.
+  Volume sdf(d, sp);
+  sdf.frame.axes = axes;
+  sdf.frame.space = "left-posterior-superior";
+  sdf.origin = org;
+  for (std::size_t z = 0; z < d[2]; ++z)
+    for (std::size_t y = 0; y < d[1]; ++y)
+      for (std::size_t x = 0; x < d[0]; ++x)
+        sdf.at(x, y, z) = float(std::sqrt(double((x - 8) * (x - 8) + (y - 8) * (y - 8) + (z - 8) * (z - 8))) - 4.0);
+  write_volume(file("sdf_same.nrrd"), sdf);
+  sdf.origin[0] += 5;
+  write_volume(file("sdf_moved.nrrd"), sdf);
+  r = run({"evaluate", file("u.nrrd"), file("sdf_moved.nrrd")});
+  EXPECT_NE(r.err.find("warning: the truth " + file("sdf_moved.nrrd") + " lies elsewhere in the world than the opacity"),
+            std::string::npos)
+      << r.status << r.err;
+  r = run({"evaluate", file("u.nrrd"), file("sdf_same.nrrd")});
+  EXPECT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(r.err.find("warning"), std::string::npos) << r.err;
+}
+
 TEST_F(WorldIo, ObliqueVolumeClassifiedAndMeshedOverlaysItsInput) {
   const Dims3 d{24, 24, 24};
   const Vec3d sp{0.5, 0.6, 0.7}, org{-20.5, 14.25, -3};

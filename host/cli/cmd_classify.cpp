@@ -67,6 +67,20 @@ struct DataMask {
   std::string text;                   // for the report
 };
 
+// A mask or initial opacity of the volume's dims is used index by index; if
+// its header places those voxels elsewhere in the world (another spacing,
+// origin or orientation), it was likely made for another volume: say so.
+void warn_if_elsewhere(const std::string& option, const std::string& path, const Volume& in) {
+  const VolumeHeader h = read_volume_header(path);
+  Volume g({1, 1, 1}, h.spacing);
+  g.origin = h.origin;
+  g.frame = h.frame;
+  const std::string differs = grid_mismatch(in, g);
+  if (!differs.empty())
+    std::cerr << "softshell: warning: " << option << " " << path << " lies elsewhere in the world than the volume ("
+              << differs << "); its voxels are used index by index\n";
+}
+
 DataMask make_mask(const std::string& option, const Volume& in) {
   DataMask m;
   const auto percent = [&](std::size_t k) {
@@ -95,6 +109,7 @@ DataMask make_mask(const std::string& option, const Volume& in) {
   } else {
     try {
       m.scanned = read_mask(option, in.dims);
+      warn_if_elsewhere("--mask", option, in);
     } catch (const InputError& e) {
       throw InputError(std::string("--mask ") + e.what());
     }
@@ -192,6 +207,7 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
     if (init->dims != in.dims)
       throw InputError(o.init + ": --init has dims " + dims_text(init->dims) + ", the volume " + dims_text(in.dims));
     require_finite(*init, o.init, "an initial opacity must be finite");
+    warn_if_elsewhere("--init", o.init, in);
     // classify writes opacities in [0, 1]; anything else (a signed distance,
     // a B-mode volume) is not a start the solver can use.
     float lo = init->data.empty() ? 0.0f : init->data[0], hi = lo;

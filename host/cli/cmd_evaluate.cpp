@@ -178,11 +178,11 @@ int run_evaluate(EvaluateOptions o) {
   std::cout << "evaluate " << o.opacity << " against " << o.truth << '\n'
             << "  volume  " << dims_text(u.dims) << ", spacing " << u.spacing[0] << ',' << u.spacing[1] << ','
             << u.spacing[2] << " mm\n";
-  for (int a = 0; a < 3; ++a)
-    if (std::abs(u.spacing[a] - sdf.spacing[a]) > 1e-6 * u.spacing[a]) {
-      std::cout << "  note    the truth's spacing differs; gradients use the opacity volume's\n";
-      break;
-    }
+  // Voxels are compared index by index; a truth placed elsewhere in the
+  // world was likely made for another volume.
+  if (const std::string differs = grid_mismatch(u, sdf); !differs.empty())
+    std::cerr << "softshell: warning: the truth " << o.truth << " lies elsewhere in the world than the opacity ("
+              << differs << "); voxels are compared index by index, gradients use the opacity's spacing\n";
   std::cout << "\n  " << std::left << std::setw(23) << "metric" << std::setw(10) << "value" << "meaning\n";
   for (const Row& r : rows) std::cout << "  " << std::setw(23) << r.name << std::setw(10) << r.value << r.meaning << '\n';
   std::cout << std::right << "\n  time    read " << fixed(t_read, 3) << " s, evaluate " << fixed(t_eval, 3)
