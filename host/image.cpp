@@ -31,9 +31,10 @@ void png_write_to_atomic(png_structp png, png_bytep data, png_size_t n) {
 }
 void png_flush_noop(png_structp) {}
 
-// The classic 5x7 ASCII font, printable characters 0x20..0x7E: five column
-// bytes per glyph, bit 0 the top row.
-constexpr std::uint8_t kFont5x7[95][5] = {
+// The classic 5x7 ASCII font, printable characters 0x20..0x7E: five columns
+// per glyph, bit 0 the top row; g, j, p, q and y are redrawn below with
+// descenders in two more rows (without them "g" read as "9" and "p" as "P").
+constexpr std::uint16_t kFont5x7[95][5] = {
     {0x00, 0x00, 0x00, 0x00, 0x00}, {0x00, 0x00, 0x5F, 0x00, 0x00}, {0x00, 0x07, 0x00, 0x07, 0x00},  //  !"
     {0x14, 0x7F, 0x14, 0x7F, 0x14}, {0x24, 0x2A, 0x7F, 0x2A, 0x12}, {0x23, 0x13, 0x08, 0x64, 0x62},  // #$%
     {0x36, 0x49, 0x55, 0x22, 0x50}, {0x00, 0x05, 0x03, 0x00, 0x00}, {0x00, 0x1C, 0x22, 0x41, 0x00},  // &'(
@@ -68,6 +69,9 @@ constexpr std::uint8_t kFont5x7[95][5] = {
     {0x00, 0x41, 0x36, 0x08, 0x00}, {0x08, 0x04, 0x08, 0x10, 0x08},                                  // }~
 };
 
+constexpr int kGlyphRows = 9;    // 7 above the baseline, 2 of descenders
+constexpr int kLineAdvance = 11;  // rows from one line's top to the next's
+
 }  // namespace
 
 void fill_rect(Image& image, int x, int y, int w, int h, Rgb colour) {
@@ -80,18 +84,37 @@ void fill_rect(Image& image, int x, int y, int w, int h, Rgb colour) {
     }
 }
 
+// Rows 0-8: the lower-case letters with descenders (x-height rows 2-6 as
+// the rest of the font, descender rows 7-8).
+const std::uint16_t* glyph_of(char ch) {
+  static constexpr std::uint16_t kG[5] = {0x038, 0x144, 0x144, 0x144, 0x0FC};
+  static constexpr std::uint16_t kJ[5] = {0x100, 0x100, 0x104, 0x0FD, 0x000};
+  static constexpr std::uint16_t kP[5] = {0x1FC, 0x044, 0x044, 0x044, 0x038};
+  static constexpr std::uint16_t kQ[5] = {0x038, 0x044, 0x044, 0x044, 0x1FC};
+  static constexpr std::uint16_t kY[5] = {0x03C, 0x140, 0x140, 0x140, 0x0FC};
+  switch (ch) {
+    case 'g': return kG;
+    case 'j': return kJ;
+    case 'p': return kP;
+    case 'q': return kQ;
+    case 'y': return kY;
+    default: break;
+  }
+  const int code = static_cast<unsigned char>(ch);
+  return kFont5x7[(code >= 0x20 && code <= 0x7E ? code : '?') - 0x20];
+}
+
 void draw_text(Image& image, int x, int y, const std::string& text, Rgb colour, int scale) {
   scale = std::max(scale, 1);
   int cx = x, cy = y;
   for (const char ch : text) {
     if (ch == '\n') {
-      cx = x, cy += 9 * scale;
+      cx = x, cy += kLineAdvance * scale;
       continue;
     }
-    const int code = static_cast<unsigned char>(ch);
-    const std::uint8_t* glyph = kFont5x7[(code >= 0x20 && code <= 0x7E ? code : '?') - 0x20];
+    const std::uint16_t* glyph = glyph_of(ch);
     for (int col = 0; col < 5; ++col)
-      for (int row = 0; row < 7; ++row)
+      for (int row = 0; row < kGlyphRows; ++row)
         if (glyph[col] >> row & 1) fill_rect(image, cx + col * scale, cy + row * scale, scale, scale, colour);
     cx += 6 * scale;
   }
@@ -111,7 +134,7 @@ int text_height(const std::string& text, int scale) {
   scale = std::max(scale, 1);
   if (text.empty()) return 0;
   const int lines = 1 + int(std::count(text.begin(), text.end(), '\n'));
-  return (9 * (lines - 1) + 7) * scale;
+  return (kLineAdvance * (lines - 1) + kGlyphRows) * scale;
 }
 
 void write_png(const std::string& path, const Image& image) {

@@ -28,9 +28,10 @@ struct Rgb {
 // Fills the rectangle [x, x + w) x [y, y + h), clipped to the image.
 void fill_rect(Image& image, int x, int y, int w, int h, Rgb colour);
 
-// Draws ASCII text with a 5x7 bitmap font, each font pixel a scale x scale
-// block, top-left corner at (x, y); glyphs advance 6 * scale pixels, '\n'
-// starts a new line 9 * scale pixels lower. Characters outside printable
+// Draws ASCII text with a 5x7 bitmap font (5x9 with the descenders of g, j,
+// p, q, y), each font pixel a scale x scale block, top-left corner at (x, y);
+// glyphs advance 6 * scale pixels, '\n' starts a new line 11 * scale pixels
+// lower. Characters outside printable
 // ASCII draw as '?'. Only glyph pixels are written (no background), clipped
 // to the image.
 void draw_text(Image& image, int x, int y, const std::string& text, Rgb colour, int scale = 1);

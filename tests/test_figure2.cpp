@@ -45,7 +45,36 @@ TEST(Figure2Text, GlyphsAreDrawnScaledAndClipped) {
 
   EXPECT_EQ(text_width("ab", 1), 11);
   EXPECT_EQ(text_width("ab\nabc", 2), 34);
-  EXPECT_EQ(text_height("ab\nabc", 1), 16);
+  EXPECT_EQ(text_height("ab\nabc", 1), 20);  // 11 rows to the next line, 9 rows of glyph
+
+  // g, j, p, q and y have descenders below the baseline (rows 7-8), so "g"
+  // does not read as "9" nor "p" as "P"; no other letter reaches there.
+  auto rows_lit = [](const std::string& ch) {
+    Image t(6, 9);
+    draw_text(t, 0, 0, ch, {255, 255, 255}, 1);
+    std::vector<bool> lit(9, false);
+    for (int y = 0; y < 9; ++y)
+      for (int x = 0; x < 6; ++x) lit[std::size_t(y)] = lit[std::size_t(y)] || t.pixel(x, y)[0] == 255;
+    return lit;
+  };
+  auto pixels = [](const std::string& ch) {
+    Image t(6, 9);
+    draw_text(t, 0, 0, ch, {255, 255, 255}, 1);
+    std::string bits;
+    for (int y = 0; y < 9; ++y)
+      for (int x = 0; x < 6; ++x) bits += t.pixel(x, y)[0] == 255 ? '#' : '.';
+    return bits;
+  };
+  for (const char* d : {"g", "j", "p", "q", "y"}) {
+    SCOPED_TRACE(d);
+    EXPECT_TRUE(rows_lit(d)[8]) << "descender";
+  }
+  for (const char* n : {"a", "b", "9", "P", "Q", "x"}) {
+    SCOPED_TRACE(n);
+    EXPECT_FALSE(rows_lit(n)[7] || rows_lit(n)[8]);
+  }
+  EXPECT_NE(pixels("g"), pixels("9"));
+  EXPECT_NE(pixels("p"), pixels("P"));
   EXPECT_EQ(text_width("", 3), 0);
 
   // Every printable character lights something except the space; bytes
