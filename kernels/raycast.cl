@@ -16,9 +16,12 @@
  *
  * Shading as the splat renderer's vertex shader (viewer/shaders/splat.vert):
  * normal = the central-difference gradient per mm (one-sided on the border,
- * as gradient.cl and splat.cl), trilinearly interpolated from the 8 voxels
+ * as gradient.cl and splat.cl) averaged over the voxel's 3x3x3 neighbours
+ * (weights (1 2 1) per axis), trilinearly interpolated from the 8 voxels
  * around the sample, flipped towards the viewer (two-sided), ambient +
- * diffuse + Blinn specular. A zero gradient faces the viewer.
+ * diffuse + Blinn specular. A zero gradient faces the viewer. Each pixel's
+ * samples are offset by a hash of the pixel (raycast_render). Both keep thin
+ * shells from shading in wood-grain rings.
  *
  * Options: -D RAYCAST_ORTHO=1 for an orthographic camera (parallel rays
  * along `forward`, the image plane `view.zw` mm half-wide / half-high).
@@ -57,8 +60,22 @@ inline float raycast_sample(__global const float* restrict v, const GridDesc g, 
 __kernel void raycast_gradients(__global const float* restrict v, const GridDesc g, __global float4* restrict out) {
   const int x = (int)get_global_id(0), y = (int)get_global_id(1), z = (int)get_global_id(2);
   if (!grid_contains(g, x, y, z)) return;
-  const size_t idx = grid_index(g, x, y, z);
-  out[idx] = (float4)(grid_gradient(v, g, idx, x, y, z), 0.0f);
+  /* Central differences averaged over the 3x3 neighbours across each axis
+   * with weights (1 2 1) x (1 2 1) / 16 (a Sobel-type gradient): on a thin,
+   * sharpened shell the plain central difference changes from voxel layer to
+   * voxel layer, and a surface crossing the layers at a shallow angle shades
+   * in terraces (wood-grain rings). Borders clamp. */
+  float3 acc = (float3)(0.0f);
+  float wsum = 0.0f;
+  for (int dz = -1; dz <= 1; ++dz)
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx) {
+        const int xx = clamp(x + dx, 0, g.nx - 1), yy = clamp(y + dy, 0, g.ny - 1), zz = clamp(z + dz, 0, g.nz - 1);
+        const float w = (float)((2 - abs(dx)) * (2 - abs(dy)) * (2 - abs(dz)));
+        acc += w * grid_gradient(v, g, grid_index(g, xx, yy, zz), xx, yy, zz);
+        wsum += w;
+      }
+  out[grid_index(g, x, y, z)] = (float4)(acc / wsum, 0.0f);
 }
 
 /* The voxels' gradients interpolated trilinearly at p (index coordinates). */
@@ -133,11 +150,21 @@ __kernel void raycast_render(__global const float* restrict vol, __global const 
   const float inv_range = 1.0f / fmax(tf.y - tf.x, 1e-12f);
   const float3 view_dir = -dir;
   const float3 half_vec = normalize(light.xyz + view_dir);
-  /* Samples at whole multiples of dt from the eye (the image plane when
-   * orthographic), not from where each ray enters the box: neighbouring rays
-   * then sample on the same spheres (planes), and the box's faces do not
-   * print wood-grain rings onto the surfaces. */
-  t0 = ceil(t0 / dt) * dt;
+  /* Samples at (k + j) dt from the eye (the image plane when orthographic),
+   * not from where each ray enters the box, with j in [0, 1) a hash of the
+   * pixel: sampling a thin shell at the same distances in every ray prints
+   * the distance spheres onto it as wood-grain rings (and the box's faces
+   * would, were the samples tied to the entry point); a per-pixel offset
+   * turns that aliasing into fine noise of the same mean (stochastic
+   * jittering), deterministic from frame to frame. */
+  uint hsh = (uint)px * 0x9E3779B1u ^ (uint)py * 0x85EBCA77u;
+  hsh ^= hsh >> 15;
+  hsh *= 0x2C1B3C6Du;
+  hsh ^= hsh >> 12;
+  hsh *= 0x297A2D39u;
+  hsh ^= hsh >> 15;
+  const float jit = (float)(hsh >> 8) * (1.0f / 16777216.0f);
+  t0 = (ceil(t0 / dt - jit) + jit) * dt;
   if (t0 <= t1) {
     const int steps = (int)floor((t1 - t0) / dt) + 1;
     for (int k = 0; k < steps; ++k) {

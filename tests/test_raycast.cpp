@@ -11,6 +11,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iostream>
+#include <cstdint>
 
 #include "error.hpp"
 #include "phantom.hpp"
@@ -65,6 +67,37 @@ D3 gradient_at(const Volume& v, int x, int y, int z) {
   return g;
 }
 
+// The voxel's central differences averaged over its 3x3x3 neighbours with
+// weights (2 - |dx|)(2 - |dy|)(2 - |dz|) (clamped at the border), as
+// raycast_gradients.
+D3 smoothed_gradient_at(const Volume& v, int x, int y, int z) {
+  D3 acc{};
+  double wsum = 0;
+  for (int dz = -1; dz <= 1; ++dz)
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx) {
+        const int xx = std::clamp(x + dx, 0, int(v.dims[0]) - 1), yy = std::clamp(y + dy, 0, int(v.dims[1]) - 1),
+                  zz = std::clamp(z + dz, 0, int(v.dims[2]) - 1);
+        const double w = (2 - std::abs(dx)) * (2 - std::abs(dy)) * (2 - std::abs(dz));
+        const D3 g = gradient_at(v, xx, yy, zz);
+        for (int a = 0; a < 3; ++a) acc[a] += w * g[a];
+        wsum += w;
+      }
+  for (int a = 0; a < 3; ++a) acc[a] /= wsum;
+  return acc;
+}
+
+// The pixel's sampling offset in [0, 1) steps (raycast_render's hash).
+double jitter(int px, int py) {
+  std::uint32_t h = std::uint32_t(px) * 0x9E3779B1u ^ std::uint32_t(py) * 0x85EBCA77u;
+  h ^= h >> 15;
+  h *= 0x2C1B3C6Du;
+  h ^= h >> 12;
+  h *= 0x297A2D39u;
+  h ^= h >> 15;
+  return double(h >> 8) / 16777216.0;
+}
+
 D3 gradient(const Volume& v, const D3& p) {
   int i0[3], i1[3];
   double w[3];
@@ -73,7 +106,7 @@ D3 gradient(const Volume& v, const D3& p) {
   for (int k = 0; k < 8; ++k) {
     const int x = k & 1 ? i1[0] : i0[0], y = k & 2 ? i1[1] : i0[1], z = k & 4 ? i1[2] : i0[2];
     const double wk = (k & 1 ? w[0] : 1 - w[0]) * (k & 2 ? w[1] : 1 - w[1]) * (k & 4 ? w[2] : 1 - w[2]);
-    const D3 gk = gradient_at(v, x, y, z);
+    const D3 gk = smoothed_gradient_at(v, x, y, z);
     for (int a = 0; a < 3; ++a) g[a] += wk * gk[a];
   }
   return g;
@@ -103,7 +136,8 @@ std::array<double, 4> reference_pixel(const Volume& v, const RayCaster::Frame& f
   }
   std::array<double, 4> c{0, 0, 0, 0};
   const double dt = f.tf[3], ref = f.misc[0];
-  t0 = std::ceil(t0 / dt) * dt;
+  const double j = jitter(px, py);
+  t0 = (std::ceil(t0 / dt - j) + j) * dt;
   if (!(t0 <= t1)) return c;
 
   const D3 view = {-dir[0], -dir[1], -dir[2]}, light = d3(f.light);
@@ -323,6 +357,58 @@ TEST(Raycast, StepSizeDoesNotChangeTheImage) {
   }
   EXPECT_GT(sum / (48 * 48), 0.1);
   EXPECT_LT(worst, 0.03) << "opacity with step 1/8 vs 1/2 voxel";
+}
+
+TEST(Raycast, ThinTiltedShellShadesWithoutWoodGrain) {
+  // A thin (0.6 voxel) planar shell tilted against the grid, seen nearly head-on: its shade
+  // should be even. Sampling every ray at the same distances from the eye and shading with
+  // the plain central difference printed rings across it (the hit moves through the shell's
+  // profile with the sampling phase, and the normal changes from voxel layer to voxel
+  // layer); the per-pixel sampling offset and the averaged gradient leave fine noise, which
+  // a 7x7 box filter removes. Measured: banding 0.0196 before, 0.0058 after.
+  Runtime& rt = runtime();
+  const Dims3 d{48, 48, 48};
+  Volume v(d, {1.0, 1.0, 1.0});
+  const double nn = std::sqrt(0.08 * 0.08 + 0.05 * 0.05 + 1.0), n[3] = {0.08 / nn, 0.05 / nn, 1.0 / nn};
+  for (std::size_t z = 0; z < d[2]; ++z)
+    for (std::size_t y = 0; y < d[1]; ++y)
+      for (std::size_t x = 0; x < d[0]; ++x) {
+        const double dist = n[0] * (double(x) - 23.5) + n[1] * (double(y) - 23.5) + n[2] * (double(z) - 23.5);
+        v.at(x, y, z) = float(std::exp(-0.5 * (dist / 0.6) * (dist / 0.6)));
+      }
+  const auto box = volume_box(v);
+  const RayCamera cam = RayCamera::orbit(0, 0, box[0], box[1]);
+  RaycastParams p;
+  RayCaster rc(rt, v, p);
+  const int w = 160, h = 160;
+  const RaycastImage img = rc.render(cam, w, h);
+  std::vector<double> shade(std::size_t(w) * h);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float* px = img.pixel(x, y);
+      shade[std::size_t(y) * w + x] = (px[0] + px[1] + px[2]) / 3.0;
+    }
+  // The middle of the image: the plane, drawn everywhere there. Banding is the shade's
+  // variation between the scale of the noise (a 7x7 box removes it) and that of the smooth
+  // changes a perspective view and the light bring (a 25x25 box keeps only those).
+  auto box_mean = [&](int cx, int cy, int r) {
+    double b = 0;
+    for (int dy = -r; dy <= r; ++dy)
+      for (int dx = -r; dx <= r; ++dx) b += shade[std::size_t(cy + dy) * w + (cx + dx)];
+    return b / double((2 * r + 1) * (2 * r + 1));
+  };
+  double sum = 0, sum2 = 0;
+  int count = 0;
+  for (int y = 50; y < 110; ++y)
+    for (int x = 50; x < 110; ++x) {
+      ASSERT_GT(img.pixel(x, y)[3], 0.5f) << "the plane covers the middle";
+      const double band = box_mean(x, y, 3) - box_mean(x, y, 12);
+      sum += box_mean(x, y, 3), sum2 += band * band, ++count;
+    }
+  const double mean = sum / count, spread = std::sqrt(sum2 / count);
+  std::cout << "[ raycast  ] tilted thin shell: shade " << mean << ", banding (rms of 7x7 minus 25x25 box) " << spread << '\n';
+  EXPECT_GT(mean, 0.2);
+  EXPECT_LT(spread, 0.01) << "banding (wood grain) across a flat surface";
 }
 
 TEST(Raycast, BadParametersThrow) {
