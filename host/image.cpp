@@ -178,49 +178,94 @@ Image read_png(const std::string& path) {
   return out;
 }
 
-Image slice_montage(const std::vector<const Volume*>& volumes, int height) {
+namespace {
+
+// One panel of the montage and what it shows.
+struct MontagePanel {
+  Image image;
+  int fixed_axis = 2;          // the axis the slice is taken across
+  std::size_t index = 0;       // at this index along it
+  double mm_per_pixel = 1.0;   // along the image's x
+};
+
+// The three mid-slices of `v`: axial (x right, y down), coronal (x right, z
+// down), sagittal (y right, z down).
+std::vector<MontagePanel> montage_panels(const Volume* v, int height) {
   struct Slice {
     int axis_u, axis_v;  // image x and y run along these volume axes
     int fixed_axis;
   };
-  // Axial: x right, y down. Coronal: x right, z down. Sagittal: y right, z down.
   const Slice slices[3] = {{0, 1, 2}, {0, 2, 1}, {1, 2, 0}};
+  const double h = std::min({v->spacing[0], v->spacing[1], v->spacing[2]});
+  const IntensityMap map = v->intensity_map();
+  std::vector<MontagePanel> panels;
+  for (const Slice& s : slices) {
+    const double extent_u = v->dims[s.axis_u] * v->spacing[s.axis_u];
+    const double extent_v = v->dims[s.axis_v] * v->spacing[s.axis_v];
+    int w = std::max(1, int(std::lround(extent_u / h))), ht = std::max(1, int(std::lround(extent_v / h)));
+    if (height > 0) {
+      const double scale = double(height) / std::max(extent_v / h, 1.0);
+      w = std::max(1, int(std::lround(w * scale)));
+      ht = height;
+    }
+    MontagePanel panel;
+    panel.image = Image(w, ht);
+    panel.fixed_axis = s.fixed_axis;
+    panel.index = v->dims[s.fixed_axis] / 2;
+    panel.mm_per_pixel = extent_u / w;
+    std::size_t c[3];
+    c[s.fixed_axis] = panel.index;
+    for (int py = 0; py < ht; ++py)
+      for (int px = 0; px < w; ++px) {
+        c[s.axis_u] = std::min(v->dims[s.axis_u] - 1, std::size_t((px + 0.5) * v->dims[s.axis_u] / w));
+        c[s.axis_v] = std::min(v->dims[s.axis_v] - 1, std::size_t((py + 0.5) * v->dims[s.axis_v] / ht));
+        const double u = std::clamp(map.to_unit(v->at(c[0], c[1], c[2])), 0.0, 1.0);
+        const auto g = static_cast<std::uint8_t>(std::lround(255.0 * u));
+        std::uint8_t* q = panel.image.pixel(px, py);
+        q[0] = q[1] = q[2] = g;
+      }
+    panels.push_back(std::move(panel));
+  }
+  return panels;
+}
+
+void blit(Image& dst, const Image& src, int x0, int y0) {
+  for (int y = 0; y < src.height; ++y)
+    if (y0 + y >= 0 && y0 + y < dst.height)
+      std::copy_n(src.pixel(0, y), std::min(src.width, dst.width - x0) * 3, dst.pixel(x0, y0 + y));
+}
+
+// A round length (1, 2 or 5 times a power of ten, in mm) of about a quarter
+// of `span_mm`.
+double scale_bar_mm(double span_mm) {
+  const double target = std::max(span_mm / 4.0, 1e-9);
+  const double p = std::pow(10.0, std::floor(std::log10(target)));
+  for (double m : {5.0, 2.0, 1.0})
+    if (m * p <= target) return m * p;
+  return p;
+}
+
+std::string length_text(double mm) {
+  char buf[32];
+  if (mm >= 1.0) std::snprintf(buf, sizeof buf, "%g mm", mm);
+  else std::snprintf(buf, sizeof buf, "%g um", mm * 1000.0);
+  return buf;
+}
+
+}  // namespace
+
+Image slice_montage(const std::vector<const Volume*>& volumes, int height) {
   const int gap = 4;
   std::vector<Image> rows;
   for (const Volume* v : volumes) {
-    const double h = std::min({v->spacing[0], v->spacing[1], v->spacing[2]});
-    const IntensityMap map = v->intensity_map();
-    std::vector<Image> panels;
-    for (const Slice& s : slices) {
-      const double extent_u = v->dims[s.axis_u] * v->spacing[s.axis_u];
-      const double extent_v = v->dims[s.axis_v] * v->spacing[s.axis_v];
-      int w = std::max(1, int(std::lround(extent_u / h))), ht = std::max(1, int(std::lround(extent_v / h)));
-      if (height > 0) {
-        const double scale = double(height) / std::max(extent_v / h, 1.0);
-        w = std::max(1, int(std::lround(w * scale)));
-        ht = height;
-      }
-      Image p(w, ht);
-      std::size_t c[3];
-      c[s.fixed_axis] = v->dims[s.fixed_axis] / 2;
-      for (int py = 0; py < ht; ++py)
-        for (int px = 0; px < w; ++px) {
-          c[s.axis_u] = std::min(v->dims[s.axis_u] - 1, std::size_t((px + 0.5) * v->dims[s.axis_u] / w));
-          c[s.axis_v] = std::min(v->dims[s.axis_v] - 1, std::size_t((py + 0.5) * v->dims[s.axis_v] / ht));
-          const double u = std::clamp(map.to_unit(v->at(c[0], c[1], c[2])), 0.0, 1.0);
-          const auto g = static_cast<std::uint8_t>(std::lround(255.0 * u));
-          std::uint8_t* q = p.pixel(px, py);
-          q[0] = q[1] = q[2] = g;
-        }
-      panels.push_back(std::move(p));
-    }
+    const std::vector<MontagePanel> panels = montage_panels(v, height);
     int w = 0, ht = 0;
-    for (const auto& p : panels) w += p.width + gap, ht = std::max(ht, p.height);
+    for (const auto& p : panels) w += p.image.width + gap, ht = std::max(ht, p.image.height);
     Image row(w - gap, ht, 32);
     int x0 = 0;
     for (const auto& p : panels) {
-      for (int y = 0; y < p.height; ++y) std::copy_n(p.pixel(0, y), p.width * 3, row.pixel(x0, y));
-      x0 += p.width + gap;
+      blit(row, p.image, x0, 0);
+      x0 += p.image.width + gap;
     }
     rows.push_back(std::move(row));
   }
@@ -229,8 +274,65 @@ Image slice_montage(const std::vector<const Volume*>& volumes, int height) {
   Image out(std::max(w, 1), std::max(ht - gap, 1), 32);
   int y0 = 0;
   for (const auto& r : rows) {
-    for (int y = 0; y < r.height; ++y) std::copy_n(r.pixel(0, y), r.width * 3, out.pixel(0, y0 + y));
+    blit(out, r, 0, y0);
     y0 += r.height + gap;
+  }
+  return out;
+}
+
+Image labelled_slice_montage(const std::vector<const Volume*>& volumes, const std::vector<std::string>& labels,
+                             int height) {
+  const Rgb kBackground{24, 26, 34}, kLabel{235, 225, 170}, kTitle{160, 190, 230}, kBar{255, 214, 90};
+  const int gap = 6, margin = 6, scale = 1;
+  const int line = text_height("Ag", scale);
+  const char* names[3] = {"axial", "coronal", "sagittal"};
+  // Each row: its label, the panels' titles above them, the panels with a
+  // scale bar in the axial panel's lower left corner.
+  std::vector<Image> rows;
+  for (std::size_t r = 0; r < volumes.size(); ++r) {
+    const Volume* v = volumes[r];
+    std::vector<MontagePanel> panels = montage_panels(v, height);
+    int w = margin, ht = 0;
+    for (const auto& p : panels) w += p.image.width + gap, ht = std::max(ht, p.image.height);
+    w += margin - gap;
+    const std::string label = r < labels.size() ? labels[r] : "";
+    w = std::max(w, 2 * margin + text_width(label, scale));
+    const int top = margin + line + 4 + line + 3;  // label, then the titles
+    Image row(w, top + ht + margin);
+    fill_rect(row, 0, 0, row.width, row.height, kBackground);
+    draw_text(row, margin, margin, label, kLabel, scale);
+    int x0 = margin;
+    for (std::size_t k = 0; k < panels.size(); ++k) {
+      MontagePanel& p = panels[k];
+      if (k == 0) {
+        // The scale bar: a round length, drawn with a dark outline so that
+        // it reads on bright and dark data alike.
+        const double bar_mm = scale_bar_mm(p.mm_per_pixel * p.image.width);
+        const int bar_px = std::max(1, int(std::lround(bar_mm / p.mm_per_pixel)));
+        const int bx = 4, by = p.image.height - 5;
+        if (bar_px + 2 * bx < p.image.width && by > 4) {
+          fill_rect(p.image, bx - 1, by - 1, bar_px + 2, 4, {0, 0, 0});
+          fill_rect(p.image, bx, by, bar_px, 2, kBar);
+          const std::string t = length_text(bar_mm);
+          if (text_width(t, scale) + bx < p.image.width && by - line - 2 >= 0)
+            draw_text(p.image, bx, by - line - 2, t, kBar, scale);
+        }
+      }
+      const std::string title = std::string(names[k]) + " " + "xyz"[p.fixed_axis] + " " + std::to_string(p.index);
+      draw_text(row, x0, margin + line + 4, title, kTitle, scale);
+      blit(row, p.image, x0, top);
+      x0 += p.image.width + gap;
+    }
+    rows.push_back(std::move(row));
+  }
+  int w = 0, ht = 0;
+  for (const auto& r : rows) w = std::max(w, r.width), ht += r.height;
+  Image out(std::max(w, 1), std::max(ht, 1));
+  fill_rect(out, 0, 0, out.width, out.height, kBackground);
+  int y0 = 0;
+  for (const auto& r : rows) {
+    blit(out, r, 0, y0);
+    y0 += r.height;
   }
   return out;
 }

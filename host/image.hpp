@@ -47,5 +47,11 @@ Image read_png(const std::string& path);  // RGB8 (other layouts converted)
 // smallest spacing, grey levels from each volume's intensity map. With
 // `height` > 0 every row is scaled to that many pixels high.
 Image slice_montage(const std::vector<const Volume*>& volumes, int height = 0);
+// The same panels for people: each row headed by its label (e.g. the file
+// name), each panel titled with its view and slice ("axial z 48"), a scale
+// bar of a round length in the axial panel's lower left corner, on a dark
+// blue-grey ground. `softshell slices` writes this unless --plain.
+Image labelled_slice_montage(const std::vector<const Volume*>& volumes, const std::vector<std::string>& labels,
+                             int height = 0);
 
 }  // namespace softshell

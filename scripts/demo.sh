@@ -39,6 +39,7 @@ for m in levoy variational; do
   "$ss" evaluate "$out/face-$m.nrrd" "$out/face/truth_sdf.nrrd" | tee "$out/face-$m-metrics.txt"
 done
 "$ss" slices "$out/face/volume.nrrd" "$out/face-levoy.nrrd" "$out/face-variational.nrrd" --height 192 \
+  --labels "B-mode input (face phantom),Levoy's classifier (lowpassed 1.5 voxels),variational classifier (defaults)" \
   -o "$out/face-classified.png"
 log "the paper's Figure 2 on a slice of the face"
 "$ss" figure2 "$out/face/volume.nrrd" --iso auto -o "$out/face-figure2.png"
@@ -50,7 +51,8 @@ if [ -f "$spine" ]; then
   log "real 3D ultrasound: PLUS spine phantom"
   "$ss" info "$spine" > "$out/spine-info.txt"
   "$ss" lowpass "$spine" --sigma 1.0 -o "$out/spine-lowpass.nrrd"
-  "$ss" slices "$spine" "$out/spine-lowpass.nrrd" --height 256 -o "$out/spine-slices.png"
+  "$ss" slices "$spine" "$out/spine-lowpass.nrrd" --height 256 \
+    --labels "PLUS spine phantom sweep (real 3D ultrasound),lowpassed" -o "$out/spine-slices.png"
   # The defaults, no per-volume flag: unscanned voxels (the zero fill around
   # the sweep) are masked, the bright near-field band under the probe is held
   # at u = 0, and the isovalue follows the local brightness

@@ -139,6 +139,47 @@ TEST_F(CliTest, InfoOnNrrdMetaImageAndRaw) {
   expect_one_line_error(run({"info", file("a.raw"), "--raw", "13,9,7", "--type", "complex"}), {"--type", "complex"});
 }
 
+TEST_F(CliTest, SlicesAreLabelledWithTheirViewsAndAScaleBar) {
+  // Without --plain: each row under its label, each panel under its title, a scale bar of a
+  // round length in the axial panel. The panels' own pixels are the plain montage's, except
+  // where the bar and its text are drawn.
+  Volume v({64, 48, 40}, {0.5, 0.5, 0.5}, ScalarType::UInt8);
+  for (std::size_t i = 0; i < v.voxels(); ++i) v.data[i] = float(60 + (i % 64) * 2);
+  write_volume(file("a.nrrd"), v);
+  RunResult r = run({"slices", file("a.nrrd"), file("a.nrrd"), "--labels", "input,again", "-o", file("l.png")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  ASSERT_EQ(run({"slices", file("a.nrrd"), "--plain", "-o", file("p.png")}).status, 0);
+  const Image l = read_png(file("l.png")), p = read_png(file("p.png"));
+  EXPECT_GT(l.width, p.width);
+  EXPECT_GT(l.height, 2 * p.height);
+  // Find the axial panel: the first 64x48 block equal to the plain montage's first panel
+  // (ignoring the bar's corner).
+  int px0 = -1, py0 = -1;
+  for (int y = 0; y + 48 <= l.height && px0 < 0; ++y)
+    for (int x = 0; x + 64 <= l.width && px0 < 0; ++x) {
+      bool same = true;
+      for (int yy = 0; yy < 20 && same; ++yy)
+        for (int xx = 0; xx < 64 && same; ++xx) same = l.pixel(x + xx, y + yy)[0] == p.pixel(xx, yy)[0];
+      if (same) px0 = x, py0 = y;
+    }
+  ASSERT_GE(px0, 0) << "the axial panel's pixels are in the labelled montage";
+  // Above it: the title's and the label's text pixels (not the dark ground), left of it the ground.
+  int text_pixels = 0, bar_pixels = 0;
+  for (int y = 0; y < py0; ++y)
+    for (int x = 0; x < l.width; ++x) text_pixels += l.pixel(x, y)[0] > 120;
+  EXPECT_GT(text_pixels, 60) << "labels and titles above the first row";
+  for (int y = py0 + 30; y < py0 + 48; ++y)
+    for (int x = px0; x < px0 + 64; ++x) {
+      const std::uint8_t* q = l.pixel(x, y);
+      bar_pixels += q[0] == 255 && q[1] == 214 && q[2] == 90;
+    }
+  // 32 mm wide panel: a bar of 5 mm = 10 pixels, 2 rows, plus its "5 mm" text.
+  EXPECT_GE(bar_pixels, 20) << "the scale bar";
+  expect_one_line_error(run({"slices", file("a.nrrd"), "--labels", "a,b", "-o", file("x.png")}),
+                        {"--labels: 2 labels for 1 inputs"});
+  EXPECT_FALSE(fs::exists(file("x.png")));
+}
+
 TEST_F(CliTest, SlicesShowTheVolume) {
   // Left half (x < 8) dark, right half bright: every panel must show it.
   Volume v({16, 12, 10}, {1, 1, 1}, ScalarType::UInt8);
@@ -146,7 +187,7 @@ TEST_F(CliTest, SlicesShowTheVolume) {
     for (std::size_t y = 0; y < 12; ++y)
       for (std::size_t x = 0; x < 16; ++x) v.at(x, y, z) = x < 8 ? 0.0f : 255.0f;
   write_volume(file("half.nrrd"), v);
-  const RunResult r = run({"slices", file("half.nrrd"), "-o", file("half.png")});
+  const RunResult r = run({"slices", file("half.nrrd"), "--plain", "-o", file("half.png")});
   ASSERT_EQ(r.status, 0) << r.err;
   const Image img = read_png(file("half.png"));
   // Axial panel 16x12 at x 0, coronal 16x10 at x 20, sagittal 12x10 at x 40 (4-pixel gaps).
