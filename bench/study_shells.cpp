@@ -79,7 +79,9 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   MaskReport mr;
   std::vector<std::uint8_t> mask = scanned_mask(in, MaskParams{}, &mr);
   if (mr.unscanned == 0) mask.clear();
-  remove_near_field(in, mask);
+  const NearFieldReport nf = remove_near_field(in, mask);
+  std::fprintf(stderr, "  near field %s (%.1f mm), reverberation %s\n", nf.found ? "removed" : "none", nf.depth_mm,
+               nf.reverb.found ? "removed" : "none");
   const std::vector<std::uint8_t>* mp = mask.empty() ? nullptr : &mask;
   const Volume filled = mp ? fill_unscanned(in, mask) : Volume();
   const LevelledVolume lv = auto_iso_levelled(in, mp, mp ? &filled : nullptr);

@@ -56,6 +56,14 @@ VariationalParams VariationalParams::literal_defaults() {
   return p;
 }
 
+double small_volume_scale(const Dims3& dims, const Vec3d& spacing, double reference_mm) {
+  if (!(reference_mm > 0)) return 1.0;
+  double extent = INFINITY;
+  for (int a = 0; a < 3; ++a)
+    if (dims[a] >= 2 && spacing[a] > 0) extent = std::min(extent, double(dims[a]) * spacing[a]);
+  return std::isfinite(extent) ? std::min(1.0, extent / reference_mm) : 1.0;
+}
+
 double VariationalParams::effective_thickness_mm(const Vec3d& spacing) const {
   if (thickness_mm <= 0) return 0;
   return std::max(thickness_mm, 2.0 * std::max({spacing[0], spacing[1], spacing[2]}));
