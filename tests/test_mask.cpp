@@ -222,6 +222,110 @@ TEST(NearField, BeamAxisFromTheSpeckleGrain) {
   EXPECT_EQ(band[v.index(20, 40, 15)], 0);
 }
 
+// ---- reverberations and small volumes -------------------------------------------------------------------
+
+// A curvilinear (fan) scan of a flat reflector in water, beam along y,
+// anisotropic voxels (0.1 x 0.1 x 0.2 mm, like the PLUS IMLiF volume): zero
+// outside the fan (the unswept fill), dark water above the reflector (rows
+// [top, top + 6)), then fading tissue, and `copies` reverberation ghosts of
+// the reflector every `period` rows below it, each `fade` as bright as the
+// one before. Speckle grain finer along the beam than across it.
+struct FanScan {
+  Volume v;
+  std::size_t top = 50, period = 25;
+  std::size_t apex_x = 80;
+  bool in_fan(std::size_t x, std::size_t y) const {
+    const double dx = double(x) - double(apex_x), dy = double(y) + 40.0;  // the apex 4 mm above the volume
+    const double r = std::hypot(dx, dy);
+    return r > 42.0 && r < 150.0 && std::fabs(dx) < 0.55 * dy;
+  }
+};
+FanScan fan_scan(int copies, double fade, std::uint64_t seed) {
+  FanScan f{Volume({160, 110, 16}, {0.1, 0.1, 0.2}, ScalarType::UInt8)};
+  Volume& v = f.v;
+  std::uniform_real_distribution<double> U(0.6, 1.4);
+  for (std::size_t z = 0; z < v.dims[2]; ++z)
+    for (std::size_t y = 0; y < v.dims[1]; ++y)
+      for (std::size_t x = 0; x < v.dims[0]; ++x) {
+        if (!f.in_fan(x, y)) continue;
+        double mean = 8;  // water
+        if (y >= f.top) mean = 35.0 * std::exp(-double(y - f.top) / 60.0);  // below the reflector, fading
+        double level = 150;
+        for (int k = 0; k <= copies; ++k, level *= fade) {
+          const std::size_t y0 = f.top + std::size_t(k) * f.period;
+          if (y >= y0 && y < y0 + 6) mean = std::max(mean, level);
+        }
+        std::mt19937_64 cell(seed ^ (y * 1000003 + (x / 3) * 7919 + z));
+        v.at(x, y, z) = float(std::clamp(std::round(mean * U(cell)), 1.0, 255.0));
+      }
+  return f;
+}
+
+TEST(Reverb, EquallySpacedCopiesOfAFlatReflectorAreFoundBelowItsEcho) {
+  const FanScan f = fan_scan(3, 0.6, test::seed() + 21);
+  const Volume& v = f.v;
+  const auto mask = scanned_mask(v);
+  ASSERT_GT(count_unscanned(mask), v.voxels() / 4);  // the sides of the fan
+  EXPECT_EQ(beam_axis_of(v, &mask), 1);
+  ReverbReport r;
+  const auto region = reverberation_region(v, &mask, 1, ReverbParams{}, &r);
+  ASSERT_TRUE(r.found) << "echo " << r.echo << " copy " << r.copy1 << " trough " << r.trough << " second " << r.copy2;
+  EXPECT_NEAR(r.spacing_mm, double(f.period) * 0.1, 0.6);  // crest to crest of 0.6 mm thick layers
+  EXPECT_GT(r.cut_mm, 0.0);
+  EXPECT_LT(r.cut_mm, 1.0);
+  // The reflector itself stays; its ghosts are in the region.
+  const std::size_t x = f.apex_x, z = 8;
+  EXPECT_EQ(region[v.index(x, f.top + 1, z)], 0);
+  EXPECT_EQ(region[v.index(x, f.top - 5, z)], 0);
+  EXPECT_EQ(region[v.index(x, f.top + f.period + 2, z)], 1);
+  EXPECT_EQ(region[v.index(x, f.top + 2 * f.period + 2, z)], 1);
+  // Merged by remove_near_field (no band: the water at the probe is dark).
+  std::vector<std::uint8_t> m = mask;
+  const NearFieldReport nf = remove_near_field(v, m);
+  EXPECT_FALSE(nf.found);
+  EXPECT_TRUE(nf.reverb.found);
+  EXPECT_EQ(count_unscanned(m), count_unscanned(mask) + nf.reverb.voxels);
+  NearFieldParams keep;
+  keep.reverb = false;
+  m = mask;
+  EXPECT_FALSE(remove_near_field(v, m, keep).reverb.found);
+  EXPECT_EQ(m, mask);
+}
+
+TEST(Reverb, ALoneEchoABoneShadowOrANearFieldIsNoReverberation) {
+  // One reflector with nothing repeating below it; a bright echo with a dark
+  // shadow (bone); a single copy only (no second one at twice the spacing).
+  for (int copies : {0, 1}) {
+    SCOPED_TRACE(copies);
+    const FanScan f = fan_scan(copies, 0.6, test::seed() + 22);
+    const auto mask = scanned_mask(f.v);
+    ReverbReport r;
+    const auto region = reverberation_region(f.v, &mask, 1, ReverbParams{}, &r);
+    EXPECT_FALSE(r.found) << "spacing " << r.spacing_mm << " copy " << r.copy1 << " second " << r.copy2;
+    EXPECT_EQ(std::count(region.begin(), region.end(), std::uint8_t{1}), 0);
+  }
+  const Volume bone = layered_scan({40, 40, 60}, {0.5, 0.5, 0.5}, 2, {{8.0, 40}, {1.5, 220}, {20.0, 6}}, 6,
+                                   test::seed() + 23);
+  ReverbReport r;
+  reverberation_region(bone, nullptr, 2, ReverbParams{}, &r);
+  EXPECT_FALSE(r.found);
+  const Volume band = layered_scan({40, 40, 60}, {0.5, 0.5, 0.5}, 2, {{2.0, 220}, {2.0, 150}, {4.0, 210}}, 40,
+                                   test::seed() + 24);
+  std::vector<std::uint8_t> m;
+  const NearFieldReport nf = remove_near_field(band, m);
+  EXPECT_TRUE(nf.found);
+  EXPECT_FALSE(nf.reverb.found);
+}
+
+TEST(SmallVolume, LengthScalesShrinkWithTheSmallestExtent) {
+  EXPECT_NEAR(small_volume_scale({334, 151, 23}, {0.1, 0.1, 0.2}, 20.0), 4.6 / 20.0, 1e-12);
+  EXPECT_EQ(small_volume_scale({147, 106, 104}, {0.5, 0.5, 0.5}, 20.0), 1.0);
+  EXPECT_EQ(small_volume_scale({96, 96, 96}, {0.3, 0.3, 0.3}, 20.0), 1.0);  // 28.8 mm
+  EXPECT_NEAR(small_volume_scale({64, 64, 64}, {0.25, 0.25, 0.25}, 20.0), 0.8, 1e-12);
+  EXPECT_NEAR(small_volume_scale({40, 40, 1}, {0.25, 0.25, 0.25}, 20.0), 0.5, 1e-12);  // a one-voxel axis does not count
+  EXPECT_EQ(small_volume_scale({8, 8, 8}, {0.1, 0.1, 0.1}, 0.0), 1.0);                 // off
+}
+
 TEST(Mask, EnclosedZeroRegionIsScannedHoweverLarge) {
   // A 20^3 block of zeros (22 % of the voxels) not touching the border.
   Volume v = speckle_volume({34, 34, 32}, test::seed());
@@ -768,6 +872,56 @@ TEST_F(CliMask, NearFieldIsRemovedByDefaultAndKeptOnRequest) {
   float band_max = 0;
   for (std::size_t z = 1; z < 10; ++z) band_max = std::max(band_max, uk.at(16, 16, z));
   EXPECT_GT(band_max, 0.2f) << "kept, the band's lower edge is a boundary at the isovalue";
+}
+
+TEST_F(CliMask, FlatReflectorInAFanIsOnePlaneNotItsGhostsOrTheFanEdge) {
+  // The synthetic IMLiF: with the defaults the shell lies on the reflector's
+  // top (the water/reflector boundary), not on the reverberation ghosts below
+  // it and not along the edge of the fan; --reverb keep draws the ghosts.
+  const FanScan f = fan_scan(3, 0.9, test::seed() + 25);
+  write_volume(file("fan.nrrd"), f.v);
+  const test::RunResult r = run({"classify", file("fan.nrrd"), "--iso", "auto", "-o", file("u.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("reverberations removed"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("default length scales x0.16"), std::string::npos) << r.out;  // 3.2 mm / 20 mm
+  const Volume u = read_volume(file("u.nrrd"));
+  const Dims3& d = u.dims;
+  std::size_t columns = 0, on_plane = 0;
+  float ghost = 0, edge = 0;
+  for (std::size_t z = 2; z + 2 < d[2]; ++z)
+    for (std::size_t x = 0; x < d[0]; ++x) {
+      if (!f.in_fan(x, f.top - 8) || !f.in_fan(x, d[1] - 1)) continue;
+      // A column well inside the fan: its crest of u on the reflector's top.
+      if (!f.in_fan(x >= 8 ? x - 8 : 0, f.top) || !f.in_fan(std::min(d[0] - 1, x + 8), f.top)) continue;
+      ++columns;
+      std::size_t best = 0;
+      for (std::size_t y = 0; y < d[1]; ++y)
+        if (u.at(x, y, z) > u.at(x, best, z)) best = y;
+      on_plane += u.at(x, best, z) > 0.5f && best + 3 >= f.top && best <= f.top + 3;
+      for (std::size_t y = f.top + f.period - 4; y < d[1]; ++y) ghost = std::max(ghost, u.at(x, y, z));
+    }
+  // The fan's edge in the water above the reflector: the scanned voxels
+  // within 5 voxels of the zero fill.
+  for (std::size_t z = 0; z < d[2]; ++z)
+    for (std::size_t y = 0; y + 10 < f.top; ++y)
+      for (std::size_t x = 5; x + 5 < d[0]; ++x)
+        if (f.in_fan(x, y) && (!f.in_fan(x - 5, y) || !f.in_fan(x + 5, y))) edge = std::max(edge, u.at(x, y, z));
+  ASSERT_GT(columns, 300u);
+  EXPECT_GT(double(on_plane), 0.9 * double(columns)) << on_plane << " of " << columns;
+  EXPECT_LT(ghost, 0.2f);
+  EXPECT_LT(edge, 0.2f);
+  const test::RunResult k =
+      run({"classify", file("fan.nrrd"), "--iso", "auto", "--reverb", "keep", "-o", file("k.nrrd")});
+  ASSERT_EQ(k.status, 0) << k.err;
+  EXPECT_EQ(k.out.find("reverberations removed"), std::string::npos) << k.out;
+  const Volume uk = read_volume(file("k.nrrd"));
+  float ghost_kept = 0;
+  for (std::size_t z = 2; z + 2 < d[2]; ++z)
+    for (std::size_t y = f.top + f.period - 4; y < f.top + f.period + 10; ++y)
+      ghost_kept = std::max(ghost_kept, uk.at(f.apex_x, y, z));
+  EXPECT_GT(ghost_kept, 0.5f) << "kept, the first ghost is drawn like a reflector";
+  expect_one_line_error(run({"classify", file("fan.nrrd"), "--iso", "100", "--reverb", "cut", "-o", file("x.nrrd")}),
+                        {"--reverb", "remove or keep"});
 }
 
 }  // namespace
