@@ -64,6 +64,11 @@ double small_volume_scale(const Dims3& dims, const Vec3d& spacing, double refere
   return std::isfinite(extent) ? std::min(1.0, extent / reference_mm) : 1.0;
 }
 
+void scale_length_scales(VariationalParams& p, double f) {
+  p.sigma_mm *= f, p.grad_sigma_mm *= f, p.thickness_mm *= f;
+  p.beta *= f * f, p.kappa *= f * f;
+}
+
 double VariationalParams::effective_thickness_mm(const Vec3d& spacing) const {
   if (thickness_mm <= 0) return 0;
   return std::max(thickness_mm, 2.0 * std::max({spacing[0], spacing[1], spacing[2]}));

@@ -90,6 +90,13 @@ struct VariationalParams {
 // reference_mm); beta and kappa, squared lengths, by its square. 1 when
 // reference_mm <= 0.
 double small_volume_scale(const Dims3& dims, const Vec3d& spacing, double reference_mm);
+// The reference extent `softshell classify --small-volume` takes by default
+// (chosen on the PLUS IMLiF volume, 4.6 mm thin: not held out).
+constexpr double kSmallVolumeMm = 20.0;
+// p's length scales times f: sigma_mm, grad_sigma_mm and thickness_mm by f,
+// beta and kappa (squared lengths) by f^2. The classify CLI does the same to
+// the ones not given on its command line.
+void scale_length_scales(VariationalParams& p, double f);
 
 // The median of u over its ridge voxels: u above 5 % of its maximum and not
 // below either neighbour along the axis where its second difference is most

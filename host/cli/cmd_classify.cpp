@@ -39,7 +39,7 @@ struct ClassifyOptions {
   SolverParams sp;
   bool compress = false, quiet = false, stats = false, no_fmg = false, literal = false, no_iso_field = false;
   std::set<std::string> given;  // long option names given on the command line
-  double small_volume_mm = 20.0;   // small_volume_scale's reference extent (0: off)
+  double small_volume_mm = kSmallVolumeMm;  // small_volume_scale's reference extent (0: off)
   double auto_iso_sigma = AutoIsoParams().sigma_mm;
   std::string scale_text;          // for the report, when the length scales shrank
   RawOptions raw;
