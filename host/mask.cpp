@@ -690,6 +690,31 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
   return done();
 }
 
+std::size_t clip_depth(const Volume& v, std::vector<std::uint8_t>& scanned, int ax, double min_mm, double max_mm) {
+  const Dims3& d = v.dims;
+  const std::size_t n = v.voxels();
+  if (ax < 0 || ax > 2) throw std::invalid_argument("clip_depth: beam axis must be 0, 1 or 2");
+  if (scanned.empty()) scanned.assign(n, 1);
+  if (scanned.size() != n) throw std::invalid_argument("clip_depth: mask size differs from the volume");
+  const int u_ax = ax == 0 ? 1 : 0, w_ax = ax == 2 ? 1 : 2;
+  const std::size_t stride[3] = {1, d[0], d[0] * d[1]};
+  const double h = v.spacing[ax];
+  std::size_t clipped = 0;
+  for (std::size_t b = 0; b < d[w_ax]; ++b)
+    for (std::size_t a = 0; a < d[u_ax]; ++a) {
+      const std::size_t base = a * stride[u_ax] + b * stride[w_ax];
+      long skin = -1;
+      for (std::size_t p = 0; p < d[ax]; ++p) {
+        const std::size_t i = base + p * stride[ax];
+        if (!scanned[i]) continue;
+        if (skin < 0) skin = long(p);
+        const double depth = double(long(p) - skin) * h;
+        if (depth < min_mm || depth >= max_mm) scanned[i] = 0, ++clipped;
+      }
+    }
+  return clipped;
+}
+
 NearFieldReport remove_near_field(const Volume& v, std::vector<std::uint8_t>& scanned, const NearFieldParams& params) {
   NearFieldReport rep;
   std::vector<std::uint8_t> band;

@@ -147,6 +147,14 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
 NearFieldReport remove_near_field(const Volume& v, std::vector<std::uint8_t>& scanned,
                                   const NearFieldParams& params = {});
 
+// The depth clip that follows the sweep (`classify --depth-clip`): along
+// the beam axis `axis`, depth is counted from each beam line's first scanned
+// voxel (the skin line, as for the near field); the scanned voxels whose
+// depth d (mm, voxel index difference x spacing) is outside [min_mm, max_mm)
+// become unscanned. An empty `scanned` means every voxel scanned (it is then
+// filled in). Returns the number of voxels clipped.
+std::size_t clip_depth(const Volume& v, std::vector<std::uint8_t>& scanned, int axis, double min_mm, double max_mm);
+
 // A mask from a volume file: nonzero voxels are scanned. Throws InputError
 // naming `path` when its dims differ from `dims`.
 std::vector<std::uint8_t> read_mask(const std::string& path, const Dims3& dims);

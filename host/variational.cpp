@@ -61,7 +61,10 @@ double small_volume_scale(const Dims3& dims, const Vec3d& spacing, double refere
   double extent = INFINITY;
   for (int a = 0; a < 3; ++a)
     if (dims[a] >= 2 && spacing[a] > 0) extent = std::min(extent, double(dims[a]) * spacing[a]);
-  return std::isfinite(extent) ? std::min(1.0, extent / reference_mm) : 1.0;
+  // Under 1 mm across is no small scan but a spacing in the wrong unit
+  // (metres, micrometres): not scaled, so the lowpass checks refuse it.
+  if (!std::isfinite(extent) || extent < kSmallVolumeMinMm) return 1.0;
+  return std::min(1.0, extent / reference_mm);
 }
 
 void scale_length_scales(VariationalParams& p, double f) {

@@ -88,7 +88,9 @@ struct VariationalParams {
 // voxels) is below reference_mm cannot hold them (a 1 mm lowpass is +-3 mm
 // wide), so they shrink by this factor: min(1, smallest extent /
 // reference_mm); beta and kappa, squared lengths, by its square. 1 when
-// reference_mm <= 0.
+// reference_mm <= 0, and when the smallest extent is under kSmallVolumeMinMm
+// (a spacing in the wrong unit, which the lowpass checks then refuse).
+constexpr double kSmallVolumeMinMm = 1.0;
 double small_volume_scale(const Dims3& dims, const Vec3d& spacing, double reference_mm);
 // The reference extent `softshell classify --small-volume` takes by default
 // (chosen on the PLUS IMLiF volume, 4.6 mm thin: not held out).

@@ -324,6 +324,8 @@ TEST(SmallVolume, LengthScalesShrinkWithTheSmallestExtent) {
   EXPECT_NEAR(small_volume_scale({64, 64, 64}, {0.25, 0.25, 0.25}, 20.0), 0.8, 1e-12);
   EXPECT_NEAR(small_volume_scale({40, 40, 1}, {0.25, 0.25, 0.25}, 20.0), 0.5, 1e-12);  // a one-voxel axis does not count
   EXPECT_EQ(small_volume_scale({8, 8, 8}, {0.1, 0.1, 0.1}, 0.0), 1.0);                 // off
+  EXPECT_NEAR(small_volume_scale({8, 8, 8}, {0.125, 0.125, 0.125}, 20.0), 0.05, 1e-12);  // 1 mm across
+  EXPECT_EQ(small_volume_scale({64, 64, 64}, {0.001, 0.001, 0.001}, 20.0), 1.0);  // 0.064 mm: metres read as mm
 }
 
 TEST(Mask, EnclosedZeroRegionIsScannedHoweverLarge) {
@@ -922,6 +924,45 @@ TEST_F(CliMask, FlatReflectorInAFanIsOnePlaneNotItsGhostsOrTheFanEdge) {
   EXPECT_GT(ghost_kept, 0.5f) << "kept, the first ghost is drawn like a reflector";
   expect_one_line_error(run({"classify", file("fan.nrrd"), "--iso", "100", "--reverb", "cut", "-o", file("x.nrrd")}),
                         {"--reverb", "remove or keep"});
+}
+
+TEST_F(CliMask, DepthClipFollowsTheSkinLine) {
+  // Fluid to 12 mm, then tissue: the boundary at z = 24. The skin line is
+  // each beam line's first scanned voxel: where x < 16 a block of zero fill
+  // (z < 10) and the mask's 2-voxel rim push it down to z = 12.
+  Volume v = layered_scan({32, 32, 48}, {0.5, 0.5, 0.5}, 2, {{12.0, 30}}, 170, test::seed() + 11);
+  for (std::size_t z = 0; z < 10; ++z)
+    for (std::size_t y = 0; y < 32; ++y)
+      for (std::size_t x = 0; x < 16; ++x) v.at(x, y, z) = 0;
+  write_volume(file("clip.nrrd"), v);
+  auto crest = [&](const Volume& u, std::size_t x) {
+    float m = 0;
+    for (std::size_t z = 18; z < 30; ++z) m = std::max(m, u.at(x, 16, z));
+    return m;
+  };
+  // Kept 8-20 mm below the skin line: where the skin is at z = 0 the
+  // boundary (12 mm down) is drawn and nothing above 8 mm; where it is at
+  // z = 12 the boundary is only 6 mm down: clipped.
+  const test::RunResult a =
+      run({"classify", file("clip.nrrd"), "--iso", "100", "--depth-clip", "8,20", "-o", file("a.nrrd")});
+  ASSERT_EQ(a.status, 0) << a.err;
+  EXPECT_NE(a.out.find("depth clip: kept 8.0 to 20.0 mm below the skin line along z"), std::string::npos) << a.out;
+  const Volume ua = read_volume(file("a.nrrd"));
+  EXPECT_GT(crest(ua, 24), 0.2f);
+  for (std::size_t z = 0; z < 16; ++z) ASSERT_EQ(ua.at(24, 16, z), 0.0f) << "z " << z;
+  for (std::size_t z = 0; z < 28; ++z) ASSERT_EQ(ua.at(6, 16, z), 0.0f) << "z " << z;
+  // Kept 0-10 mm: clipped where the skin is at z = 0, kept where it is lower.
+  const test::RunResult b =
+      run({"classify", file("clip.nrrd"), "--iso", "100", "--depth-clip", "0,10", "-o", file("b.nrrd")});
+  ASSERT_EQ(b.status, 0) << b.err;
+  const Volume ub = read_volume(file("b.nrrd"));
+  for (std::size_t z = 20; z < 48; ++z) ASSERT_EQ(ub.at(24, 16, z), 0.0f) << "z " << z;
+  EXPECT_GT(crest(ub, 6), 0.2f);
+  for (const char* bad : {"5", "10,5", "-1,4", "a,b", "3,nan"})
+    expect_one_line_error(run({"classify", file("clip.nrrd"), "--iso", "100", "--depth-clip", bad, "-o", file("x.nrrd")}),
+                          {"--depth-clip"});
+  expect_one_line_error(run({"classify", file("clip.nrrd"), "--iso", "100", "--depth-clip", "500,600", "-o", file("x.nrrd")}),
+                        {"--depth-clip", "no scanned voxel"});
 }
 
 }  // namespace

@@ -31,7 +31,7 @@ namespace {
 
 struct ClassifyOptions {
   std::string in, out, device, method = "variational", iso, init, cycle = "pcg", smoother = "gs", mask = "auto";
-  std::string near_field = "remove", reverb = "remove";
+  std::string near_field = "remove", reverb = "remove", depth_clip;
   double thickness = 1.0;
   double iso_fraction = AutoIsoParams().local_fraction, iso_field_sigma = AutoIsoParams().field_sigma_mm;
   std::optional<double> sigma;  // unset: 1 mm for variational, 0 (raw) for levoy
@@ -266,6 +266,20 @@ int run_classify(const ClassifyOptions& options) {
   if (o.mask.empty()) throw InputError("--mask: expected FILE, auto or none");
   if (o.near_field != "remove" && o.near_field != "keep")
     throw InputError("--near-field: expected remove or keep, got '" + o.near_field + "'");
+  // --depth-clip MIN,MAX (mm below the skin line; MAX may be inf).
+  std::optional<std::pair<double, double>> depth_clip;
+  if (!o.depth_clip.empty()) {
+    const auto comma = o.depth_clip.find(',');
+    char* e1 = nullptr;
+    char* e2 = nullptr;
+    const std::string a = o.depth_clip.substr(0, comma), b = comma == std::string::npos ? "" : o.depth_clip.substr(comma + 1);
+    const double lo = std::strtod(a.c_str(), &e1), hi = std::strtod(b.c_str(), &e2);
+    if (a.empty() || b.empty() || *e1 != '\0' || *e2 != '\0' || !std::isfinite(lo) || std::isnan(hi) || lo < 0 ||
+        !(hi > lo))
+      throw InputError("--depth-clip: expected MIN,MAX in mm below the skin line with 0 <= MIN < MAX (MAX may be inf), "
+                       "got '" + o.depth_clip + "'");
+    depth_clip.emplace(lo, hi);
+  }
   if (o.reverb != "remove" && o.reverb != "keep")
     throw InputError("--reverb: expected remove or keep, got '" + o.reverb + "'");
   // Every parameter before any file is read.
@@ -317,6 +331,16 @@ int run_classify(const ClassifyOptions& options) {
   const std::string iso_warning = given_iso ? iso_outside_data(in, *given_iso) : "";
   step.emplace("mask");
   DataMask mask = make_mask(o.mask, in);
+  std::vector<std::uint8_t> clip;  // --depth-clip: the scanned region with the clip applied
+  std::size_t unscanned_before_clip = 0;
+  int axis = -1;
+  if (depth_clip) {
+    clip = mask.scanned.empty() ? std::vector<std::uint8_t>(in.voxels(), 1) : mask.scanned;
+    unscanned_before_clip = count_unscanned(clip);
+    axis = beam_axis_of(in, &clip);
+    clip_depth(in, clip, axis, depth_clip->first, depth_clip->second);
+    if (mask.scanned.empty()) mask.scanned.assign(in.voxels(), 1);
+  }
   if (o.near_field == "remove" || o.reverb == "remove") {
     // The bright near field under the probe is an occluder, not the object
     // (docs/real-data.md, "The near field"); the equally spaced copies of a
@@ -340,6 +364,21 @@ int run_classify(const ClassifyOptions& options) {
         << std::fixed << std::setprecision(1) << nf.reverb.cut_mm << " mm under its crest (copies every "
         << nf.reverb.spacing_mm << " mm, " << nf.reverb.voxels << " voxels; --reverb keep to draw them)";
     mask.text += t.str();
+  }
+  if (depth_clip) {
+    // The user's depth clip that follows the sweep (docs/real-data.md),
+    // depth from the skin line of the scanned region (not from the bottom of
+    // a removed near field).
+    for (std::size_t i = 0; i < clip.size(); ++i)
+      if (!clip[i]) mask.scanned[i] = 0;
+    const std::size_t clipped = count_unscanned(clip) - unscanned_before_clip;
+    std::ostringstream t;
+    t << "; depth clip: kept " << std::fixed << std::setprecision(1) << depth_clip->first << " to "
+      << depth_clip->second << " mm below the skin line along " << "xyz"[axis] << " (" << clipped
+      << " voxels clipped)";
+    mask.text += t.str();
+    if (count_unscanned(mask.scanned) == mask.scanned.size())
+      throw InputError("--depth-clip " + o.depth_clip + ": no scanned voxel lies at that depth");
   }
   double iso = 0;
   std::string iso_text;
@@ -429,6 +468,11 @@ void add_classify_command(CLI::App& app, Action& action) {
       ->capture_default_str()
       ->type_name("remove|keep")
       ->check(one_of({"remove", "keep"}));
+  sub->add_option("--depth-clip", o->depth_clip,
+                  "Keep only the scanned voxels MIN to MAX mm below the skin line (each beam line's first scanned "
+                  "voxel, along the data's beam axis): a clip that follows the sweep; the rest is held at u = 0 like "
+                  "unscanned voxels (MAX may be inf)")
+      ->type_name("MIN,MAX");
   sub->add_option("--small-volume", o->small_volume_mm,
                   "A volume whose smallest extent is below this many mm gets its default length scales (--sigma, "
                   "--grad-sigma, --shell, --iso-field-sigma, the auto isovalue's lowpass) scaled by that extent / "
