@@ -636,9 +636,11 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
   }
   if (rep.lines < 16 || double(rep.lines) < 0.05 * double(with_data)) return done();
   // The echo train: Q(s), the median over the aligned lines.
-  const auto smax = std::size_t(std::floor(params.max_spacing_mm / h));
+  const auto smax = std::size_t(std::min(1e9, std::floor(params.max_spacing_mm / h)));
   const auto smin = std::max<std::size_t>(1, std::size_t(std::ceil(params.min_spacing_mm / h)));
-  const std::size_t S = std::size_t(std::ceil(double(smax) * (2.0 + params.tolerance))) + 1;
+  if (!(params.max_spacing_mm / h >= double(smin)) || smax < smin) return done();
+  // At most the beam lines' length (a spacing in the wrong unit made smax huge).
+  const std::size_t S = std::min<std::size_t>(d[ax], std::size_t(std::ceil(double(smax) * (2.0 + params.tolerance))) + 1);
   std::vector<std::vector<float>> at_s(S);
   for (std::size_t l = 0; l < lines; ++l) {
     if (echo[l] < 0) continue;
