@@ -3,7 +3,7 @@
 // levelling) against the device classification, in one run, as shares of
 // the whole (docs/benchmarks.md, "Host stages").
 //
-//   softshell_host_stages VOLUME [--reps R] [--threads T] [--device D]
+//   softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep]
 //
 // T (0: every core) is passed to the multi-threaded host stages; 1 gives
 // the single-threaded baseline. Each stage's time is the minimum of R runs.
@@ -33,19 +33,21 @@ double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::
 int main(int argc, char** argv) {
   std::string in, device;
   int reps = 3, threads = 0;
+  bool reverb = true;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--reps" && i + 1 < argc) reps = std::atoi(argv[++i]);
     else if (a == "--threads" && i + 1 < argc) threads = std::atoi(argv[++i]);
     else if (a == "--device" && i + 1 < argc) device = argv[++i];
+    else if (a == "--reverb" && i + 1 < argc) reverb = std::string(argv[++i]) != "keep";
     else if (in.empty() && a[0] != '-') in = a;
     else {
-      std::cerr << "usage: softshell_host_stages VOLUME [--reps R] [--threads T] [--device D]\n";
+      std::cerr << "usage: softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep]\n";
       return 2;
     }
   }
   if (in.empty() || reps < 1 || threads < 0) {
-    std::cerr << "usage: softshell_host_stages VOLUME [--reps R] [--threads T] [--device D]\n";
+    std::cerr << "usage: softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep]\n";
     return 2;
   }
   try {
@@ -66,6 +68,7 @@ int main(int argc, char** argv) {
       t0 = Clock::now();
       NearFieldParams np;
       np.threads = threads;
+      np.reverb = reverb;
       remove_near_field(v, mask, np);
       t[1] = since(t0);
       t0 = Clock::now();

@@ -79,11 +79,19 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   MaskReport mr;
   std::vector<std::uint8_t> mask = scanned_mask(in, MaskParams{}, &mr);
   if (mr.unscanned == 0) mask.clear();
-  remove_near_field(in, mask);
+  const NearFieldReport nf = remove_near_field(in, mask);
+  std::fprintf(stderr, "  near field %s (%.1f mm), reverberation %s\n", nf.found ? "removed" : "none", nf.depth_mm,
+               nf.reverb.found ? "removed" : "none");
   const std::vector<std::uint8_t>* mp = mask.empty() ? nullptr : &mask;
   const Volume filled = mp ? fill_unscanned(in, mask) : Volume();
-  const LevelledVolume lv = auto_iso_levelled(in, mp, mp ? &filled : nullptr);
+  // A small volume's length scales shrink with it (1 for every phantom of
+  // the family: they are 55 mm across or more).
+  const double scale = small_volume_scale(in.dims, in.spacing, kSmallVolumeMm);
+  AutoIsoParams ap;
+  ap.sigma_mm *= scale, ap.field_sigma_mm *= scale;
+  const LevelledVolume lv = auto_iso_levelled(in, mp, mp ? &filled : nullptr, ap);
   VariationalParams p;
+  scale_length_scales(p, scale);
   p.v_iso = lv.data.intensity_map().to_unit(lv.iso);
   *iso_out = lv.iso;
   return classify_variational(rt, lv.data, p, SolverParams{}, rep, nullptr, mp);

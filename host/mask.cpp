@@ -372,31 +372,19 @@ int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int 
   return int(std::max_element(energy, energy + 3) - energy);
 }
 
-std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std::uint8_t>* scanned,
-                                          const NearFieldParams& params, NearFieldReport* report) {
+// The data lowpassed across the beam only (beam lines stay lines): speckle
+// averaged, depth resolution kept. Normalised over the scanned samples.
+static std::vector<float> lowpass_across_beam(const Volume& v, const std::vector<std::uint8_t>* scanned, int ax,
+                                       double sigma_mm, int threads) {
   const Dims3& d = v.dims;
   const std::size_t n = v.voxels();
-  if (scanned && scanned->size() != n) throw std::invalid_argument("near_field_band: mask size differs from the volume");
-  NearFieldReport rep;
-  const int threads = host_threads(params.threads);
-  rep.axis = params.axis >= 0 && params.axis < 3 ? params.axis : beam_axis_of(v, scanned, threads);
-  std::vector<std::uint8_t> band(n, 0);
-  const int ax = rep.axis, u_ax = ax == 0 ? 1 : 0, w_ax = ax == 2 ? 1 : 2;  // the two lateral axes
-  const std::size_t stride[3] = {1, d[0], d[0] * d[1]};
-  const double hz = v.spacing[ax];
-  const auto bins = std::size_t(std::ceil(params.search_mm / 0.5)) + 1;
-  if (d[ax] < 4) {
-    if (report) *report = rep;
-    return band;
-  }
-  // The data lowpassed across the beam only (beam lines stay lines): speckle
-  // averaged, depth resolution kept.
+  const int u_ax = ax == 0 ? 1 : 0, w_ax = ax == 2 ? 1 : 2;  // the two lateral axes
   std::vector<float> lp = v.data;
   for (const int axis : {u_ax, w_ax}) {
     // At most as wide as the axis (wider is flat across it anyway: a
     // spacing in the wrong unit made it 30000 taps, O(n r) for nothing),
     // and only the taps inside the axis are visited.
-    const double sigma_vox = std::clamp(params.sigma_mm / v.spacing[axis], 0.5, std::max(0.5, double(d[axis])));
+    const double sigma_vox = std::clamp(sigma_mm / v.spacing[axis], 0.5, std::max(0.5, double(d[axis])));
     const std::vector<float> w = gaussian_weights(sigma_vox, 3.0);
     const long r = long(w.size() / 2);
     std::vector<float> out(n);
@@ -455,6 +443,27 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     }
     lp.swap(out);
   }
+  return lp;
+}
+
+std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std::uint8_t>* scanned,
+                                          const NearFieldParams& params, NearFieldReport* report) {
+  const Dims3& d = v.dims;
+  const std::size_t n = v.voxels();
+  if (scanned && scanned->size() != n) throw std::invalid_argument("near_field_band: mask size differs from the volume");
+  NearFieldReport rep;
+  const int threads = host_threads(params.threads);
+  rep.axis = params.axis >= 0 && params.axis < 3 ? params.axis : beam_axis_of(v, scanned, threads);
+  std::vector<std::uint8_t> band(n, 0);
+  const int ax = rep.axis, u_ax = ax == 0 ? 1 : 0, w_ax = ax == 2 ? 1 : 2;  // the two lateral axes
+  const std::size_t stride[3] = {1, d[0], d[0] * d[1]};
+  const double hz = v.spacing[ax];
+  const auto bins = std::size_t(std::ceil(params.search_mm / 0.5)) + 1;
+  if (d[ax] < 4) {
+    if (report) *report = rep;
+    return band;
+  }
+  const std::vector<float> lp = lowpass_across_beam(v, scanned, ax, params.sigma_mm, threads);
   // Skin line per beam line (its first scanned voxel), samples per depth bin.
   auto voxel = [&](std::size_t a, std::size_t b, std::size_t z) {
     return a * stride[u_ax] + b * stride[w_ax] + z * stride[ax];
@@ -564,13 +573,172 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   return band;
 }
 
+std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vector<std::uint8_t>* scanned, int ax,
+                                               const ReverbParams& params, ReverbReport* report, int threads) {
+  const Dims3& d = v.dims;
+  const std::size_t n = v.voxels();
+  if (scanned && scanned->size() != n) throw std::invalid_argument("reverberation_region: mask size differs from the volume");
+  if (ax < 0 || ax > 2) throw std::invalid_argument("reverberation_region: beam axis must be 0, 1 or 2");
+  ReverbReport rep;
+  std::vector<std::uint8_t> region(n, 0);
+  const auto done = [&] {
+    if (report) *report = rep;
+    return region;
+  };
+  const double h = v.spacing[ax];
+  if (d[ax] < 8 || !(h > 0)) return done();
+  threads = host_threads(threads);
+  const std::vector<float> lp = lowpass_across_beam(v, scanned, ax, params.sigma_mm, threads);
+  const auto is_scanned = [&](std::size_t i) { return !scanned || (*scanned)[i] != 0; };
+  // lo (median) and hi (99th percentile) of the scanned samples.
+  std::vector<float> vals;
+  vals.reserve(n);
+  for (std::size_t i = 0; i < n; ++i)
+    if (is_scanned(i)) vals.push_back(lp[i]);
+  if (vals.size() < 100) return done();
+  const auto quantile = [&](double q) {
+    const auto k = std::size_t(q * double(vals.size() - 1));
+    std::nth_element(vals.begin(), vals.begin() + long(k), vals.end());
+    return double(vals[k]);
+  };
+  const double lo = quantile(0.5), hi = quantile(0.99);
+  std::vector<float>().swap(vals);
+  if (!(hi > lo)) return done();
+  const double strong = lo + params.strong * (hi - lo);
+  const int u_ax = ax == 0 ? 1 : 0, w_ax = ax == 2 ? 1 : 2;
+  const std::size_t stride[3] = {1, d[0], d[0] * d[1]};
+  const std::size_t lines = d[u_ax] * d[w_ax];
+  const auto at = [&](std::size_t l, std::size_t p) {
+    return (l % d[u_ax]) * stride[u_ax] + (l / d[u_ax]) * stride[w_ax] + p * stride[ax];
+  };
+  // The first strong echo of each line, at its crest (within 1 mm below the
+  // crossing).
+  const auto crest_reach = std::size_t(std::ceil(1.0 / h));
+  std::vector<long> echo(lines, -1);
+  std::size_t with_data = 0;
+  for (std::size_t l = 0; l < lines; ++l) {
+    bool any = false;
+    for (std::size_t p = 0; p < d[ax]; ++p) {
+      const std::size_t i = at(l, p);
+      if (!is_scanned(i)) continue;
+      any = true;
+      if (lp[i] < strong) continue;
+      std::size_t best = p;
+      for (std::size_t q = p + 1; q < d[ax] && q <= p + crest_reach; ++q) {
+        const std::size_t j = at(l, q);
+        if (is_scanned(j) && lp[j] > lp[at(l, best)]) best = q;
+      }
+      echo[l] = long(best);
+      ++rep.lines;
+      break;
+    }
+    with_data += any;
+  }
+  if (rep.lines < 16 || double(rep.lines) < 0.05 * double(with_data)) return done();
+  // The echo train: Q(s), the median over the aligned lines.
+  const auto smax = std::size_t(std::min(1e9, std::floor(params.max_spacing_mm / h)));
+  const auto smin = std::max<std::size_t>(1, std::size_t(std::ceil(params.min_spacing_mm / h)));
+  if (!(params.max_spacing_mm / h >= double(smin)) || smax < smin) return done();
+  // At most the beam lines' length (a spacing in the wrong unit made smax huge).
+  const std::size_t S = std::min<std::size_t>(d[ax], std::size_t(std::ceil(double(smax) * (2.0 + params.tolerance))) + 1);
+  std::vector<std::vector<float>> at_s(S);
+  for (std::size_t l = 0; l < lines; ++l) {
+    if (echo[l] < 0) continue;
+    for (std::size_t s = 0; s < S && std::size_t(echo[l]) + s < d[ax]; ++s) {
+      const std::size_t i = at(l, std::size_t(echo[l]) + s);
+      if (is_scanned(i)) at_s[s].push_back(lp[i]);
+    }
+  }
+  std::vector<double> Q;  // up to the first depth too few lines reach
+  for (std::size_t s = 0; s < S; ++s) {
+    auto& x = at_s[s];
+    if (double(x.size()) < 0.25 * double(rep.lines)) break;
+    std::nth_element(x.begin(), x.begin() + long(x.size() / 2), x.end());
+    Q.push_back(double(x[x.size() / 2]));
+  }
+  std::vector<std::vector<float>>().swap(at_s);
+  const auto argext = [&](std::size_t a, std::size_t b, bool max) {  // [a, b], b < Q.size()
+    std::size_t k = a;
+    for (std::size_t s = a + 1; s <= b; ++s)
+      if (max ? Q[s] > Q[k] : Q[s] < Q[k]) k = s;
+    return k;
+  };
+  if (Q.size() <= smin + 1) return done();
+  const std::size_t s1 = argext(smin, std::min(smax, Q.size() - 1), true);
+  const std::size_t t1 = argext(1, s1 - 1, false);
+  rep.echo = Q[0], rep.copy1 = Q[s1], rep.trough = Q[t1], rep.spacing_mm = double(s1) * h;
+  const double rise = Q[0] - Q[t1];
+  if (!(rise > 0) || Q[s1] - Q[t1] < params.min_copy * rise) return done();
+  const auto lo2 = std::size_t(std::lround(double(s1) * (2.0 - params.tolerance)));
+  const auto hi2 = std::min(Q.size() - 1, std::size_t(std::lround(double(s1) * (2.0 + params.tolerance))));
+  if (lo2 <= s1 + 1 || lo2 > hi2) return done();
+  const std::size_t s2 = argext(lo2, hi2, true);
+  const std::size_t t2 = argext(s1 + 1, s2 - 1, false);
+  rep.copy2 = Q[s2];
+  if (Q[s2] > Q[s1] || Q[s2] - Q[t2] < params.min_second * (Q[0] - Q[t2])) return done();
+  // Found: the region starts where the echo's lower flank falls halfway to
+  // the trough.
+  std::size_t cut = 1;
+  while (cut < t1 && Q[cut] >= Q[t1] + 0.5 * rise) ++cut;
+  rep.found = true;
+  rep.cut_mm = double(cut) * h;
+  for (std::size_t l = 0; l < lines; ++l) {
+    if (echo[l] < 0) continue;
+    for (std::size_t p = std::size_t(echo[l]) + cut; p < d[ax]; ++p) {
+      const std::size_t i = at(l, p);
+      if (is_scanned(i)) region[i] = 1, ++rep.voxels;
+    }
+  }
+  return done();
+}
+
+std::size_t clip_depth(const Volume& v, std::vector<std::uint8_t>& scanned, int ax, double min_mm, double max_mm) {
+  const Dims3& d = v.dims;
+  const std::size_t n = v.voxels();
+  if (ax < 0 || ax > 2) throw std::invalid_argument("clip_depth: beam axis must be 0, 1 or 2");
+  if (scanned.empty()) scanned.assign(n, 1);
+  if (scanned.size() != n) throw std::invalid_argument("clip_depth: mask size differs from the volume");
+  const int u_ax = ax == 0 ? 1 : 0, w_ax = ax == 2 ? 1 : 2;
+  const std::size_t stride[3] = {1, d[0], d[0] * d[1]};
+  const double h = v.spacing[ax];
+  std::size_t clipped = 0;
+  for (std::size_t b = 0; b < d[w_ax]; ++b)
+    for (std::size_t a = 0; a < d[u_ax]; ++a) {
+      const std::size_t base = a * stride[u_ax] + b * stride[w_ax];
+      long skin = -1;
+      for (std::size_t p = 0; p < d[ax]; ++p) {
+        const std::size_t i = base + p * stride[ax];
+        if (!scanned[i]) continue;
+        if (skin < 0) skin = long(p);
+        const double depth = double(long(p) - skin) * h;
+        if (depth < min_mm || depth >= max_mm) scanned[i] = 0, ++clipped;
+      }
+    }
+  return clipped;
+}
+
 NearFieldReport remove_near_field(const Volume& v, std::vector<std::uint8_t>& scanned, const NearFieldParams& params) {
   NearFieldReport rep;
-  const std::vector<std::uint8_t> band = near_field_band(v, scanned.empty() ? nullptr : &scanned, params, &rep);
-  if (!rep.found) return rep;
-  if (scanned.empty()) scanned.assign(v.voxels(), 1);
-  for (std::size_t i = 0; i < band.size(); ++i)
-    if (band[i]) scanned[i] = 0;
+  std::vector<std::uint8_t> band;
+  if (params.band)
+    band = near_field_band(v, scanned.empty() ? nullptr : &scanned, params, &rep);
+  else
+    rep.axis = params.axis >= 0 && params.axis < 3 ? params.axis
+                                                   : beam_axis_of(v, scanned.empty() ? nullptr : &scanned, params.threads);
+  if (rep.found) {
+    if (scanned.empty()) scanned.assign(v.voxels(), 1);
+    for (std::size_t i = 0; i < band.size(); ++i)
+      if (band[i]) scanned[i] = 0;
+  }
+  if (params.reverb) {
+    const std::vector<std::uint8_t> region = reverberation_region(v, scanned.empty() ? nullptr : &scanned, rep.axis,
+                                                                  params.reverb_params, &rep.reverb, params.threads);
+    if (rep.reverb.found) {
+      if (scanned.empty()) scanned.assign(v.voxels(), 1);
+      for (std::size_t i = 0; i < region.size(); ++i)
+        if (region[i]) scanned[i] = 0;
+    }
+  }
   return rep;
 }
 

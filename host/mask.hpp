@@ -80,6 +80,41 @@ int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int 
 // reaches down to where P first falls below halfway
 // between the two, plus margin_mm. Returns 1 for voxels in the band, all 0
 // when there is none.
+// Reverberations of a strong flat reflector (docs/real-data.md,
+// "Reverberations"): a specular echo bounces between the reflector and the
+// probe (or within a plate), and the scan shows fainter copies of it at equal
+// spacing below it along the beam -- ghosts, not surfaces. Per beam line the
+// first strong echo (the data lowpassed across the beam rising above lo +
+// strong (hi - lo), lo the median and hi the 99th percentile over the scanned
+// voxels; then its crest within 1 mm) aligns the line; Q(s), the median over
+// the aligned lines s below their echo, is the echo train. Reverberation: Q
+// has a copy at s1 in [min_spacing_mm, max_spacing_mm] that rises above the
+// trough before it by min_copy of the echo's own rise, and a second, fainter
+// copy within tolerance s1 of 2 s1 rising by min_second. Then, in every line
+// with a first strong echo, the voxels below it from where its lower flank
+// falls to halfway between the echo and that trough are the reverberation
+// region (held at u = 0 like the near field).
+struct ReverbParams {
+  double strong = 0.5;
+  double min_spacing_mm = 1.0, max_spacing_mm = 15.0;
+  double min_copy = 0.3, min_second = 0.15;
+  double tolerance = 0.2;
+  double sigma_mm = 1.0;  // lowpass across the beam, as the near field's
+};
+struct ReverbReport {
+  bool found = false;
+  double spacing_mm = 0;            // s1
+  double cut_mm = 0;                // below the echo's crest: where the region starts
+  double echo = 0, copy1 = 0, copy2 = 0, trough = 0;  // Q at 0, s1, 2 s1 and the trough before s1 (file units)
+  std::size_t lines = 0;            // beam lines with a first strong echo
+  std::size_t voxels = 0;           // voxels in the region
+};
+// The region (1) below the first strong echo of each line when the echo
+// train is a reverberation; all 0 otherwise. `axis` the beam's.
+std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vector<std::uint8_t>* scanned, int axis,
+                                               const ReverbParams& params = {}, ReverbReport* report = nullptr,
+                                               int threads = 0);
+
 struct NearFieldParams {
   double top_mm = 3.0, search_mm = 25.0, margin_mm = 1.0;
   double stay_mm = 3.0;    // the band ends where the profile stays below halfway this long
@@ -88,6 +123,9 @@ struct NearFieldParams {
   int axis = -1;           // beam axis (0 x, 1 y, 2 z); -1: beam_axis_of the data
   double max_share = 0.5;  // a "band" holding more of the scanned voxels is the object, not a near field
   int threads = 0;         // host threads (0: every core); the band is the same for any count
+  bool band = true;        // remove_near_field: the band (false: only the reverberations, if reverb)
+  bool reverb = true;      // remove_near_field: also the reverberations of a flat reflector (below)
+  ReverbParams reverb_params;
 };
 struct NearFieldReport {
   int axis = 2;                 // the beam axis used
@@ -96,16 +134,26 @@ struct NearFieldReport {
   double top = 0, below = 0;    // P at the top and below it (file units)
   std::size_t voxels = 0;       // voxels in the band
   bool too_deep = false;        // a band was found but held more than max_share of the scanned voxels: kept
+  ReverbReport reverb;          // remove_near_field with params.reverb
 };
 std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std::uint8_t>* scanned,
                                           const NearFieldParams& params = {}, NearFieldReport* report = nullptr);
 
 // near_field_band() merged into a scanned mask (band voxels become
 // unscanned: u held at 0, their samples continued from below before the
-// lowpass, so the band's lower edge is no boundary either). An empty
-// `scanned` means every voxel scanned; it stays empty when there is no band.
+// lowpass, so the band's lower edge is no boundary either), then, with
+// params.reverb, reverberation_region() of what is left likewise. An empty
+// `scanned` means every voxel scanned; it stays empty when neither is found.
 NearFieldReport remove_near_field(const Volume& v, std::vector<std::uint8_t>& scanned,
                                   const NearFieldParams& params = {});
+
+// The depth clip that follows the sweep (`classify --depth-clip`): along
+// the beam axis `axis`, depth is counted from each beam line's first scanned
+// voxel (the skin line, as for the near field); the scanned voxels whose
+// depth d (mm, voxel index difference x spacing) is outside [min_mm, max_mm)
+// become unscanned. An empty `scanned` means every voxel scanned (it is then
+// filled in). Returns the number of voxels clipped.
+std::size_t clip_depth(const Volume& v, std::vector<std::uint8_t>& scanned, int axis, double min_mm, double max_mm);
 
 // A mask from a volume file: nonzero voxels are scanned. Throws InputError
 // naming `path` when its dims differ from `dims`.

@@ -56,6 +56,22 @@ VariationalParams VariationalParams::literal_defaults() {
   return p;
 }
 
+double small_volume_scale(const Dims3& dims, const Vec3d& spacing, double reference_mm) {
+  if (!(reference_mm > 0)) return 1.0;
+  double extent = INFINITY;
+  for (int a = 0; a < 3; ++a)
+    if (dims[a] >= 2 && spacing[a] > 0) extent = std::min(extent, double(dims[a]) * spacing[a]);
+  // Under 1 mm across is no small scan but a spacing in the wrong unit
+  // (metres, micrometres): not scaled, so the lowpass checks refuse it.
+  if (!std::isfinite(extent) || extent < kSmallVolumeMinMm) return 1.0;
+  return std::min(1.0, extent / reference_mm);
+}
+
+void scale_length_scales(VariationalParams& p, double f) {
+  p.sigma_mm *= f, p.grad_sigma_mm *= f, p.thickness_mm *= f;
+  p.beta *= f * f, p.kappa *= f * f;
+}
+
 double VariationalParams::effective_thickness_mm(const Vec3d& spacing) const {
   if (thickness_mm <= 0) return 0;
   return std::max(thickness_mm, 2.0 * std::max({spacing[0], spacing[1], spacing[2]}));

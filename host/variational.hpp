@@ -81,6 +81,25 @@ struct VariationalParams {
   double effective_thickness_mm(const Vec3d& spacing) const;
 };
 
+// Small volumes (docs/parameters.md, "Small volumes"): the default length
+// scales -- the lowpasses (sigma_mm, grad_sigma_mm), the shell thickness and
+// the isovalue field's spread -- are in mm for anatomy-sized scans; a volume
+// whose smallest extent (dims x spacing, over the axes with at least 2
+// voxels) is below reference_mm cannot hold them (a 1 mm lowpass is +-3 mm
+// wide), so they shrink by this factor: min(1, smallest extent /
+// reference_mm); beta and kappa, squared lengths, by its square. 1 when
+// reference_mm <= 0, and when the smallest extent is under kSmallVolumeMinMm
+// (a spacing in the wrong unit, which the lowpass checks then refuse).
+constexpr double kSmallVolumeMinMm = 1.0;
+double small_volume_scale(const Dims3& dims, const Vec3d& spacing, double reference_mm);
+// The reference extent `softshell classify --small-volume` takes by default
+// (chosen on the PLUS IMLiF volume, 4.6 mm thin: not held out).
+constexpr double kSmallVolumeMm = 20.0;
+// p's length scales times f: sigma_mm, grad_sigma_mm and thickness_mm by f,
+// beta and kappa (squared lengths) by f^2. The classify CLI does the same to
+// the ones not given on its command line.
+void scale_length_scales(VariationalParams& p, double f);
+
 // The median of u over its ridge voxels: u above 5 % of its maximum and not
 // below either neighbour along the axis where its second difference is most
 // negative (a maximum across a shell). 0 when there is none.

@@ -222,6 +222,140 @@ TEST(NearField, BeamAxisFromTheSpeckleGrain) {
   EXPECT_EQ(band[v.index(20, 40, 15)], 0);
 }
 
+// ---- reverberations and small volumes -------------------------------------------------------------------
+
+// A curvilinear (fan) scan of a flat reflector in water, beam along y,
+// anisotropic voxels (0.1 x 0.1 x 0.2 mm, like the PLUS IMLiF volume): zero
+// outside the fan (the unswept fill), dark water above the reflector (rows
+// [top, top + 6)), then fading tissue, and `copies` reverberation ghosts of
+// the reflector every `period` rows below it, each `fade` as bright as the
+// one before. Speckle grain finer along the beam than across it.
+struct FanScan {
+  Volume v;
+  std::size_t top = 50, period = 25;
+  std::size_t apex_x = 80;
+  bool in_fan(std::size_t x, std::size_t y) const {
+    const double dx = double(x) - double(apex_x), dy = double(y) + 40.0;  // the apex 4 mm above the volume
+    const double r = std::hypot(dx, dy);
+    return r > 42.0 && r < 150.0 && std::fabs(dx) < 0.55 * dy;
+  }
+};
+FanScan fan_scan(int copies, double fade, std::uint64_t seed) {
+  FanScan f{Volume({160, 110, 16}, {0.1, 0.1, 0.2}, ScalarType::UInt8)};
+  Volume& v = f.v;
+  std::uniform_real_distribution<double> U(0.6, 1.4);
+  for (std::size_t z = 0; z < v.dims[2]; ++z)
+    for (std::size_t y = 0; y < v.dims[1]; ++y)
+      for (std::size_t x = 0; x < v.dims[0]; ++x) {
+        if (!f.in_fan(x, y)) continue;
+        double mean = 8;  // water
+        if (y >= f.top) mean = 35.0 * std::exp(-double(y - f.top) / 60.0);  // below the reflector, fading
+        double level = 150;
+        for (int k = 0; k <= copies; ++k, level *= fade) {
+          const std::size_t y0 = f.top + std::size_t(k) * f.period;
+          if (y >= y0 && y < y0 + 6) mean = std::max(mean, level);
+        }
+        std::mt19937_64 cell(seed ^ (y * 1000003 + (x / 3) * 7919 + z));
+        v.at(x, y, z) = float(std::clamp(std::round(mean * U(cell)), 1.0, 255.0));
+      }
+  return f;
+}
+
+TEST(Reverb, EquallySpacedCopiesOfAFlatReflectorAreFoundBelowItsEcho) {
+  const FanScan f = fan_scan(3, 0.6, test::seed() + 21);
+  const Volume& v = f.v;
+  const auto mask = scanned_mask(v);
+  ASSERT_GT(count_unscanned(mask), v.voxels() / 4);  // the sides of the fan
+  EXPECT_EQ(beam_axis_of(v, &mask), 1);
+  ReverbReport r;
+  const auto region = reverberation_region(v, &mask, 1, ReverbParams{}, &r);
+  ASSERT_TRUE(r.found) << "echo " << r.echo << " copy " << r.copy1 << " trough " << r.trough << " second " << r.copy2;
+  EXPECT_NEAR(r.spacing_mm, double(f.period) * 0.1, 0.6);  // crest to crest of 0.6 mm thick layers
+  EXPECT_GT(r.cut_mm, 0.0);
+  EXPECT_LT(r.cut_mm, 1.0);
+  // The reflector itself stays; its ghosts are in the region.
+  const std::size_t x = f.apex_x, z = 8;
+  EXPECT_EQ(region[v.index(x, f.top + 1, z)], 0);
+  EXPECT_EQ(region[v.index(x, f.top - 5, z)], 0);
+  EXPECT_EQ(region[v.index(x, f.top + f.period + 2, z)], 1);
+  EXPECT_EQ(region[v.index(x, f.top + 2 * f.period + 2, z)], 1);
+  // Merged by remove_near_field (no band: the water at the probe is dark).
+  std::vector<std::uint8_t> m = mask;
+  const NearFieldReport nf = remove_near_field(v, m);
+  EXPECT_FALSE(nf.found);
+  EXPECT_TRUE(nf.reverb.found);
+  EXPECT_EQ(count_unscanned(m), count_unscanned(mask) + nf.reverb.voxels);
+  NearFieldParams keep;
+  keep.reverb = false;
+  m = mask;
+  EXPECT_FALSE(remove_near_field(v, m, keep).reverb.found);
+  EXPECT_EQ(m, mask);
+}
+
+TEST(Reverb, ALoneEchoABoneShadowOrANearFieldIsNoReverberation) {
+  // One reflector with nothing repeating below it; a bright echo with a dark
+  // shadow (bone); a single copy only (no second one at twice the spacing).
+  for (int copies : {0, 1}) {
+    SCOPED_TRACE(copies);
+    const FanScan f = fan_scan(copies, 0.6, test::seed() + 22);
+    const auto mask = scanned_mask(f.v);
+    ReverbReport r;
+    const auto region = reverberation_region(f.v, &mask, 1, ReverbParams{}, &r);
+    EXPECT_FALSE(r.found) << "spacing " << r.spacing_mm << " copy " << r.copy1 << " second " << r.copy2;
+    EXPECT_EQ(std::count(region.begin(), region.end(), std::uint8_t{1}), 0);
+  }
+  const Volume bone = layered_scan({40, 40, 60}, {0.5, 0.5, 0.5}, 2, {{8.0, 40}, {1.5, 220}, {20.0, 6}}, 6,
+                                   test::seed() + 23);
+  ReverbReport r;
+  reverberation_region(bone, nullptr, 2, ReverbParams{}, &r);
+  EXPECT_FALSE(r.found);
+  const Volume band = layered_scan({40, 40, 60}, {0.5, 0.5, 0.5}, 2, {{2.0, 220}, {2.0, 150}, {4.0, 210}}, 40,
+                                   test::seed() + 24);
+  std::vector<std::uint8_t> m;
+  const NearFieldReport nf = remove_near_field(band, m);
+  EXPECT_TRUE(nf.found);
+  EXPECT_FALSE(nf.reverb.found);
+}
+
+TEST(Reverb, RealFlatReflectorScanHasItsGhostsFoundTheSpineSweepNone) {
+  // The PLUS flat reflector (IMLiF): beam along y, copies every ~3 mm; the
+  // spine sweep (bone over its shadow, a near-field band): no train.
+  // IMLiF is not shipped in data/ (data/plus-spine/README.md): looked for
+  // there, then in ../shared/data, and skipped when absent even in CI (a
+  // clean clone has no ../shared); the spine sweep is shipped.
+  REQUIRE_SHARED_FILE(real_spine());
+  std::string imlif = test::shared_data_dir() + "/plus-spine/vtkVolumeReconstructorTestIMLiFvolumeRef.mha";
+  if (!fs::exists(imlif)) imlif = std::string(SOFTSHELL_SHARED_DATA) + "/plus-spine/vtkVolumeReconstructorTestIMLiFvolumeRef.mha";
+  if (!fs::exists(imlif)) GTEST_SKIP() << "not shipped and not in ../shared/data: " << imlif;
+  const Volume v = read_volume(imlif);
+  std::vector<std::uint8_t> mask = scanned_mask(v);
+  const NearFieldReport r = remove_near_field(v, mask);
+  EXPECT_EQ(r.axis, 1);
+  EXPECT_FALSE(r.found);
+  ASSERT_TRUE(r.reverb.found);
+  EXPECT_NEAR(r.reverb.spacing_mm, 3.0, 0.3);
+  EXPECT_GT(r.reverb.copy1, 0.6 * r.reverb.echo);  // the first ghost nearly as bright as the reflector (0.74)
+  // The reflector (rows 59-62 at the middle of the fan) stays, its first ghost (rows 88-91) goes.
+  EXPECT_EQ(mask[v.index(167, 60, 11)], 1);
+  EXPECT_EQ(mask[v.index(167, 90, 11)], 0);
+  const Volume spine = read_volume(real_spine());
+  std::vector<std::uint8_t> sm = scanned_mask(spine);
+  const NearFieldReport s = remove_near_field(spine, sm);
+  EXPECT_TRUE(s.found);
+  EXPECT_FALSE(s.reverb.found);
+}
+
+TEST(SmallVolume, LengthScalesShrinkWithTheSmallestExtent) {
+  EXPECT_NEAR(small_volume_scale({334, 151, 23}, {0.1, 0.1, 0.2}, 20.0), 4.6 / 20.0, 1e-12);
+  EXPECT_EQ(small_volume_scale({147, 106, 104}, {0.5, 0.5, 0.5}, 20.0), 1.0);
+  EXPECT_EQ(small_volume_scale({96, 96, 96}, {0.3, 0.3, 0.3}, 20.0), 1.0);  // 28.8 mm
+  EXPECT_NEAR(small_volume_scale({64, 64, 64}, {0.25, 0.25, 0.25}, 20.0), 0.8, 1e-12);
+  EXPECT_NEAR(small_volume_scale({40, 40, 1}, {0.25, 0.25, 0.25}, 20.0), 0.5, 1e-12);  // a one-voxel axis does not count
+  EXPECT_EQ(small_volume_scale({8, 8, 8}, {0.1, 0.1, 0.1}, 0.0), 1.0);                 // off
+  EXPECT_NEAR(small_volume_scale({8, 8, 8}, {0.125, 0.125, 0.125}, 20.0), 0.05, 1e-12);  // 1 mm across
+  EXPECT_EQ(small_volume_scale({64, 64, 64}, {0.001, 0.001, 0.001}, 20.0), 1.0);  // 0.064 mm: metres read as mm
+}
+
 TEST(Mask, EnclosedZeroRegionIsScannedHoweverLarge) {
   // A 20^3 block of zeros (22 % of the voxels) not touching the border.
   Volume v = speckle_volume({34, 34, 32}, test::seed());
@@ -801,6 +935,95 @@ TEST_F(CliMask, NearFieldIsRemovedByDefaultAndKeptOnRequest) {
   float band_max = 0;
   for (std::size_t z = 1; z < 10; ++z) band_max = std::max(band_max, uk.at(16, 16, z));
   EXPECT_GT(band_max, 0.2f) << "kept, the band's lower edge is a boundary at the isovalue";
+}
+
+TEST_F(CliMask, FlatReflectorInAFanIsOnePlaneNotItsGhostsOrTheFanEdge) {
+  // The synthetic IMLiF: with the defaults the shell lies on the reflector's
+  // top (the water/reflector boundary), not on the reverberation ghosts below
+  // it and not along the edge of the fan; --reverb keep draws the ghosts.
+  const FanScan f = fan_scan(3, 0.9, test::seed() + 25);
+  write_volume(file("fan.nrrd"), f.v);
+  const test::RunResult r = run({"classify", file("fan.nrrd"), "--iso", "auto", "-o", file("u.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("reverberations removed"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("default length scales x0.16"), std::string::npos) << r.out;  // 3.2 mm / 20 mm
+  const Volume u = read_volume(file("u.nrrd"));
+  const Dims3& d = u.dims;
+  std::size_t columns = 0, on_plane = 0;
+  float ghost = 0, edge = 0;
+  for (std::size_t z = 2; z + 2 < d[2]; ++z)
+    for (std::size_t x = 0; x < d[0]; ++x) {
+      if (!f.in_fan(x, f.top - 8) || !f.in_fan(x, d[1] - 1)) continue;
+      // A column well inside the fan: its crest of u on the reflector's top.
+      if (!f.in_fan(x >= 8 ? x - 8 : 0, f.top) || !f.in_fan(std::min(d[0] - 1, x + 8), f.top)) continue;
+      ++columns;
+      std::size_t best = 0;
+      for (std::size_t y = 0; y < d[1]; ++y)
+        if (u.at(x, y, z) > u.at(x, best, z)) best = y;
+      on_plane += u.at(x, best, z) > 0.5f && best + 3 >= f.top && best <= f.top + 3;
+      for (std::size_t y = f.top + f.period - 4; y < d[1]; ++y) ghost = std::max(ghost, u.at(x, y, z));
+    }
+  // The fan's edge in the water above the reflector: the scanned voxels
+  // within 5 voxels of the zero fill.
+  for (std::size_t z = 0; z < d[2]; ++z)
+    for (std::size_t y = 0; y + 10 < f.top; ++y)
+      for (std::size_t x = 5; x + 5 < d[0]; ++x)
+        if (f.in_fan(x, y) && (!f.in_fan(x - 5, y) || !f.in_fan(x + 5, y))) edge = std::max(edge, u.at(x, y, z));
+  ASSERT_GT(columns, 300u);
+  EXPECT_GT(double(on_plane), 0.9 * double(columns)) << on_plane << " of " << columns;
+  EXPECT_LT(ghost, 0.2f);
+  EXPECT_LT(edge, 0.2f);
+  const test::RunResult k =
+      run({"classify", file("fan.nrrd"), "--iso", "auto", "--reverb", "keep", "-o", file("k.nrrd")});
+  ASSERT_EQ(k.status, 0) << k.err;
+  EXPECT_EQ(k.out.find("reverberations removed"), std::string::npos) << k.out;
+  const Volume uk = read_volume(file("k.nrrd"));
+  float ghost_kept = 0;
+  for (std::size_t z = 2; z + 2 < d[2]; ++z)
+    for (std::size_t y = f.top + f.period - 4; y < f.top + f.period + 10; ++y)
+      ghost_kept = std::max(ghost_kept, uk.at(f.apex_x, y, z));
+  EXPECT_GT(ghost_kept, 0.5f) << "kept, the first ghost is drawn like a reflector";
+  expect_one_line_error(run({"classify", file("fan.nrrd"), "--iso", "100", "--reverb", "cut", "-o", file("x.nrrd")}),
+                        {"--reverb", "remove or keep"});
+}
+
+TEST_F(CliMask, DepthClipFollowsTheSkinLine) {
+  // Fluid to 12 mm, then tissue: the boundary at z = 24. The skin line is
+  // each beam line's first scanned voxel: where x < 16 a block of zero fill
+  // (z < 10) and the mask's 2-voxel rim push it down to z = 12.
+  Volume v = layered_scan({32, 32, 48}, {0.5, 0.5, 0.5}, 2, {{12.0, 30}}, 170, test::seed() + 11);
+  for (std::size_t z = 0; z < 10; ++z)
+    for (std::size_t y = 0; y < 32; ++y)
+      for (std::size_t x = 0; x < 16; ++x) v.at(x, y, z) = 0;
+  write_volume(file("clip.nrrd"), v);
+  auto crest = [&](const Volume& u, std::size_t x) {
+    float m = 0;
+    for (std::size_t z = 18; z < 30; ++z) m = std::max(m, u.at(x, 16, z));
+    return m;
+  };
+  // Kept 8-20 mm below the skin line: where the skin is at z = 0 the
+  // boundary (12 mm down) is drawn and nothing above 8 mm; where it is at
+  // z = 12 the boundary is only 6 mm down: clipped.
+  const test::RunResult a =
+      run({"classify", file("clip.nrrd"), "--iso", "100", "--depth-clip", "8,20", "-o", file("a.nrrd")});
+  ASSERT_EQ(a.status, 0) << a.err;
+  EXPECT_NE(a.out.find("depth clip: kept 8.0 to 20.0 mm below the skin line along z"), std::string::npos) << a.out;
+  const Volume ua = read_volume(file("a.nrrd"));
+  EXPECT_GT(crest(ua, 24), 0.2f);
+  for (std::size_t z = 0; z < 16; ++z) ASSERT_EQ(ua.at(24, 16, z), 0.0f) << "z " << z;
+  for (std::size_t z = 0; z < 28; ++z) ASSERT_EQ(ua.at(6, 16, z), 0.0f) << "z " << z;
+  // Kept 0-10 mm: clipped where the skin is at z = 0, kept where it is lower.
+  const test::RunResult b =
+      run({"classify", file("clip.nrrd"), "--iso", "100", "--depth-clip", "0,10", "-o", file("b.nrrd")});
+  ASSERT_EQ(b.status, 0) << b.err;
+  const Volume ub = read_volume(file("b.nrrd"));
+  for (std::size_t z = 20; z < 48; ++z) ASSERT_EQ(ub.at(24, 16, z), 0.0f) << "z " << z;
+  EXPECT_GT(crest(ub, 6), 0.2f);
+  for (const char* bad : {"5", "10,5", "-1,4", "a,b", "3,nan"})
+    expect_one_line_error(run({"classify", file("clip.nrrd"), "--iso", "100", "--depth-clip", bad, "-o", file("x.nrrd")}),
+                          {"--depth-clip"});
+  expect_one_line_error(run({"classify", file("clip.nrrd"), "--iso", "100", "--depth-clip", "500,600", "-o", file("x.nrrd")}),
+                        {"--depth-clip", "no scanned voxel"});
 }
 
 }  // namespace

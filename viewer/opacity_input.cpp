@@ -47,9 +47,16 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   remove_near_field(v, in.mask);  // the near field is an occluder (docs/real-data.md)
   const std::vector<std::uint8_t>* mask = in.mask.empty() ? nullptr : &in.mask;
   Volume filled = mask ? fill_unscanned(v, in.mask) : Volume();
+  // A small volume's length scales shrink with it, as classify's do
+  // (host/variational.hpp, small_volume_scale).
+  const double scale = small_volume_scale(v.dims, v.spacing, kSmallVolumeMm);
+  in.params.sigma_mm = 1.0;
+  scale_length_scales(in.params, scale);
   if (iso_text == "auto") {
     // The local rule's field levelled out, as classify does (host/auto_iso.hpp).
-    LevelledVolume lv = auto_iso_levelled(v, mask, mask ? &filled : nullptr);
+    AutoIsoParams ap;
+    ap.sigma_mm *= scale, ap.field_sigma_mm *= scale;
+    LevelledVolume lv = auto_iso_levelled(v, mask, mask ? &filled : nullptr, ap);
     in.iso = lv.iso;
     in.data = std::move(lv.data);
   } else {
@@ -60,7 +67,6 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
     in.data = mask ? std::move(filled) : std::move(v);
   }
   in.params.v_iso = in.data.intensity_map().to_unit(in.iso);
-  in.params.sigma_mm = 1.0;
   in.u = reclassify(rt, in, in.params, nullptr, &in.report);  // keeps in.classifier
   in.classified = true;
   std::ostringstream note;

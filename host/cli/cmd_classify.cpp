@@ -31,7 +31,7 @@ namespace {
 
 struct ClassifyOptions {
   std::string in, out, device, method = "variational", iso, init, cycle = "pcg", smoother = "gs", mask = "auto";
-  std::string near_field = "remove";
+  std::string near_field = "remove", reverb = "remove", depth_clip;
   double thickness = 1.0;
   double iso_fraction = AutoIsoParams().local_fraction, iso_field_sigma = AutoIsoParams().field_sigma_mm;
   std::optional<double> sigma;  // unset: 1 mm for variational, 0 (raw) for levoy
@@ -39,6 +39,9 @@ struct ClassifyOptions {
   SolverParams sp;
   bool compress = false, quiet = false, stats = false, no_fmg = false, literal = false, no_iso_field = false;
   std::set<std::string> given;  // long option names given on the command line
+  double small_volume_mm = kSmallVolumeMm;  // small_volume_scale's reference extent (0: off)
+  double auto_iso_sigma = AutoIsoParams().sigma_mm;
+  std::string scale_text;          // for the report, when the length scales shrank
   RawOptions raw;
   NonFiniteOption non_finite;
 };
@@ -184,6 +187,7 @@ int run_levoy(const ClassifyOptions& o, Runtime& rt, const Volume& in, double is
               << iso_text << ", thickness " << p.thickness << " voxels (" << levoy_thickness_mm(p.thickness, in.spacing)
               << " mm), lowpass sigma " << p.sigma_mm << " mm\n"
               << "  mask     " << mask.text << '\n'
+              << (o.scale_text.empty() ? "" : "  scale    " + o.scale_text + "\n")
               << "  opacity  " << drawn << " voxels above 0.2 (" << std::setprecision(1)
               << 100.0 * double(drawn) / double(u.voxels()) << " %)\n"
               << std::setprecision(3) << "  device   " << rt.info().label() << '\n'
@@ -244,6 +248,7 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
               << "  volume   " << dims_text(in.dims) << ' ' << scalar_type_name(in.source_type) << ", iso " << iso
               << iso_text << " (" << p.v_iso << " normalised, " << map.describe() << ")\n"
               << "  mask     " << mask.text << '\n'
+              << (o.scale_text.empty() ? "" : "  scale    " + o.scale_text + "\n")
               << "  params   alpha " << p.alpha << " beta " << p.beta << " gamma " << p.gamma << " omega " << p.omega
               << " delta " << p.delta << " epsilon " << p.epsilon << " u_ind " << p.u_ind << " sigma " << p.sigma_mm
               << " mm, kappa " << p.kappa << " grad-sigma " << p.grad_sigma_mm << " mm"
@@ -267,8 +272,9 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
   return 0;
 }
 
-int run_classify(const ClassifyOptions& o) {
+int run_classify(const ClassifyOptions& options) {
   const auto t0 = Clock::now();
+  ClassifyOptions o = options;  // the length scales may shrink with a small volume
   if (o.method != "levoy" && o.method != "variational")
     throw InputError("--method " + o.method + ": unknown (methods: variational, levoy)");
   const bool variational = o.method == "variational";
@@ -276,8 +282,24 @@ int run_classify(const ClassifyOptions& o) {
   if (o.mask.empty()) throw InputError("--mask: expected FILE, auto or none");
   if (o.near_field != "remove" && o.near_field != "keep")
     throw InputError("--near-field: expected remove or keep, got '" + o.near_field + "'");
+  // --depth-clip MIN,MAX (mm below the skin line; MAX may be inf).
+  std::optional<std::pair<double, double>> depth_clip;
+  if (!o.depth_clip.empty()) {
+    const auto comma = o.depth_clip.find(',');
+    char* e1 = nullptr;
+    char* e2 = nullptr;
+    const std::string a = o.depth_clip.substr(0, comma), b = comma == std::string::npos ? "" : o.depth_clip.substr(comma + 1);
+    const double lo = std::strtod(a.c_str(), &e1), hi = std::strtod(b.c_str(), &e2);
+    if (a.empty() || b.empty() || *e1 != '\0' || *e2 != '\0' || !std::isfinite(lo) || std::isnan(hi) || lo < 0 ||
+        !(hi > lo))
+      throw InputError("--depth-clip: expected MIN,MAX in mm below the skin line with 0 <= MIN < MAX (MAX may be inf), "
+                       "got '" + o.depth_clip + "'");
+    depth_clip.emplace(lo, hi);
+  }
+  if (o.reverb != "remove" && o.reverb != "keep")
+    throw InputError("--reverb: expected remove or keep, got '" + o.reverb + "'");
   // Every parameter before any file is read.
-  const VariationalParams vp = variational ? variational_params(o) : VariationalParams{};
+  if (variational) variational_params(o);
   if (variational) solver_params(o);
   if (!variational && (!(o.thickness > 0) || o.thickness > 100)) throw InputError("--thickness must be in (0, 100] voxels");
   const std::string mask_file = o.mask != "auto" && o.mask != "none" ? o.mask : "";
@@ -287,7 +309,27 @@ int run_classify(const ClassifyOptions& o) {
   // The header first: sizes, data files, the lowpasses' widths and the
   // memory the classifier needs are all checked before a sample is read.
   const VolumeHeader head = read_volume_header(o.in, raw);
+  // Small volumes (docs/parameters.md): the default length scales shrink
+  // with a volume whose smallest extent is below --small-volume; those given
+  // on the command line, and the paper's functional, stay.
+  if (const double scale = o.literal ? 1.0 : small_volume_scale(head.dims, head.spacing, o.small_volume_mm); scale < 1.0) {
+    const auto given = [&](const char* name) { return o.given.count(name) > 0; };
+    if (variational && !given("--sigma")) o.sigma = scale * VariationalParams().sigma_mm;
+    if (!given("--grad-sigma")) o.vp.grad_sigma_mm *= scale;
+    if (!given("--shell")) o.vp.thickness_mm *= scale;
+    if (!given("--iso-field-sigma")) o.iso_field_sigma *= scale;
+    // beta and kappa are squared lengths (mm^2; host/variational.hpp).
+    if (!given("--beta")) o.vp.beta *= scale * scale;
+    if (!given("--kappa")) o.vp.kappa *= scale * scale;
+    o.auto_iso_sigma *= scale;
+    std::ostringstream t;
+    t << "small volume (smallest extent " << std::fixed << std::setprecision(1) << scale * o.small_volume_mm
+      << " mm < --small-volume " << o.small_volume_mm << " mm): default length scales x" << std::setprecision(2)
+      << scale;
+    o.scale_text = t.str();
+  }
   if (variational) {
+    const VariationalParams vp = variational_params(o);
     check_lowpass_sigma(vp.sigma_mm, head.spacing, "--sigma");
     check_lowpass_sigma(vp.grad_sigma_mm, head.spacing, "--grad-sigma");
   } else {
@@ -305,10 +347,24 @@ int run_classify(const ClassifyOptions& o) {
   const std::string iso_warning = given_iso ? iso_outside_data(in, *given_iso) : "";
   step.emplace("mask");
   DataMask mask = make_mask(o.mask, in);
-  if (o.near_field == "remove") {
+  std::vector<std::uint8_t> clip;  // --depth-clip: the scanned region with the clip applied
+  std::size_t unscanned_before_clip = 0;
+  int axis = -1;
+  if (depth_clip) {
+    clip = mask.scanned.empty() ? std::vector<std::uint8_t>(in.voxels(), 1) : mask.scanned;
+    unscanned_before_clip = count_unscanned(clip);
+    axis = beam_axis_of(in, &clip);
+    clip_depth(in, clip, axis, depth_clip->first, depth_clip->second);
+    if (mask.scanned.empty()) mask.scanned.assign(in.voxels(), 1);
+  }
+  if (o.near_field == "remove" || o.reverb == "remove") {
     // The bright near field under the probe is an occluder, not the object
-    // (docs/real-data.md, "The near field").
-    const NearFieldReport nf = remove_near_field(in, mask.scanned);
+    // (docs/real-data.md, "The near field"); the equally spaced copies of a
+    // flat reflector below it are ghosts ("Reverberations").
+    NearFieldParams np;
+    np.reverb = o.reverb == "remove";
+    np.band = o.near_field == "remove";
+    const NearFieldReport nf = remove_near_field(in, mask.scanned, np);
     std::ostringstream t;
     if (nf.found)
       t << "; near field removed: the first " << std::fixed << std::setprecision(1) << nf.depth_mm
@@ -317,9 +373,28 @@ int run_classify(const ClassifyOptions& o) {
     else if (nf.too_deep)
       t << "; near field kept: the bright band (" << std::fixed << std::setprecision(1) << nf.depth_mm
         << " mm along " << "xyz"[nf.axis] << ") would be more than half of the scanned voxels";
-    else
+    else if (o.near_field == "remove")
       t << "; no bright near field (beam along " << "xyz"[nf.axis] << ")";
+    if (nf.reverb.found)
+      t << "; reverberations removed: below the first strong echo of " << nf.reverb.lines << " beam lines from "
+        << std::fixed << std::setprecision(1) << nf.reverb.cut_mm << " mm under its crest (copies every "
+        << nf.reverb.spacing_mm << " mm, " << nf.reverb.voxels << " voxels; --reverb keep to draw them)";
     mask.text += t.str();
+  }
+  if (depth_clip) {
+    // The user's depth clip that follows the sweep (docs/real-data.md),
+    // depth from the skin line of the scanned region (not from the bottom of
+    // a removed near field).
+    for (std::size_t i = 0; i < clip.size(); ++i)
+      if (!clip[i]) mask.scanned[i] = 0;
+    const std::size_t clipped = count_unscanned(clip) - unscanned_before_clip;
+    std::ostringstream t;
+    t << "; depth clip: kept " << std::fixed << std::setprecision(1) << depth_clip->first << " to "
+      << depth_clip->second << " mm below the skin line along " << "xyz"[axis] << " (" << clipped
+      << " voxels clipped)";
+    mask.text += t.str();
+    if (count_unscanned(mask.scanned) == mask.scanned.size())
+      throw InputError("--depth-clip " + o.depth_clip + ": no scanned voxel lies at that depth");
   }
   double iso = 0;
   std::string iso_text;
@@ -340,6 +415,7 @@ int run_classify(const ClassifyOptions& o) {
     ap.want_field = ap.rule == AutoIsoRule::Local && !o.no_iso_field;
     ap.local_fraction = o.iso_fraction;
     ap.field_sigma_mm = o.iso_field_sigma;
+    ap.sigma_mm = o.auto_iso_sigma;
     AutoIsoReport rep;
     iso = auto_iso(in, mask.scanned.empty() ? nullptr : &mask.scanned, ap, &rep);
     iso_field = std::move(rep.field);
@@ -401,6 +477,25 @@ void add_classify_command(CLI::App& app, Action& action) {
       ->capture_default_str()
       ->type_name("remove|keep")
       ->check(one_of({"remove", "keep"}));
+  sub->add_option("--reverb", o->reverb,
+                  "remove: when a flat reflector's echo repeats at equal spacing below it along the beam "
+                  "(reverberation), the region below each beam line's first strong echo is held at u = 0; keep: "
+                  "classify it like the rest (docs/real-data.md)")
+      ->capture_default_str()
+      ->type_name("remove|keep")
+      ->check(one_of({"remove", "keep"}));
+  sub->add_option("--depth-clip", o->depth_clip,
+                  "Keep only the scanned voxels MIN to MAX mm below the skin line (each beam line's first scanned "
+                  "voxel, along the data's beam axis): a clip that follows the sweep; the rest is held at u = 0 like "
+                  "unscanned voxels (MAX may be inf)")
+      ->type_name("MIN,MAX");
+  sub->add_option("--small-volume", o->small_volume_mm,
+                  "A volume whose smallest extent is below this many mm gets its default length scales (--sigma, "
+                  "--grad-sigma, --shell, --iso-field-sigma, the auto isovalue's lowpass) scaled by that extent / "
+                  "this, and --beta and --kappa (squared lengths) by its square; those given stay; 0: never "
+                  "(docs/parameters.md)")
+      ->capture_default_str()
+      ->check(real_range(0, 1e6, "mm"));
   sub->add_option("--method", o->method,
                   "variational: the paper's variational classifier; levoy: Levoy's isovalue-contour opacity")
       ->capture_default_str()
