@@ -324,6 +324,9 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
   p.grad_sigma_mm = param(b[18], 0, 4);
   p.kappa = param(b[19], 0, 4);
   p.u_ind = param(b[20], 0, 2);
+  // Small volumes' length scales (classify --small-volume MM, byte 47 the
+  // reference extent up to 255 mm): on for odd byte 46.
+  if ((b[46] & 1) && !(b[45] & 1)) scale_length_scales(p, small_volume_scale(dims, spacing, double(b[47])));
   SolverParams sp;
   sp.max_cycles = 1 + b[21] % 20;
   sp.max_levels = 1 + b[22] % 8;
