@@ -70,14 +70,21 @@ class ViewerApp {
   int run() {
     init_gl();
     init_cl();
+    double loop_s = 0;  // frames after the first (which builds lists and textures)
+    int timed = 0;
     for (int frame = 0; !glfwWindowShouldClose(gl_->window()); ++frame) {
+      const auto t0 = Clock::now();
       glfwPollEvents();
       update();
       const bool last = o_.frames > 0 && frame + 1 >= o_.frames;
       render(last && !o_.screenshot.empty() ? o_.screenshot : std::string());
       glfwSwapBuffers(gl_->window());
+      if (frame > 0 && !(last && !o_.screenshot.empty())) loop_s += since(t0), ++timed;
       if (last) break;
     }
+    if (o_.frames > 0 && !o_.quiet && timed > 0)
+      std::printf("view: %d frames after the first, %.1f ms per frame (%.1f fps), window %dx%d\n", timed,
+                  1000.0 * loop_s / timed, timed / loop_s, o_.width, o_.height);
     glDeleteTextures(1, &ray_texture_);
     glDeleteVertexArrays(1, &quad_vao_);
     glDeleteProgram(quad_program_);
