@@ -1,0 +1,223 @@
+// `softshell view` with its panel, slice views and histogram, looked at in
+// pixels (the real binary under xvfb-run, Mesa llvmpipe), and the parameters
+// file round trip: view saves it, classify --params reproduces the same u.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include "cli_fixture.hpp"
+#include "image.hpp"
+#include "io.hpp"
+#include "test_support.hpp"
+
+namespace softshell::test {
+namespace {
+
+class ViewerCli : public CliTest {
+ protected:
+  static void one_line_error(const RunResult& r, const std::vector<std::string>& parts) {
+    expect_one_line_error(r, {});
+    for (const std::string& p : parts) EXPECT_NE(r.err.find(p), std::string::npos) << "'" << p << "' not in: " << r.err;
+  }
+};
+
+struct PaneImage {
+  int x = 0, y = 0, w = 0, h = 0, nu = 0, nv = 0, at = 0;
+};
+
+// "view: slice axial z = 16, image at 351,533 263x263 (32x32 voxels)"
+PaneImage pane_from(const std::string& out, const std::string& name) {
+  PaneImage p;
+  const auto at = out.find("view: slice " + name);
+  if (at == std::string::npos) return p;
+  const std::string line = out.substr(at, out.find('\n', at) - at);
+  char axis = 0;
+  const std::string fmt = "view: slice " + name + " %c = %d, image at %d,%d %dx%d (%dx%d voxels)";
+  if (std::sscanf(line.c_str(), fmt.c_str(), &axis, &p.at, &p.x, &p.y, &p.w, &p.h, &p.nu, &p.nv) != 8) p.w = 0;
+  return p;
+}
+
+struct Histogram {
+  double x = 0, y = 0, w = 0, h = 0, lo = 0, hi = 0, marker = 0;
+  bool ok = false;
+};
+
+Histogram histogram_from(const std::string& out) {
+  Histogram hg;
+  const auto at = out.find("view: histogram");
+  if (at == std::string::npos) return hg;
+  hg.ok = std::sscanf(out.c_str() + at, "view: histogram at %lf,%lf %lfx%lf, range [%lf, %lf], marker %lf", &hg.x, &hg.y,
+                      &hg.w, &hg.h, &hg.lo, &hg.hi, &hg.marker) == 7;
+  return hg;
+}
+
+// The pixel at the centre of texel (i, j) of a slice image.
+const std::uint8_t* texel(const Image& img, const PaneImage& p, int i, int j) {
+  const int x = p.x + int((i + 0.5) * p.w / p.nu), y = p.y + int((j + 0.5) * p.h / p.nv);
+  return img.pixel(x, y);
+}
+
+TEST_F(ViewerCli, SliceViewsShowTheBModeGreyAndTheOverlayWhereUIsHigh) {
+  const std::string in = file("raw.nrrd");
+  ASSERT_EQ(run({"synthetic", "--size", "32", "-o", in, "-q"}).status, 0);
+  const std::string shot = file("panel.png"), u_path = file("u.nrrd");
+  const RunResult r = run({"view", in, "--iso", "120", "--frames", "2", "--size", "900x600", "--screenshot", shot,
+                           "--screenshot-panel", "--cursor", "16,14,18", "--save-u", u_path});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const Image img = read_png(shot);
+  const Volume v = read_volume(in), u = read_volume(u_path);
+  ASSERT_EQ(v.source_type, ScalarType::UInt8);  // grey = the sample (type range [0, 255])
+  const char* names[3] = {"axial", "coronal", "sagittal"};
+  const int axes[3][3] = {{0, 1, 2}, {0, 2, 1}, {1, 2, 0}};
+  const int cursor[3] = {16, 14, 18};
+  for (int k = 0; k < 3; ++k) {
+    SCOPED_TRACE(names[k]);
+    const PaneImage p = pane_from(r.out, names[k]);
+    ASSERT_GT(p.w, 0) << r.out;
+    ASSERT_EQ(p.nu, 32);
+    ASSERT_EQ(p.at, cursor[axes[k][2]]);
+    ASSERT_LE(p.x + p.w, img.width);
+    ASSERT_LE(p.y + p.h, img.height);
+    const int au = axes[k][0], av = axes[k][1], an = axes[k][2];
+    auto voxel = [&](int i, int j) {
+      std::size_t c[3];
+      c[au] = std::size_t(i), c[av] = std::size_t(j), c[an] = std::size_t(cursor[an]);
+      return v.index(c[0], c[1], c[2]);
+    };
+    int grey = 0, grey_ok = 0, high = 0, high_orange = 0, all = 0, all_ok = 0;
+    for (int j = 1; j + 1 < p.nv; ++j)
+      for (int i = 1; i + 1 < p.nu; ++i) {
+        if (std::abs(i - cursor[au]) <= 1 || std::abs(j - cursor[av]) <= 1) continue;  // the cursor's lines
+        const std::size_t idx = voxel(i, j);
+        const std::uint8_t* px = texel(img, p, i, j);
+        // Off the contour (u below the splat threshold 0.2 here and around):
+        // the grey level, blended with the orange overlay at 0.5 u.
+        bool quiet = true;
+        for (int dj = -1; dj <= 1; ++dj)
+          for (int di = -1; di <= 1; ++di) quiet &= u.data[voxel(i + di, j + dj)] < 0.15f;
+        if (quiet) {
+          const double g = v.data[idx] / 255.0, a = 0.5 * u.data[idx], col[3] = {1.0, 0.45, 0.05};
+          bool ok = true;
+          for (int c = 0; c < 3; ++c) ok &= std::abs(px[c] - 255.0 * (g * (1 - a) + col[c] * a)) <= 1.5;
+          ++all, all_ok += ok;
+        }
+        // u ~ 0 (the overlay under half a grey level): the B-mode grey level itself.
+        if (quiet && u.data[idx] < 0.003f) {
+          ++grey;
+          const int want = int(std::lround(v.data[idx]));
+          grey_ok += std::abs(px[0] - want) <= 1 && std::abs(px[1] - want) <= 1 && std::abs(px[2] - want) <= 1;
+        }
+        if (u.data[idx] > 0.5f) {  // the overlay (orange, opacity 0.5 u): red well above blue
+          ++high;
+          high_orange += int(px[0]) - int(px[2]) > 40;
+        }
+      }
+    EXPECT_GT(all, 100);
+    EXPECT_EQ(all_ok, all) << "slice texels off the contour not showing grey blended with the overlay";
+    EXPECT_GT(grey, 30);
+    EXPECT_EQ(grey_ok, grey) << "slice texels with u = 0 not showing the volume's grey";
+    EXPECT_GT(high, 5);
+    EXPECT_EQ(high_orange, high) << "texels with u > 0.5 without the overlay colour";
+  }
+}
+
+// The red isovalue marker's column in the histogram (-1: none).
+double marker_column(const Image& img, const Histogram& hg) {
+  const int y = int(hg.y + 0.1 * hg.h);  // near the top: above most bars
+  double sum = 0;
+  int n = 0;
+  for (int x = int(hg.x); x < int(hg.x + hg.w); ++x) {
+    const std::uint8_t* p = img.pixel(x, y);
+    if (p[0] > 220 && p[1] < 80 && p[2] < 80) sum += x, ++n;
+  }
+  return n ? sum / n : -1;
+}
+
+TEST_F(ViewerCli, HistogramMarkerMovesWithTheIsovalue) {
+  const std::string in = file("raw.nrrd");
+  ASSERT_EQ(run({"synthetic", "--size", "32", "-o", in, "-q"}).status, 0);
+  std::vector<double> columns;
+  for (const char* iso : {"90", "170"}) {
+    SCOPED_TRACE(iso);
+    const std::string shot = file(std::string("h") + iso + ".png");
+    const RunResult r = run({"view", in, "--iso", iso, "--frames", "2", "--size", "900x600", "--screenshot", shot,
+                             "--screenshot-panel"});
+    ASSERT_EQ(r.status, 0) << r.err;
+    const Histogram hg = histogram_from(r.out);
+    ASSERT_TRUE(hg.ok) << r.out;
+    EXPECT_NEAR(hg.marker, std::stod(iso), 1e-3);
+    const double col = marker_column(read_png(shot), hg);
+    ASSERT_GE(col, 0) << "no marker drawn";
+    EXPECT_NEAR(col, hg.x + hg.w * (hg.marker - hg.lo) / (hg.hi - hg.lo), 2.0);
+    columns.push_back(col);
+  }
+  // 80 grey levels apart: the marker moved right by the histogram's scale.
+  EXPECT_GT(columns[1] - columns[0], 20.0);
+}
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+TEST_F(ViewerCli, SavedParametersReproduceTheClassification) {
+  const std::string in = file("raw.nrrd");
+  ASSERT_EQ(run({"synthetic", "--size", "32", "-o", in, "-q"}).status, 0);
+  const std::string given = write("given.txt", "# a session\niso = 120\nalpha = 0.5\nkappa = 0.2\nrenderer = mc\nview = 20,10\n");
+  const std::string saved = file("saved.txt"), vu = file("view-u.nrrd"), mesh = file("mesh.ply");
+  const RunResult r = run({"view", in, "--params", given, "--frames", "2", "--size", "320x240", "--save-params", saved,
+                           "--save-u", vu, "--save-mesh", mesh});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const std::string text = slurp(saved);
+  for (const char* line : {"iso = 120\n", "alpha = 0.5\n", "kappa = 0.2\n", "renderer = mc\n", "view = 20,10\n", "beta = 2\n"})
+    EXPECT_NE(text.find(line), std::string::npos) << line << " not in:\n" << text;
+  EXPECT_TRUE(fs::exists(mesh));
+
+  const std::string a = file("a.nrrd"), b = file("b.nrrd"), c = file("c.nrrd"), d = file("d.nrrd");
+  ASSERT_EQ(run({"classify", in, "--params", saved, "-o", a, "-q"}).status, 0);
+  ASSERT_EQ(run({"classify", in, "--iso", "120", "--alpha", "0.5", "--kappa", "0.2", "-o", b, "-q"}).status, 0);
+  const Volume ua = read_volume(a), ub = read_volume(b), uv = read_volume(vu);
+  EXPECT_EQ(ua.data, ub.data) << "classify --params differs from the same options on the command line";
+  EXPECT_EQ(ua.data, uv.data) << "classify --params differs from the viewer's u";
+  // The command line wins over the file.
+  ASSERT_EQ(run({"classify", in, "--params", saved, "--alpha", "2", "-o", c, "-q"}).status, 0);
+  ASSERT_EQ(run({"classify", in, "--iso", "120", "--alpha", "2", "--kappa", "0.2", "-o", d, "-q"}).status, 0);
+  const Volume uc = read_volume(c), ud = read_volume(d);
+  EXPECT_EQ(uc.data, ud.data);
+  EXPECT_NE(uc.data, ua.data);
+}
+
+TEST_F(ViewerCli, BadParametersFilesAreOneLineErrors) {
+  const std::string in = file("raw.nrrd");
+  ASSERT_EQ(run({"synthetic", "--size", "16", "-o", in, "-q"}).status, 0);
+  const std::pair<const char*, std::vector<std::string>> cases[] = {
+      {"iso = 120\nalpah = 1\n", {"bad.txt:2", "alpah", "unknown key"}},
+      {"alpha = one\n", {"bad.txt:1", "alpha", "expected a number"}},
+      {"omega = 2\n", {"omega", "out of range"}},
+      {"crop = 0,1,0,1\n", {"crop", "6 comma-separated"}},
+      {"renderer = voxels\n", {"renderer", "voxels"}},
+      {"alpha 1\n", {"bad.txt:1", "key = value"}},
+      {"beta = 1\nbeta = 2\n", {"beta", "twice"}},
+  };
+  for (const auto& [content, words] : cases) {
+    SCOPED_TRACE(content);
+    const std::string bad = write("bad.txt", content);
+    one_line_error(run({"classify", in, "--iso", "120", "--params", bad, "-o", file("u.nrrd")}), words);
+    one_line_error(run({"view", in, "--params", bad, "--frames", "1"}), words);
+  }
+  expect_one_line_error(run({"classify", in, "--params", file("missing.txt"), "-o", file("u.nrrd")}), {"missing.txt"});
+  expect_one_line_error(run({"classify", in, "-o", file("u.nrrd")}), {"--iso"});
+  expect_one_line_error(run({"view", in, "--save-params", file("p.txt")}), {"--frames"});
+  expect_one_line_error(run({"view", in, "--frames", "1", "--cursor", "1,2"}), {"--cursor"});
+  expect_one_line_error(run({"view", in, "--frames", "1", "--cursor", "1,2,99"}), {"--cursor", "outside"});
+  expect_one_line_error(run({"view", in, "--frames", "1", "--volume", file("missing.nrrd")}), {"missing.nrrd"});
+  EXPECT_FALSE(fs::exists(file("u.nrrd")));
+  EXPECT_FALSE(fs::exists(file("p.txt")));
+}
+
+}  // namespace
+}  // namespace softshell::test
