@@ -40,6 +40,7 @@ const std::vector<std::pair<std::string, KeySpec>>& specs() {
       {"mesh_level", {Kind::Numbers, 1, 0, 1, true}},
       {"light", {Kind::Numbers, 2, -90, 90}},
       {"colour", {Kind::Numbers, 3, 0, 1}},
+      {"colour_map", {Kind::Word, 1, 0, 0, false, "solid|depth"}},
       {"background", {Kind::Numbers, 3, 0, 1}},
       {"crop", {Kind::Numbers, 6, 0, 1}},
       {"view", {Kind::Numbers, 2, -360, 360}},

@@ -19,7 +19,7 @@ namespace softshell {
 //   renderer   splat | isosplat | mc | raycast
 //   threshold  splat threshold on u, (0, 1)
 //   mesh_level Marching Cubes level, (0, 1)
-//   light      AZ,EL degrees;  colour, background  R,G,B in [0, 1]
+//   light      AZ,EL degrees;  colour, background  R,G,B in [0, 1];  colour_map  solid | depth
 //   crop       X0,X1,Y0,Y1,Z0,Z1 fractions;  view  AZ,EL degrees;  distance  camera distance, mm
 const std::vector<std::string>& params_file_keys();
 

@@ -123,6 +123,51 @@ TEST_F(ViewerCli, SliceViewsShowTheBModeGreyAndTheOverlayWhereUIsHigh) {
   }
 }
 
+TEST_F(ViewerCli, OpacityVolumeSlicesShowUOrTheGivenBModeVolume) {
+  const std::string in = file("u.nrrd"), bmode = file("b.nrrd");
+  const Volume u = shell_volume(24);
+  write_volume(in, u);
+  Volume b(u.dims);  // a B-mode stand-in: a grey ramp unlike u
+  b.source_type = ScalarType::UInt8;
+  for (std::size_t z = 0; z < u.dims[2]; ++z)
+    for (std::size_t y = 0; y < u.dims[1]; ++y)
+      for (std::size_t x = 0; x < u.dims[0]; ++x) b.at(x, y, z) = float((x * 9 + y * 5 + z * 3) % 256);
+  write_volume(bmode, b);
+  for (int with_bmode = 0; with_bmode < 2; ++with_bmode) {
+    SCOPED_TRACE(with_bmode ? "--volume" : "u alone");
+    const std::string shot = file("s.png");
+    std::vector<std::string> args{"view", in, "--frames", "2", "--size", "900x600", "--screenshot", shot,
+                                  "--screenshot-panel", "--cursor", "5,5,12"};
+    if (with_bmode) args.insert(args.end(), {"--volume", bmode});
+    const RunResult r = run(args);
+    ASSERT_EQ(r.status, 0) << r.err;
+    const Image img = read_png(shot);
+    const PaneImage p = pane_from(r.out, "axial");
+    ASSERT_GT(p.w, 0) << r.out;
+    int n = 0, ok = 0;
+    for (int j = 7; j + 1 < p.nv; ++j)
+      for (int i = 7; i + 1 < p.nu; ++i) {
+        bool quiet = true;  // away from the contour at the threshold 0.2
+        for (int dj = -1; dj <= 1; ++dj)
+          for (int di = -1; di <= 1; ++di) quiet &= u.at(i + di, j + dj, 12) < 0.15f;
+        if (!quiet) continue;
+        const float uu = u.at(i, j, 12);
+        const double g = with_bmode ? b.at(i, j, 12) / 255.0 : uu, a = with_bmode ? 0.5 * uu : 0.0;
+        const double col[3] = {1.0, 0.45, 0.05};
+        const std::uint8_t* px = texel(img, p, i, j);
+        bool good = true;
+        for (int c = 0; c < 3; ++c) good &= std::abs(px[c] - 255.0 * (g * (1 - a) + col[c] * a)) <= 1.5;
+        ++n, ok += good;
+      }
+    EXPECT_GT(n, 40);
+    EXPECT_EQ(ok, n);
+    EXPECT_NE(r.out.find("view: histogram"), std::string::npos);
+  }
+  expect_one_line_error(run({"view", in, "--frames", "1", "--volume", file("small.nrrd")}), {"small.nrrd"});
+  write_volume(file("small.nrrd"), shell_volume(16));
+  expect_one_line_error(run({"view", in, "--frames", "1", "--volume", file("small.nrrd")}), {"--volume", "dims"});
+}
+
 // The red isovalue marker's column in the histogram (-1: none).
 double marker_column(const Image& img, const Histogram& hg) {
   const int y = int(hg.y + 0.1 * hg.h);  // near the top: above most bars
@@ -155,6 +200,40 @@ TEST_F(ViewerCli, HistogramMarkerMovesWithTheIsovalue) {
   }
   // 80 grey levels apart: the marker moved right by the histogram's scale.
   EXPECT_GT(columns[1] - columns[0], 20.0);
+}
+
+// Mean green / red of the object's pixels (not the black background) in columns [x0, x1).
+double green_over_red(const Image& img, int x0, int x1) {
+  double sum = 0;
+  int n = 0;
+  for (int y = 0; y < img.height; ++y)
+    for (int x = x0; x < x1; ++x) {
+      const std::uint8_t* p = img.pixel(x, y);
+      if (p[0] > 40) sum += double(p[1]) / p[0], ++n;
+    }
+  return n ? sum / n : -1;
+}
+
+TEST_F(ViewerCli, DepthColourMapShadesAlongTheBeam) {
+  // Seen from +x (--view 90,0), depth z runs left to right on the screen:
+  // with --colour-map depth the shallow side is light (green/red near 0.9),
+  // the deep side red-brown (near 0.3); with one colour both sides alike.
+  const std::string in = file("raw.nrrd");
+  ASSERT_EQ(run({"synthetic", "--size", "32", "-o", in, "-q"}).status, 0);
+  double diff[2] = {0, 0};
+  for (int depth = 0; depth < 2; ++depth) {
+    const std::string shot = file(depth ? "depth.png" : "solid.png");
+    const RunResult r = run({"view", in, "--iso", "120", "--frames", "2", "--size", "240x240", "--view", "90,0",
+                             "--screenshot", shot, "--colour-map", depth ? "depth" : "solid", "-q"});
+    ASSERT_EQ(r.status, 0) << r.err;
+    const Image img = read_png(shot);
+    const double left = green_over_red(img, 0, 100), right = green_over_red(img, 140, 240);
+    ASSERT_GT(left, 0);
+    ASSERT_GT(right, 0);
+    diff[depth] = left - right;
+  }
+  EXPECT_LT(std::abs(diff[0]), 0.05) << "one colour: green/red should not depend on depth";
+  EXPECT_GT(diff[1], 0.2) << "depth colour: the shallow side should be lighter (more green) than the deep side";
 }
 
 std::string slurp(const std::string& path) {

@@ -206,6 +206,8 @@ class ViewerApp {
     for (int a = 0; a < 3; ++a)
       cursor_[a] = o_.cursor[a] >= 0 ? std::min(o_.cursor[a], int(input_.u.dims[a]) - 1) : int(input_.u.dims[a]) / 2;
     initial_v_iso_ = input_.params.v_iso;
+    settings_.depth_lo = float(input_.u.origin[2]);
+    settings_.depth_hi = float(input_.u.origin[2] + input_.u.spacing[2] * double(input_.u.dims[2] - 1));
     build_histogram();
     upload_u();
     regenerate();
@@ -626,6 +628,12 @@ class ViewerApp {
       }
       ImGui::SliderFloat("light left/right", &settings_.light_azimuth, -90.0f, 90.0f, "%.0f deg");
       ImGui::SliderFloat("light up/down", &settings_.light_elevation, -90.0f, 90.0f, "%.0f deg");
+      int cmap = settings_.depth_colour ? 1 : 0;
+      ImGui::RadioButton("one colour", &cmap, 0);
+      ImGui::SameLine();
+      ImGui::RadioButton("colour by depth", &cmap, 1);
+      settings_.depth_colour = cmap == 1;
+      if (settings_.depth_colour && mode_ == ViewRenderer::Raycast) ImGui::TextDisabled("(the ray caster draws one colour)");
       ImGui::ColorEdit3("colour", &settings_.colour.x, ImGuiColorEditFlags_NoInputs);
       ImGui::SameLine();
       ImGui::ColorEdit3("background", &settings_.background.x, ImGuiColorEditFlags_NoInputs);
@@ -931,6 +939,7 @@ class ViewerApp {
     f.set("light", std::vector<double>{settings_.light_azimuth, settings_.light_elevation});
     const auto rgb = [](glm::vec3 c) { return std::vector<double>{c.r, c.g, c.b}; };
     f.set("colour", rgb(settings_.colour));
+    f.set("colour_map", std::string(settings_.depth_colour ? "depth" : "solid"));
     f.set("background", rgb(settings_.background));
     const glm::vec3 lo = settings_.crop_lo, hi = settings_.crop_hi;
     f.set("crop", std::vector<double>{lo.x, hi.x, lo.y, hi.y, lo.z, hi.z});

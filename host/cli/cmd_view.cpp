@@ -23,6 +23,7 @@ namespace {
 
 struct ViewOptions {
   std::string in, device, size = "1200x800", view = "0,0", crop, iso = "auto", screenshot, renderer;
+  std::string colour_map = "solid";
   std::string params, volume, save_params, save_u, save_mesh, cursor;
   float overlay = 0.5f;
   std::set<std::string> given;  // long option names given on the command line
@@ -45,6 +46,7 @@ ViewOptions with_params_file(ViewOptions o, viewer::ViewerOptions& v, Variationa
   };
   if (free("iso", "--iso")) o.iso = *f.find("iso");
   if (free("renderer", "--renderer")) o.renderer = *f.find("renderer");
+  if (free("colour_map", "--colour-map")) o.colour_map = *f.find("colour_map");
   if (free("threshold", "--threshold")) o.splat.threshold = float(*f.number("threshold"));
   if (free("crop", "--crop")) o.crop = list("crop");
   if (free("view", "--view")) o.view = list("view");
@@ -113,6 +115,8 @@ int run_view(const ViewOptions& given_options) {
     v.cursor = {x, y, z};
   }
   v.overlay = o.overlay;
+  if (o.colour_map != "solid" && o.colour_map != "depth") throw InputError("--colour-map: expected solid or depth");
+  v.settings.depth_colour = o.colour_map == "depth";
   v.iso_text = o.iso;
   v.save_params = o.save_params, v.save_u = o.save_u, v.save_mesh = o.save_mesh;
   v.frames = o.frames;
@@ -176,6 +180,12 @@ void add_view_command(CLI::App& app, Action& action) {
       ->type_name("V");
   sub->add_option("--cursor", o->cursor, "Initial 3-D cursor (voxel indices): the slices shown; default the centre")
       ->type_name("X,Y,Z");
+  sub->add_option("--colour-map", o->colour_map,
+                  "solid: one colour; depth: colour by depth along the beam (z), light near the transducer to dark "
+                  "red-brown deep (splats and mesh; the ray caster draws one colour)")
+      ->capture_default_str()
+      ->type_name("solid|depth")
+      ->check(one_of({"solid", "depth"}));
   sub->add_option("--overlay", o->overlay, "Initial opacity of the u overlay on the B-mode slices")
       ->capture_default_str()
       ->check(real_range(0, 1));
