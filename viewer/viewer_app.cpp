@@ -741,8 +741,8 @@ class ViewerApp {
     if (iso && !edit_) edit_ = input_.params;
     hist_marker_ = iso ? map.from_unit(edit_->v_iso) : double(params_.threshold);
     const bool marker = iso || (input_.bmode.data.empty() && mode_ == ViewRenderer::Splats);
-    ImGui::TextDisabled("%s, log counts%s", iso ? "scanned voxels as classified" : !input_.bmode.data.empty() ? "B-mode voxels" : "u",
-                        marker ? (iso ? "; drag: isovalue" : "; drag: threshold") : "");
+    ImGui::TextDisabled("%s (log)%s", iso ? "scanned voxels" : !input_.bmode.data.empty() ? "B-mode voxels" : "u",
+                        marker ? (iso ? "; drag the isovalue" : "; drag the threshold") : "");
     const ImVec2 p0 = ImGui::GetCursorScreenPos();
     const float w = std::max(50.0f, ImGui::GetContentRegionAvail().x), h = 80.0f;
     hist_rect_ = {p0.x, p0.y, w, h};

@@ -150,8 +150,11 @@ void add_view_command(CLI::App& app, Action& action) {
   auto* sub = app.add_subcommand(
       "view",
       "Interactive viewer: oriented splats (or isotropic splats, the Marching Cubes mesh, ray casting) with an orbit "
-      "camera and a panel (renderer, cut-away, re-classification). "
-      "Drag rotates, right-drag pans, the wheel zooms; S saves a screenshot, R resets the view, Esc quits.");
+      "camera; a panel docked on the left (histogram with the isovalue, re-classification, rendering, cut-away, "
+      "slices, save u / mesh / parameters) and three slice views under the 3-D view (axial, coronal, sagittal: the "
+      "B-mode data with u overlaid, linked by a 3-D cursor). Drag rotates, right-drag pans, the wheel zooms; a click "
+      "on a slice moves the cursor, the wheel over a slice pages it; S saves a screenshot of the 3-D view, R resets "
+      "the view, Esc quits (docs/rendering.md).");
   sub->add_option("IN", o->in, "Opacity volume (float in [0, 1]) or raw ultrasound volume (classified first)")
       ->required();
   sub->add_option("--size", o->size, "Window size")->capture_default_str()->type_name("WxH");
@@ -165,11 +168,12 @@ void add_view_command(CLI::App& app, Action& action) {
                   "(Marching Cubes mesh at level 0.2) or raycast (the OpenCL ray caster); overrides --method")
       ->type_name("splat|isosplat|mc|raycast")
       ->check(one_of({"splat", "isosplat", "mc", "raycast"}));
-  sub->add_option("--frames", o->frames, "Draw N frames, then quit (for scripts and tests)")
+  sub->add_option("--frames", o->frames, "Draw N frames, then quit (for scripts and tests); prints the mean time per frame after the first")
       ->check(int_range(0, 1000000));
-  sub->add_option("--screenshot", o->screenshot, "With --frames: save the last frame (without the panel) as PNG");
+  sub->add_option("--screenshot", o->screenshot, "With --frames: save the last frame's 3-D view alone, at the window size, as PNG");
   sub->add_flag("--screenshot-panel", o->screenshot_panel,
-                "Draw the whole window into the --screenshot: panel, slice views, histogram, scale bar");
+                "Save the whole window as --screenshot instead (panel, 3-D view with scale bar and axes, slice views) and print "
+                "where the slice images and the histogram are");
   sub->add_option("--params", o->params,
                   "Parameters file (as the panel's 'save parameters' writes it, docs/rendering.md): isovalue, "
                   "classification weights, renderer, threshold, light, colours, crop, camera; options given here win")
