@@ -45,7 +45,8 @@ ViewOptions with_params_file(ViewOptions o, viewer::ViewerOptions& v, Variationa
     return t;
   };
   if (free("iso", "--iso")) o.iso = *f.find("iso");
-  if (free("renderer", "--renderer")) o.renderer = *f.find("renderer");
+  // --method on the command line picks the renderer too: the file's does not override it.
+  if (free("renderer", "--renderer") && !o.given.count("--method")) o.renderer = *f.find("renderer");
   if (free("colour_map", "--colour-map")) o.colour_map = *f.find("colour_map");
   if (free("threshold", "--threshold")) o.splat.threshold = float(*f.number("threshold"));
   if (free("crop", "--crop")) o.crop = list("crop");
