@@ -168,6 +168,55 @@ TEST_F(ViewerCli, OpacityVolumeSlicesShowUOrTheGivenBModeVolume) {
   expect_one_line_error(run({"view", in, "--frames", "1", "--volume", file("small.nrrd")}), {"--volume", "dims"});
 }
 
+TEST_F(ViewerCli, CursorMovesTheSlicePlaneIn3DAndTheCropBoxIsDrawnOnTheSlices) {
+  const std::string in = file("u.nrrd");
+  write_volume(in, shell_volume(32));
+  // The sagittal plane (x = cursor x) is drawn in 3-D in exactly (235, 79, 69), no blending.
+  // Seen down the beam (--view 0,0: x to the right) its pixels' mean column follows the cursor.
+  double column[2] = {0, 0};
+  int k = 0;
+  for (const char* cursor : {"4,16,16", "27,16,16"}) {
+    SCOPED_TRACE(cursor);
+    const std::string shot = file("c.png");
+    const RunResult r = run({"view", in, "--frames", "2", "--size", "900x600", "--screenshot", shot,
+                             "--screenshot-panel", "--cursor", cursor, "--crop", "0,1,0,1,0,0.5"});
+    ASSERT_EQ(r.status, 0) << r.err;
+    const Image img = read_png(shot);
+    int vx = 0, vy = 0, vw = 0, vh = 0;
+    const auto at = r.out.find("view: 3-D view at ");
+    ASSERT_NE(at, std::string::npos) << r.out;
+    ASSERT_EQ(std::sscanf(r.out.c_str() + at, "view: 3-D view at %d,%d %dx%d", &vx, &vy, &vw, &vh), 4);
+    double sum = 0;
+    int n = 0;
+    for (int y = vy; y < vy + vh - 60; ++y)  // above the scale bar and the orientation marker
+      for (int x = vx; x < vx + vw; ++x) {
+        const std::uint8_t* p = img.pixel(x, y);
+        if (p[0] == 235 && p[1] == 79 && p[2] == 69) sum += x, ++n;
+      }
+    ASSERT_GT(n, 50) << "no sagittal plane outline in the 3-D view";
+    column[k++] = sum / n;
+    // The crop box (z up to 0.5) on the coronal slice (x right, z down): a near-white row at
+    // z = 0.5 (31) = 15.5, i.e. between texel rows 15 and 16.
+    const PaneImage p = pane_from(r.out, "coronal");
+    ASSERT_GT(p.w, 0);
+    const int y = p.y + int(16.0 * p.h / p.nv);
+    int white = 0;
+    for (int dy = -2; dy <= 2; ++dy)
+      for (int x = p.x; x < p.x + p.w; ++x) {
+        const std::uint8_t* q = img.pixel(x, y + dy);
+        white += q[0] > 225 && q[1] > 225 && q[2] > 225;
+      }
+    EXPECT_GT(white, p.w / 2) << "no crop box edge across the coronal slice";
+    int white_elsewhere = 0;  // and not at z = 0.25 (a row of u and grey only)
+    for (int x = p.x; x < p.x + p.w; ++x) {
+      const std::uint8_t* q = img.pixel(x, p.y + int(8.5 * p.h / p.nv));
+      white_elsewhere += q[0] > 225 && q[1] > 225 && q[2] > 225;
+    }
+    EXPECT_LT(white_elsewhere, p.w / 4);
+  }
+  EXPECT_GT(column[1] - column[0], 40.0) << "the sagittal plane did not follow the cursor to the right";
+}
+
 // The red isovalue marker's column in the histogram (-1: none).
 double marker_column(const Image& img, const Histogram& hg) {
   const int y = int(hg.y + 0.1 * hg.h);  // near the top: above most bars

@@ -381,6 +381,8 @@ class ViewerApp {
 
   // Where things are in the window, for scripts and tests.
   void print_layout() const {
+    const Rect& v = layout_.view;
+    std::printf("view: 3-D view at %.0f,%.0f %.0fx%.0f\n", v.x, v.y, v.w, v.h);
     for (int k = 0; k < 3; ++k) {
       const Rect& r = slice_image_[k];
       std::printf("view: slice %s %c = %d, image at %.0f,%.0f %.0fx%.0f (%dx%d voxels)\n", kSliceNames[k],
@@ -868,8 +870,11 @@ class ViewerApp {
       const glm::vec3 lo = settings_.crop_lo, hi = settings_.crop_hi;
       if (lo[au] > 0 || lo[av] > 0 || hi[au] < 1 || hi[av] < 1 || lo[an] > 0 || hi[an] < 1) {
         const bool inside = cursor_[an] >= lo[an] * (u.dims[an] - 1) - 0.5f && cursor_[an] <= hi[an] * (u.dims[an] - 1) + 0.5f;
-        dl->AddRect(ImVec2(px(lo[au] * (nu - 1)), py(lo[av] * (nv - 1))), ImVec2(px(hi[au] * (nu - 1)), py(hi[av] * (nv - 1))),
-                    inside ? IM_COL32(240, 240, 240, 230) : IM_COL32(120, 120, 120, 200), 0.0f, 0, 1.5f);
+        // On pixel centres, 2 px wide: one row or column fully covered (crisp, and found by tests).
+        const auto snap = [](float t) { return std::floor(t) + 0.5f; };
+        dl->AddRect(ImVec2(snap(px(lo[au] * (nu - 1))), snap(py(lo[av] * (nv - 1)))),
+                    ImVec2(snap(px(hi[au] * (nu - 1))), snap(py(hi[av] * (nv - 1)))),
+                    inside ? IM_COL32(245, 245, 245, 255) : IM_COL32(120, 120, 120, 255), 0.0f, 0, 2.0f);
       }
       // The cursor: the other two slices.
       dl->AddLine(ImVec2(px(float(cursor_[au])), r.y), ImVec2(px(float(cursor_[au])), r.y + r.h), kAxisColour[au] & 0xB0FFFFFF);
