@@ -102,7 +102,7 @@ TEST_F(CliArgs, EveryFloatOptionOfEveryCommandRefusesNanAndInfinityNamingItsRang
     }
   }
 #ifdef SOFTSHELL_HAVE_VIEWER
-  EXPECT_EQ(checked, 53);  // classify alone has 26
+  EXPECT_EQ(checked, 54);  // classify alone has 26 (--small-volume the 26th); view --overlay
 #else
   EXPECT_EQ(checked, 41);  // without render, view, figure5, figure6
 #endif

@@ -70,6 +70,7 @@ void MeshRenderer::draw(const OrbitCamera& camera, const RenderSettings& s, int 
       glm::normalize(camera.to_world({std::sin(laz) * std::cos(lel), std::sin(lel), std::cos(laz) * std::cos(lel)}));
   glUniform3fv(loc("u_light"), 1, glm::value_ptr(light));
   glUniform3fv(loc("u_colour"), 1, glm::value_ptr(s.colour));
+  glUniform3f(loc("u_depth"), s.depth_colour ? 1.0f : 0.0f, s.depth_lo, s.depth_hi);
   glUniform4f(loc("u_material"), s.ambient, s.diffuse, s.specular, s.shininess);
   glUniform3fv(loc("u_crop_lo"), 1, glm::value_ptr(crop_lo));
   glUniform3fv(loc("u_crop_hi"), 1, glm::value_ptr(crop_hi));

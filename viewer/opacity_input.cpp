@@ -21,7 +21,8 @@ bool looks_like_opacity(const Volume& v) {
   return std::all_of(v.data.begin(), v.data.end(), [](float f) { return f >= 0.0f && f <= 1.0f; });
 }
 
-OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, const std::string& iso_text) {
+OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, const std::string& iso_text,
+                          const VariationalParams* weights) {
   OpacityInput in;
   Volume v = read_volume(path);
   require_finite(v, path, "replace them first (e.g. softshell lowpass IN --sigma 0 --replace-non-finite 0 -o OUT)");
@@ -37,10 +38,13 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   // As `softshell classify IN --iso auto` does: auto mask, near field
   // removed, auto isovalue, unscanned voxels filled for the lowpass and held
   // at u = 0; too wide a lowpass or too large a volume refused first.
-  const VariationalParams defaults;
-  check_lowpass_sigma(1.0, v.spacing, "the classifier's lowpass sigma");
+  VariationalParams defaults;
+  defaults.sigma_mm = 1.0;
+  if (weights) defaults = *weights;
+  check_lowpass_sigma(defaults.sigma_mm, v.spacing, "the classifier's lowpass sigma");
   check_lowpass_sigma(defaults.grad_sigma_mm, v.spacing, "the classifier's --grad-sigma");
   check_classify_memory(rt, path, v.dims, Classifier::Variational, true);
+  in.bmode = v;  // before the near field is removed: the slices show the data as read
   MaskReport mr;
   in.mask = scanned_mask(v, MaskParams{}, &mr);
   if (mr.unscanned == 0) in.mask.clear();
@@ -66,15 +70,16 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
       throw InputError("--iso: expected a number in the input's intensity units or 'auto', got '" + iso_text + "'");
     in.data = mask ? std::move(filled) : std::move(v);
   }
+  in.params = defaults;
   in.params.v_iso = in.data.intensity_map().to_unit(in.iso);
   in.u = reclassify(rt, in, in.params, nullptr, &in.report);  // keeps in.classifier
   in.classified = true;
   std::ostringstream note;
-  note << "classified " << path << " (" << scalar_type_name(in.data.source_type) << ") with the defaults: iso "
+  note << "classified " << path << " (" << scalar_type_name(in.data.source_type) << (weights ? ") with the given weights: iso " : ") with the defaults: iso ")
        << std::setprecision(4) << in.iso << (iso_text == "auto" ? " (auto)" : "") << ", " << in.report.cycles
        << " iterations, relative residual " << std::scientific << std::setprecision(2)
        << (in.report.residuals.empty() ? 0.0 : in.report.residuals.back())
-       << (in.report.converged ? "" : " (NOT converged)");
+         << (in.report.converged ? "" : " (NOT converged)");
   in.note = note.str();
   return in;
 }

@@ -24,6 +24,9 @@ bool looks_like_opacity(const Volume& v);
 
 struct OpacityInput {
   Volume u;                          // opacity in [0, 1]
+  // The B-mode volume as read (the slice views show it): the raw input when
+  // classified here, `view --volume V` otherwise; empty: none (the slices show u).
+  Volume bmode;
   bool classified = false;           // true when u was computed here
   // Only when classified: the data as the classifier saw it (unscanned voxels
   // filled), its mask (empty: all scanned), and the parameters used.
@@ -43,7 +46,10 @@ struct OpacityInput {
 // number in the file's units. Throws InputError for a file that is not a
 // volume, and for an opacity volume with values outside [0, 1] forced by
 // `kind`.
-OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, const std::string& iso = "auto");
+// `weights`: the classification parameters other than v_iso (default:
+// VariationalParams{} with sigma 1 mm, as classify's defaults).
+OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, const std::string& iso = "auto",
+                          const VariationalParams* weights = nullptr);
 
 // Re-solves with new parameters (normalised v_iso), warm-starting from
 // `init` when given. Re-uses in.classifier when only pointwise parameters

@@ -38,6 +38,10 @@ struct RenderSettings {
   // dot(normal, centre - point) > 0 are dropped.
   glm::vec3 crop_lo{0.0f}, crop_hi{1.0f};
   glm::vec3 clip_normal{0.0f}, clip_point{0.0f};
+  // Depth colour map (splats and meshes): colour by z (depth along the beam,
+  // mm) from light near depth_lo to dark red-brown at depth_hi, instead of colour.
+  bool depth_colour = false;
+  float depth_lo = 0.0f, depth_hi = 1.0f;
 };
 
 // What the last draw did.

@@ -5,7 +5,10 @@
 // (compute: re-solve, splat generation), render (draw), events.
 #pragma once
 
+#include <array>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include "cl_runtime.hpp"
 #include "opacity_input.hpp"
@@ -29,6 +32,16 @@ struct ViewerOptions {
   std::string screenshot;   // with frames: save the last frame's scene here
   bool screenshot_panel = false;  // ... with the ImGui panel drawn on it
   bool quiet = false;
+  // The slice views: the 3-D cursor (voxel indices; -1: the centre) and the
+  // opacity of the u overlay on the B-mode slices.
+  std::array<int, 3> cursor{-1, -1, -1};
+  float overlay = 0.5f;
+  std::string iso_text = "auto";  // how the isovalue was given (the parameters file keeps "auto")
+  // With frames: written at the end (u as float, the mesh at mesh_level, the parameters file).
+  std::string save_params, save_u, save_mesh;
+  // From a parameters file: camera distance (mm), light AZ,EL, colours R,G,B.
+  std::optional<float> distance;
+  std::optional<std::vector<double>> light, colour, background;
 };
 
 // Runs until the window closes, Esc, or `frames` frames. Returns 0.

@@ -25,6 +25,7 @@
 #include "filter.hpp"
 #include "variational.hpp"
 #include "text.hpp"
+#include "params_file.hpp"
 
 namespace softshell::cli {
 namespace {
@@ -32,6 +33,7 @@ namespace {
 struct ClassifyOptions {
   std::string in, out, device, method = "variational", iso, init, cycle = "pcg", smoother = "gs", mask = "auto";
   std::string near_field = "remove", reverb = "remove", depth_clip;
+  std::string params;  // --params FILE
   double thickness = 1.0;
   double iso_fraction = AutoIsoParams().local_fraction, iso_field_sigma = AutoIsoParams().field_sigma_mm;
   std::optional<double> sigma;  // unset: 1 mm for variational, 0 (raw) for levoy
@@ -272,9 +274,33 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
   return 0;
 }
 
-int run_classify(const ClassifyOptions& options) {
+// --params FILE: the isovalue and the weights from a parameters file
+// (host/params_file.hpp) where the command line does not give them; the
+// file's rendering keys are for `view` and ignored here.
+ClassifyOptions with_params_file(ClassifyOptions o) {
+  if (o.params.empty()) return o;
+  const ParamsFile f = read_params_file(o.params);
+  const auto take = [&](const char* key, const std::string& option) {
+    if (!f.find(key) || o.given.count(option)) return false;
+    o.given.insert(option);  // counts as given (--literal keeps it)
+    return true;
+  };
+  if (take("iso", "--iso")) o.iso = *f.find("iso");
+  if (take("sigma", "--sigma")) o.sigma = *f.number("sigma");
+  const std::pair<const char*, double*> weights[] = {{"alpha", &o.vp.alpha}, {"beta", &o.vp.beta},
+                                                     {"gamma", &o.vp.gamma}, {"omega", &o.vp.omega},
+                                                     {"delta", &o.vp.delta}, {"epsilon", &o.vp.epsilon},
+                                                     {"kappa", &o.vp.kappa}};
+  for (const auto& [key, value] : weights)
+    if (take(key, std::string("--") + key)) *value = *f.number(key);
+  return o;
+}
+
+int run_classify(const ClassifyOptions& given_options) {
   const auto t0 = Clock::now();
-  ClassifyOptions o = options;  // the length scales may shrink with a small volume
+  // The parameters file first; then the length scales may shrink with a small volume.
+  ClassifyOptions o = with_params_file(given_options);
+  if (o.iso.empty()) throw InputError("--iso is required (a number, auto, ...), or an iso key in --params");
   if (o.method != "levoy" && o.method != "variational")
     throw InputError("--method " + o.method + ": unknown (methods: variational, levoy)");
   const bool variational = o.method == "variational";
@@ -303,7 +329,7 @@ int run_classify(const ClassifyOptions& options) {
   if (variational) solver_params(o);
   if (!variational && (!(o.thickness > 0) || o.thickness > 100)) throw InputError("--thickness must be in (0, 100] voxels");
   const std::string mask_file = o.mask != "auto" && o.mask != "none" ? o.mask : "";
-  ensure_distinct_outputs({o.in, mask_file, o.init}, {o.out});
+  ensure_distinct_outputs({o.in, mask_file, o.init, o.params}, {o.out});
   check_output(o.out, OutputKind::Volume);  // before any work: a typo costs nothing
   const auto raw = o.raw.spec();
   // The header first: sizes, data files, the lowpasses' widths and the
@@ -452,9 +478,13 @@ void add_classify_command(CLI::App& app, Action& action) {
                   "Isovalue, in the input's own intensity units (e.g. 0-255 for 8-bit data), or auto: for the "
                   "variational method a field near the bright side of each boundary (auto-local), for levoy where the "
                   "gradient of the lowpassed data peaks (auto-edge); auto-ridge: the crest of the boundary echoes "
-                  "(docs/parameters.md)")
-      ->required()
+                  "(docs/parameters.md); required unless --params gives it")
       ->type_name("V|auto|auto-local|auto-ridge|auto-edge");
+  sub->add_option("--params", o->params,
+                  "Parameters file (as `view` saves it: key = value lines, docs/rendering.md): iso, sigma and the "
+                  "weights alpha beta gamma omega delta epsilon kappa are taken from it unless given here; its "
+                  "rendering keys are ignored; an unknown key or a bad value is an error")
+      ->type_name("FILE");
   sub->add_option("--iso-fraction", o->iso_fraction,
                   "The local rule: where between a boundary's dark trough (0) and bright crest (1) its isovalue lies")
       ->capture_default_str()

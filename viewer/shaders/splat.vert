@@ -18,12 +18,21 @@ uniform vec3 u_colour, u_colour2;  // ramp by the splat's T.w (0 from the genera
 uniform vec4 u_material;         // ambient, diffuse, specular, shininess
 uniform vec3 u_crop_lo, u_crop_hi;  // splats with centres outside the box are dropped
 uniform vec4 u_clip;             // and those with dot(xyz, centre) + w > 0
+uniform vec3 u_depth;            // x = 1: colour by depth z in [y, z] mm instead of u_colour
 
 out vec2 v_tex;
 out vec4 v_colour;
 
 // Texture-space corners (paper Figure 4): the equilateral triangle around
 // the circle of radius 0.5; vertex k sits at centre + corner.x S + corner.y T.
+// Depth colour map (SlicerHeart-style): light skin tones near the
+// transducer, darker red-brown with depth along the beam (z).
+vec3 depth_colour(float t) {
+  t = clamp(t, 0.0, 1.0);
+  return t < 0.5 ? mix(vec3(1.0, 0.9, 0.72), vec3(0.93, 0.55, 0.33), 2.0 * t)
+                 : mix(vec3(0.93, 0.55, 0.33), vec3(0.5, 0.16, 0.12), 2.0 * t - 1.0);
+}
+
 const vec2 k_corner[3] = vec2[3](vec2(1.0, 0.0), vec2(-0.5, -0.8660254), vec2(-0.5, 0.8660254));
 
 void main() {
@@ -39,7 +48,8 @@ void main() {
   vec4 t = texelFetch(u_splats, base + 3);
   vec3 S = u_isotropic != 0 ? u_iso_s : texelFetch(u_splats, base + 2).xyz;
   vec3 T = u_isotropic != 0 ? u_iso_t : t.xyz;
-  vec3 colour = mix(u_colour, u_colour2, t.w);
+  vec3 colour = u_depth.x > 0.5 ? depth_colour((c.z - u_depth.y) / max(u_depth.z - u_depth.y, 1e-6))
+                                 : mix(u_colour, u_colour2, t.w);
   vec2 k = k_corner[corner];
   vec3 p = c.xyz + k.x * S + k.y * T;
   gl_Position = u_view_proj * vec4(p, 1.0);
