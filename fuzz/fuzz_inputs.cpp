@@ -16,6 +16,7 @@
 #include <iostream>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <sstream>
 
 #include "auto_iso.hpp"
@@ -119,7 +120,7 @@ bool close(double a, double b) { return std::fabs(a - b) <= 1e-5 * std::max(std:
 // What every volume that reads must satisfy, and its round trip through
 // every writer.
 void check_volume(const std::string& path, const Volume& v) {
-  const VolumeHeader h = read_volume_header(path);
+  const VolumeHeader h = read_any_header(path);
   if (v.voxels() == 0 || v.data.size() != v.voxels()) fail("a volume without samples read from " + path);
   if (h.dims != v.dims || h.type != v.source_type || h.spacing != v.spacing || h.origin != v.origin)
     fail("read_volume_header and read_volume disagree on " + path);
@@ -187,7 +188,13 @@ bool answered(F&& body) {
 
 bool run_reader(const std::string& path) {
   return answered([&] {
-    const Volume v = read_volume(path);
+    // A 3D+t sequence (4-D NRRD): its last frame, and the header of every
+    // read must agree with the volume.
+    const VolumeHeader h = read_any_header(path);
+    if (h.frames == 0) fail("a header with no frames");
+    const std::optional<std::size_t> frame = h.frames > 1 ? std::optional<std::size_t>(h.frames - 1) : std::nullopt;
+    const Volume v = read_volume(path, std::nullopt, frame);
+    if (v.dims != h.dims) fail("header dims differ from the volume's");
     check_volume(path, v);
   });
 }
@@ -543,6 +550,9 @@ std::vector<Seed> seeds(const std::string& harness) {
                                      "measurement frame: (1,0,0) (0,0,-1) (0,1,0)\nendian: little\nencoding: raw\n\n" +
                                          std::string("\x01\x00\x02\x00\x03\x00\x04\x00\x05\x00\x06\x00\x07\x00\x08\x00", 16)});
     s.push_back({"hex.nrrd", "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: hex\n\n0102030405060708\n"});
+    s.push_back({"sequence.nrrd", "NRRD0005\ntype: uchar\ndimension: 4\nspace: left-posterior-superior\nsizes: 2 2 2 3\n"
+                                  "space directions: (0.5,0,0) (0,0.5,0) (0,0,1) none\nkinds: domain domain domain list\n"
+                                  "encoding: raw\nspace origin: (0,0,0)\n\n" + std::string(24, '\x05')});
     s.push_back({"bzip2.nrrd", head + "endian: little\nencoding: bzip2\n\n" + bzip2(raw)});
     s.push_back({"skips.nrrd", "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 1\nencoding: raw\nline skip: 1\n"
                                "byte skip: 2\n\nskip me\nxxABCD"});

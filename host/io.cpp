@@ -781,10 +781,25 @@ std::size_t replace_non_finite(Volume& v, float value) {
 
 // ---- dispatch ----------------------------------------------------------------
 
-Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw) {
-  if (raw) return read_raw(path, *raw);
-  switch (format_of(path)) {
-    case Format::Nrrd: return io_detail::read_nrrd(path);
+namespace {
+
+// Only NRRD holds sequences; any other file is frame 0 of one.
+void check_single_frame(const std::string& path, std::optional<std::size_t> frame) {
+  if (frame && *frame != 0)
+    throw input_error(path, "--frame " + std::to_string(*frame) + ": a 3-D volume has one frame (0)");
+}
+
+}  // namespace
+
+Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw, std::optional<std::size_t> frame) {
+  if (raw) {
+    check_single_frame(path, frame);
+    return read_raw(path, *raw);
+  }
+  const Format f = format_of(path);
+  if (f != Format::Nrrd) check_single_frame(path, frame);
+  switch (f) {
+    case Format::Nrrd: return io_detail::read_nrrd(path, frame);
     case Format::MetaImage: return io_detail::read_metaimage(path);
     case Format::Nifti: return io_detail::read_nifti(path);
     case Format::Vti: return io_detail::read_vti(path);
@@ -805,8 +820,10 @@ void write_nifti(const std::string& path, const Volume&, const WriteOptions&, bo
 bool nifti_supported() { return true; }
 #endif
 
-VolumeHeader read_volume_header(const std::string& path, const std::optional<RawSpec>& raw) {
+VolumeHeader read_volume_header(const std::string& path, const std::optional<RawSpec>& raw,
+                                std::optional<std::size_t> frame) {
   if (raw) {
+    check_single_frame(path, frame);
     io_detail::FilePtr f = io_detail::open_for_reading(path);
     check_raw_size(path, *raw, io_detail::file_size(f.get()));
     check_geometry(path, raw->spacing, {0.0, 0.0, 0.0});
@@ -817,8 +834,10 @@ VolumeHeader read_volume_header(const std::string& path, const std::optional<Raw
     h.files = {path};
     return h;
   }
-  switch (format_of(path)) {
-    case Format::Nrrd: return io_detail::read_nrrd_header(path);
+  const Format f = format_of(path);
+  if (f != Format::Nrrd) check_single_frame(path, frame);
+  switch (f) {
+    case Format::Nrrd: return io_detail::read_nrrd_header(path, frame, false);
     case Format::MetaImage: return io_detail::read_metaimage_header(path);
     case Format::Nifti: return io_detail::read_nifti_header(path);
     case Format::Vti: return io_detail::read_vti_header(path);
@@ -882,7 +901,7 @@ namespace {
 // output is written).
 std::vector<std::string> input_files(const std::string& input) {
   try {
-    return read_volume_header(input).files;
+    return read_any_header(input).files;
   } catch (const InputError&) {
     return {input};
   }
@@ -926,6 +945,11 @@ void ensure_distinct_outputs(const std::vector<std::string>& inputs, const std::
 
 void ensure_distinct_output(const std::string& input, const std::string& output) {
   ensure_distinct_outputs({input}, {output});
+}
+
+VolumeHeader read_any_header(const std::string& path, const std::optional<RawSpec>& raw) {
+  if (!raw && format_of(path) == Format::Nrrd) return io_detail::read_nrrd_header(path, std::nullopt, true);
+  return read_volume_header(path, raw);
 }
 
 }  // namespace softshell

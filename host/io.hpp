@@ -45,7 +45,13 @@ Vec3d parse_vec3(const std::string& text, const std::string& what);
 // (.nrrd/.nhdr, .mha/.mhd, .nii/.nii.gz/.hdr, .vti). Checks, before allocating, that the voxel count
 // does not overflow, that the samples fit in this machine's memory and that
 // the file holds the bytes its header declares.
-Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw = std::nullopt);
+//
+// 3D+t: a 4-D NRRD whose slowest axis holds frames (kind list, time or
+// domain, as 3D Slicer's Sequences module writes them) is a sequence of 3-D
+// volumes of one geometry; `frame` picks one (0-based). Without it such a
+// file is refused with one line giving the frame count; a 3-D file is frame 0.
+Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw = std::nullopt,
+                   std::optional<std::size_t> frame = std::nullopt);
 
 // True when this build reads NIfTI (.nii, .nii.gz, .hdr/.img; niftilib was found).
 bool nifti_supported();
@@ -59,10 +65,17 @@ struct VolumeHeader {
   Vec3d origin{0.0, 0.0, 0.0};
   WorldFrame frame;
   std::vector<std::string> files;  // the header itself, then its detached data file(s)
+  std::size_t frames = 1;          // > 1: a 3D+t sequence (dims are one frame's)
 };
 // Parses the header only (and checks that its data files are acceptable);
 // allocates nothing of the volume's size. Throws InputError like read_volume.
-VolumeHeader read_volume_header(const std::string& path, const std::optional<RawSpec>& raw = std::nullopt);
+// `frame` as for read_volume (the chosen frame's header, `frames` the count;
+// a sequence without a frame chosen is refused the same way).
+VolumeHeader read_volume_header(const std::string& path, const std::optional<RawSpec>& raw = std::nullopt,
+                                std::optional<std::size_t> frame = std::nullopt);
+// The header of any file, a sequence without a frame chosen included
+// (frames > 1; dims, spacing, ... are each frame's): what `info` shows.
+VolumeHeader read_any_header(const std::string& path, const std::optional<RawSpec>& raw = std::nullopt);
 
 // Voxel spacing softshell accepts, in mm: 1 nm to 1 km. Outside it the
 // header's unit is wrong (or the file is corrupt), and the float32 grid
@@ -226,8 +239,10 @@ bool is_tracked_frame_key(const std::string& key);
 // The one-line refusal for such a file (InputError naming `path`).
 InputError tracked_frame_error(const std::string& path, const std::string& key);
 
-Volume read_nrrd(const std::string& path);
-VolumeHeader read_nrrd_header(const std::string& path);
+Volume read_nrrd(const std::string& path, std::optional<std::size_t> frame = std::nullopt);
+// any_frame: a sequence's header without a frame chosen (for `info`).
+VolumeHeader read_nrrd_header(const std::string& path, std::optional<std::size_t> frame = std::nullopt,
+                              bool any_frame = false);
 void write_nrrd(const std::string& path, const Volume& v, const WriteOptions& opt);
 Volume read_metaimage(const std::string& path);
 // NIfTI (host/io_nifti.cpp; only when nifti_supported()).

@@ -20,6 +20,7 @@
 #include <cstring>
 #include <filesystem>
 #include <memory>
+#include <limits>
 #include <mutex>
 #include <optional>
 #include <sstream>
@@ -300,20 +301,25 @@ WorldFrame frame_of(const Nrrd* n) {
   return f;
 }
 
-// Dims, type, spacing and origin of a loaded header, validated.
+// Dims, type, spacing and origin of a loaded header, validated. A 4-D
+// header whose slowest axis holds frames (kind list, time, domain or none:
+// 3D Slicer's Sequences module and PLUS's .igs.nrrd write 3D+t so) is a
+// sequence: dims are one frame's, `frames` the count.
 VolumeHeader geometry(const Nrrd* n, const std::string& path) {
-  if (n->dim != 3) {
-    std::string hint;
-    if (n->dim == 4) {
-      // 3D Slicer's Sequences module (and PLUS's .igs.nrrd) store 3D+t as a 4-D NRRD whose
-      // slowest axis is a list or time.
-      const int k = n->axis[3].kind;
-      const bool frames = k == nrrdKindList || k == nrrdKindTime || k == nrrdKindDomain;
-      if (frames) hint = "; a sequence of " + std::to_string(n->axis[3].size) + " 3-D frames? softshell reads one 3-D volume per file";
-    }
-    throw input_error(path, "expected a 3-D scalar volume, found " + std::to_string(n->dim) + "-D data (sizes " +
-                                sizes_text(n) + ")" + hint);
+  std::size_t frames = 1;
+  if (n->dim == 4) {
+    const int k = n->axis[3].kind;
+    if (k == nrrdKindList || k == nrrdKindTime || k == nrrdKindDomain || k == nrrdKindUnknown)
+      frames = n->axis[3].size;
   }
+  if (n->dim != 3 && n->dim != 4) {
+    throw input_error(path, "expected a 3-D scalar volume, found " + std::to_string(n->dim) + "-D data (sizes " +
+                                sizes_text(n) + ")");
+  }
+  if (n->dim == 4 && frames == 1 && n->axis[3].size != 1)
+    throw input_error(path, std::string("expected a 3-D scalar volume or a sequence of them, found 4-D data (sizes ") +
+                                sizes_text(n) + ") whose last axis (kind " + airEnumStr(nrrdKind, n->axis[3].kind) +
+                                ") is not a list of frames");
   const auto t = scalar_type_of(n->type);
   if (!t) {
     throw input_error(path, std::string("unsupported NRRD type '") + airEnumStr(nrrdType, n->type) +
@@ -322,6 +328,7 @@ VolumeHeader geometry(const Nrrd* n, const std::string& path) {
   VolumeHeader h;
   h.type = *t;
   h.dims = {n->axis[0].size, n->axis[1].size, n->axis[2].size};
+  h.frames = frames;
   for (unsigned ax = 0; ax < 3; ++ax) h.spacing[ax] = axis_spacing(n, ax);
   double origin[NRRD_SPACE_DIM_MAX];
   const unsigned sdim = nrrdSpaceOriginGet(n, origin);
@@ -449,7 +456,7 @@ void check_data_size(const std::string& path, const HeaderScan& scan, const Load
   const std::uint64_t start = scan.data_file.empty() ? scan.data_offset : 0;
   std::uint64_t avail = total > start ? total - start : 0;
   if (info.byte_skip > 0) avail = avail > std::uint64_t(info.byte_skip) ? avail - std::uint64_t(info.byte_skip) : 0;
-  const std::uint64_t voxels = std::uint64_t(h.dims[0]) * h.dims[1] * h.dims[2];  // checked_voxels() ran
+  const std::uint64_t voxels = std::uint64_t(h.dims[0]) * h.dims[1] * h.dims[2] * h.frames;  // checked_voxels() ran
   const std::uint64_t expected = voxels * scalar_type_size(h.type);
   const std::string where = scan.data_file.empty() ? " after the header" : " in " + scan.data_file;
   const NrrdEncoding* e = info.encoding;
@@ -514,6 +521,12 @@ VolumeHeader checked_header(const std::string& path) {
   const LoadInfo info = load(head.get(), path, true);
   VolumeHeader h = geometry(head.get(), path);
   checked_voxels(path, h.dims, h.type);
+  // A sequence is read whole (Teem's reader), then one frame is kept.
+  if (h.frames > 1) {
+    if (h.frames > std::numeric_limits<std::size_t>::max() / std::max<std::size_t>(h.dims[2], 1))
+      throw input_error(path, "sizes " + sizes_text(head.get()) + ": too many samples");
+    checked_voxels(path, {h.dims[0], h.dims[1], h.dims[2] * h.frames}, h.type);
+  }
   check_data_size(path, scan, info, h);
   h.files = {path};
   if (!scan.data_file.empty()) h.files.push_back(scan.data_file);
@@ -522,22 +535,44 @@ VolumeHeader checked_header(const std::string& path) {
 
 }  // namespace
 
-VolumeHeader read_nrrd_header(const std::string& path) {
-  const std::lock_guard<std::mutex> lock(teem_mutex());
-  nrrdStateVerboseIO = 0;  // Teem would otherwise chat on stderr
-  return checked_header(path);
+namespace {
+
+// The frame a read takes: `frame`, which must exist; a sequence needs one.
+std::size_t chosen_frame(const std::string& path, const VolumeHeader& h, std::optional<std::size_t> frame,
+                         bool header_only) {
+  const std::string range = h.frames == 1 ? "(0)" : "(0 to " + std::to_string(h.frames - 1) + ")";
+  if (frame && *frame >= h.frames)
+    throw input_error(path, "--frame " + std::to_string(*frame) + ": the file holds " + std::to_string(h.frames) +
+                                (h.frames == 1 ? " frame " : " frames ") + range);
+  if (!frame && h.frames > 1 && !header_only)
+    throw input_error(path, "a sequence of " + std::to_string(h.frames) + " 3-D frames of " + dims_text(h.dims) +
+                                ": choose one with --frame K " + range);
+  return frame.value_or(0);
 }
 
-Volume read_nrrd(const std::string& path) {
+}  // namespace
+
+VolumeHeader read_nrrd_header(const std::string& path, std::optional<std::size_t> frame, bool any_frame) {
+  const std::lock_guard<std::mutex> lock(teem_mutex());
+  nrrdStateVerboseIO = 0;  // Teem would otherwise chat on stderr
+  VolumeHeader h = checked_header(path);
+  chosen_frame(path, h, frame, any_frame);
+  return h;
+}
+
+Volume read_nrrd(const std::string& path, std::optional<std::size_t> frame) {
   const std::lock_guard<std::mutex> lock(teem_mutex());
   nrrdStateVerboseIO = 0;  // Teem would otherwise chat on stderr
   const VolumeHeader h = checked_header(path);
+  const std::size_t k = chosen_frame(path, h, frame, false);
 
   // Pass 2: the real thing.
   const NrrdOwned n(nrrdNew());
   load(n.get(), path, false);
-  if (n->dim != 3 || n->type != nrrd_type_of(h.type) || n->axis[0].size != h.dims[0] ||
-      n->axis[1].size != h.dims[1] || n->axis[2].size != h.dims[2] || !n->data) {
+  const unsigned dim = h.frames > 1 || n->dim == 4 ? 4u : 3u;
+  if (n->dim != dim || n->type != nrrd_type_of(h.type) || n->axis[0].size != h.dims[0] ||
+      n->axis[1].size != h.dims[1] || n->axis[2].size != h.dims[2] || (dim == 4 && n->axis[3].size != h.frames) ||
+      !n->data) {
     throw input_error(path, "file changed while being read");
   }
 
@@ -549,7 +584,8 @@ Volume read_nrrd(const std::string& path) {
   v.frame = h.frame;
   v.data.resize(v.voxels());
   // After nrrdLoad the data is in host byte order.
-  decode_samples(static_cast<const unsigned char*>(n->data), v.voxels(), h.type, false, v.data.data());
+  const std::size_t offset = k * v.voxels() * scalar_type_size(h.type);
+  decode_samples(static_cast<const unsigned char*>(n->data) + offset, v.voxels(), h.type, false, v.data.data());
   return v;
 }
 

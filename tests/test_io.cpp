@@ -552,8 +552,13 @@ TEST(IoNrrd, ErrorsAreOneLineAndNameTheFile) {
   expect_input_error([&] { read_volume(gz); }, {gz + ": "});
   const std::string d2 = nrrd("d2.nrrd", "NRRD0004\ntype: uint8\ndimension: 2\nsizes: 4 5\nencoding: raw\n\n");
   expect_input_error([&] { read_volume(d2); }, {d2 + ": expected a 3-D scalar volume, found 2-D data (sizes 4 5)"});
-  const std::string d4 = nrrd("d4.nrrd", "NRRD0004\ntype: uint8\ndimension: 4\nsizes: 3 4 5 6\nencoding: raw\n\n");
-  expect_input_error([&] { read_volume(d4); }, {"found 4-D data (sizes 3 4 5 6)"});
+  // 4-D: a sequence of frames when the last axis is a list (or time, domain, no kind), else refused.
+  const std::string d4 = nrrd("d4.nrrd", "NRRD0004\ntype: uint8\ndimension: 4\nsizes: 3 4 5 6\n"
+                                         "kinds: domain domain domain vector\nencoding: raw\n\n");
+  expect_input_error([&] { read_volume(d4); },
+                     {"found 4-D data (sizes 3 4 5 6) whose last axis (kind vector) is not a list of frames"});
+  const std::string s4 = nrrd("s4.nrrd", "NRRD0004\ntype: uint8\ndimension: 4\nsizes: 3 4 5 6\nencoding: raw\n\n");
+  expect_input_error([&] { read_volume(s4); }, {"data truncated: expected 360 bytes of raw data"});
   const std::string block = nrrd("block.nrrd", "NRRD0004\ntype: block\nblock size: 4\ndimension: 3\n"
                                                "sizes: 2 2 2\nendian: little\nencoding: raw\n\n");
   expect_input_error([&] { read_volume(block); }, {block + ": unsupported NRRD type 'block'"});

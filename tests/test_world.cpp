@@ -415,7 +415,10 @@ TEST_F(WorldIo, PlusTrackedFrameSequenceIsRefused) {
   // A 3D+t sequence as 3D Slicer's Sequences module writes it: a 4-D NRRD with a list axis.
   write("beat.seq.nrrd", "NRRD0004\ntype: uint8\ndimension: 4\nsizes: 2 2 2 3\nkinds: domain domain domain list\n"
                          "encoding: raw\n\n" + std::string(24, '\x01'));
-  expect_one_line_error(run({"info", file("beat.seq.nrrd")}), {"found 4-D data", "sequence of 3 3-D frames"});
+  // It is read a frame at a time (tests/test_io.cpp: Sequence.*); `info` counts the frames.
+  const RunResult i = run({"info", file("beat.seq.nrrd")});
+  EXPECT_EQ(i.status, 0) << i.err;
+  EXPECT_NE(i.out.find("frames:             3 (a 3D+t sequence"), std::string::npos) << i.out;
   // A reconstructed volume that keeps PLUS's lone "Seq_Frame0000_ImageStatus" is a volume.
   EXPECT_FALSE(io_detail::is_tracked_frame_key("Seq_Frame0000_ImageStatus"));
   EXPECT_TRUE(io_detail::is_tracked_frame_key("Seq_Frame0000_ProbeToTrackerTransform"));
@@ -424,6 +427,80 @@ TEST_F(WorldIo, PlusTrackedFrameSequenceIsRefused) {
 }
 
 // ---- end to end: classify and mesh an oblique volume -----------------------------------------
+
+// ---- 3D+t sequences -----------------------------------------------------------------------------
+
+template <class Fn>
+void expect_input_error(Fn fn, std::initializer_list<std::string> parts) {
+  try {
+    fn();
+    ADD_FAILURE() << "no InputError";
+  } catch (const InputError& e) {
+    const std::string msg = e.what();
+    for (const std::string& p : parts) EXPECT_NE(msg.find(p), std::string::npos) << "'" << p << "' not in: " << msg;
+  }
+}
+
+TEST_F(WorldIo, SequenceFramesAreReadOneAtATime) {
+  // Three frames of 16^3 (a growing ball), a 4-D NRRD as 3D Slicer's Sequences module writes it.
+  const Dims3 d{16, 16, 16};
+  const Vec3d sp{0.5, 0.6, 0.7}, org{-20.5, 14.25, -3};
+  const Mat3 axes = oblique_axes();
+  std::vector<std::string> frames;
+  for (int k = 0; k < 3; ++k) {
+    std::string f = ball_samples(d, sp, 2.0 + 0.5 * k);
+    frames.push_back(f);
+  }
+  std::string head = nrrd_header(d, sp, axes, org, "left-posterior-superior");
+  // nrrd_header writes a 3-D header: make it 4-D with a list of frames.
+  auto replace = [&](const std::string& a, const std::string& b) { head.replace(head.find(a), a.size(), b); };
+  replace("dimension: 3", "dimension: 4");
+  replace("sizes: 16 16 16", "sizes: 16 16 16 3");
+  replace("kinds: domain domain domain", "kinds: domain domain domain list");
+  const std::size_t dirs = head.find("space directions:");
+  head.insert(head.find('\n', dirs), " none");
+  write("seq.nrrd", head + frames[0] + frames[1] + frames[2]);
+  for (int k = 0; k < 3; ++k) {
+    SCOPED_TRACE(k);
+    const Volume v = read_volume(file("seq.nrrd"), std::nullopt, std::size_t(k));
+    ASSERT_EQ(v.dims, d);
+    for (std::size_t i = 0; i < v.voxels(); ++i)
+      ASSERT_EQ(v.data[i], float(static_cast<unsigned char>(frames[k][i]))) << "voxel " << i;
+    for (int a = 0; a < 3; ++a) EXPECT_NEAR(v.spacing[a], sp[a], 1e-12);
+    EXPECT_EQ(v.origin, org);
+    const VolumeHeader h = read_volume_header(file("seq.nrrd"), std::nullopt, std::size_t(k));
+    EXPECT_EQ(h.frames, 3u);
+    EXPECT_EQ(h.dims, d);
+  }
+  expect_input_error([&] { read_volume(file("seq.nrrd")); },
+                     {"a sequence of 3 3-D frames of 16x16x16: choose one with --frame K (0 to 2)"});
+  expect_input_error([&] { read_volume_header(file("seq.nrrd")); }, {"choose one with --frame K"});
+  expect_input_error([&] { read_volume(file("seq.nrrd"), std::nullopt, std::size_t(3)); },
+                     {"--frame 3: the file holds 3 frames (0 to 2)"});
+  EXPECT_EQ(read_any_header(file("seq.nrrd")).frames, 3u);
+  // A 3-D file is frame 0 of one, whatever its format.
+  write("one.nrrd", nrrd_header(d, sp, axes, org, "left-posterior-superior") + frames[1]);
+  EXPECT_EQ(read_volume(file("one.nrrd"), std::nullopt, std::size_t(0)).voxels(), d[0] * d[1] * d[2]);
+  expect_input_error([&] { read_volume(file("one.nrrd"), std::nullopt, std::size_t(1)); },
+                     {"--frame 1: the file holds 1 frame (0)"});
+  write_volume(file("one.mha"), read_volume(file("one.nrrd")));
+  expect_input_error([&] { read_volume(file("one.mha"), std::nullopt, std::size_t(2)); },
+                     {"--frame 2: a 3-D volume has one frame (0)"});
+
+  // The command line: info counts the frames; classify --frame K gives exactly what the frame
+  // written as a 3-D file gives; without --frame a one-line error before any work.
+  RunResult r = run({"info", file("seq.nrrd"), "--frame", "2"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("frames:             3 (a 3D+t sequence; below: frame 2"), std::string::npos) << r.out;
+  r = run({"classify", file("seq.nrrd"), "--iso", "110", "--mask", "none", "--frame", "1", "-o", file("u1.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  r = run({"classify", file("one.nrrd"), "--iso", "110", "--mask", "none", "-o", file("u_one.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(read_volume(file("u1.nrrd")).data, read_volume(file("u_one.nrrd")).data);
+  r = run({"classify", file("seq.nrrd"), "--iso", "110", "-o", file("u.nrrd")});
+  expect_one_line_error(r, {"seq.nrrd: a sequence of 3 3-D frames of 16x16x16: choose one with --frame K (0 to 2)"});
+  EXPECT_FALSE(fs::exists(file("u.nrrd")));
+}
 
 TEST_F(WorldIo, MaskInitAndTruthPlacedElsewhereAreNamedInAWarning) {
   // Masks, initial opacities and truths are used index by index; one whose header puts its

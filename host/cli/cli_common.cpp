@@ -12,6 +12,8 @@ void RawOptions::add_to(CLI::App* app) {
   app->add_option("--type", type, "Sample type of raw data: uint8|uint16|int16|float|double")->type_name("T");
   app->add_option("--spacing", spacing, "Voxel spacing of raw data in mm (default 1,1,1)")->type_name("X,Y,Z");
   app->add_flag("--big-endian", big_endian, "Raw data is big-endian (default little)");
+  app->add_option("--frame", frame, "One frame (0-based) of a 3D+t sequence (a 4-D NRRD of frames; `info` counts them)")
+      ->type_name("K");
 }
 
 std::optional<RawSpec> RawOptions::spec() const {

@@ -66,6 +66,7 @@ int run_shearwarp_render(const RaycastRenderRequest& request);
 struct RawOptions {
   std::string dims, type, spacing;
   bool big_endian = false;
+  std::optional<std::size_t> frame;  // --frame K: one frame of a 3D+t sequence
 
   void add_to(CLI::App* app);
   // The raw description, or nullopt when --raw was not given; throws

@@ -334,7 +334,7 @@ int run_classify(const ClassifyOptions& given_options) {
   const auto raw = o.raw.spec();
   // The header first: sizes, data files, the lowpasses' widths and the
   // memory the classifier needs are all checked before a sample is read.
-  const VolumeHeader head = read_volume_header(o.in, raw);
+  const VolumeHeader head = read_volume_header(o.in, raw, o.raw.frame);
   // Small volumes (docs/parameters.md): the default length scales shrink
   // with a volume whose smallest extent is below --small-volume; those given
   // on the command line, and the paper's functional, stay.
@@ -368,7 +368,7 @@ int run_classify(const ClassifyOptions& given_options) {
   // A tolerance below 1e-4 is reached by float64 refinement (host/multigrid.cpp).
   check_classify_memory(rt, o.in, head.dims, variational ? Classifier::Variational : Classifier::Levoy,
                         o.mask != "none", variational && o.sp.tol < 1e-4);
-  Volume in = read_volume(o.in, raw);
+  Volume in = read_volume(o.in, raw, o.raw.frame);
   o.non_finite.apply(in, o.in);
   const std::string iso_warning = given_iso ? iso_outside_data(in, *given_iso) : "";
   step.emplace("mask");

@@ -268,7 +268,7 @@ int run_figure2(const Figure2Options& o) {
   check_output(o.out, OutputKind::Png);
 
   Runtime rt(o.device);
-  Volume in = read_volume(o.in, o.raw.spec());
+  Volume in = read_volume(o.in, o.raw.spec(), o.raw.frame);
   o.non_finite.apply(in, o.in);
   if (spec.index >= 0 && std::size_t(spec.index) >= in.dims[spec.axis])
     throw InputError("--slice " + o.slice + ": index out of range, the volume has " +

@@ -15,7 +15,13 @@ struct InfoOptions {
 };
 
 int run_info(const std::string& path, const RawOptions& raw) {
-  const Volume v = read_volume(path, raw.spec());
+  // A 3D+t sequence: its frame count, then frame 0 (or --frame K) in full.
+  const VolumeHeader h = read_any_header(path, raw.spec());
+  const std::size_t k = raw.frame.value_or(0);
+  const Volume v = read_volume(path, raw.spec(), h.frames > 1 ? std::optional<std::size_t>(k) : raw.frame);
+  if (h.frames > 1)
+    std::cout << "frames:             " << h.frames << " (a 3D+t sequence; below: frame " << k
+              << ", --frame K for another)\n";
   std::cout << describe_volume(v, path);
   return 0;
 }

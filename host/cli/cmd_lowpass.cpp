@@ -35,12 +35,12 @@ int run_lowpass(const LowpassOptions& o) {
   check_output(o.out, OutputKind::Volume);
   const auto raw = o.raw.spec();
   // The kernel's width from the header, before the samples are read.
-  check_lowpass_sigma(o.sigma, read_volume_header(o.in, raw).spacing, "--sigma", o.truncate);
+  check_lowpass_sigma(o.sigma, read_volume_header(o.in, raw, o.raw.frame).spacing, "--sigma", o.truncate);
   std::optional<progress::Stage> stage(std::in_place, "lowpass");
   Runtime rt(o.device);  // fail fast on the device before reading a large input
   const double t_device = seconds_since(t0);
   const auto t_read0 = Clock::now();
-  Volume in = read_volume(o.in, raw);
+  Volume in = read_volume(o.in, raw, o.raw.frame);
   o.non_finite.apply(in, o.in);
   const double t_read = seconds_since(t_read0);
 

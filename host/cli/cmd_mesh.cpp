@@ -35,7 +35,7 @@ int run_mesh(const MeshOptions& o) {
     throw InputError("-o " + o.out + ": expected a .ply file");
   ensure_distinct_output(o.in, o.out);
   check_output(o.out, OutputKind::Ply);
-  Volume v = read_volume(o.in, o.raw.spec());
+  Volume v = read_volume(o.in, o.raw.spec(), o.raw.frame);
   o.non_finite.apply(v, o.in);
   for (int a = 0; a < 3; ++a)
     if (v.dims[a] < 2) throw input_error(o.in, "Marching Cubes needs at least 2 samples along every axis");

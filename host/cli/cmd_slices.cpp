@@ -41,7 +41,7 @@ int run_slices(const SlicesOptions& o) {
   check_output(out, OutputKind::Png);
   std::vector<Volume> volumes;
   for (const auto& in : inputs) {
-    volumes.push_back(read_volume(in, raw.spec()));
+    volumes.push_back(read_volume(in, raw.spec(), raw.frame));
     non_finite.apply(volumes.back(), in);
   }
   std::vector<const Volume*> ptrs;
