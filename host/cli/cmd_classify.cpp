@@ -22,6 +22,7 @@
 #include "progress.hpp"
 #include "metrics.hpp"
 #include "memory_need.hpp"
+#include "bone_cue.hpp"
 #include "filter.hpp"
 #include "variational.hpp"
 #include "text.hpp"
@@ -32,6 +33,7 @@ namespace {
 struct ClassifyOptions {
   std::string in, out, device, method = "variational", iso, init, cycle = "pcg", smoother = "gs", mask = "auto";
   std::string near_field = "remove";
+  std::string bone_cue = "auto";
   double thickness = 1.0;
   double iso_fraction = AutoIsoParams().local_fraction, iso_field_sigma = AutoIsoParams().field_sigma_mm;
   std::optional<double> sigma;  // unset: 1 mm for variational, 0 (raw) for levoy
@@ -179,9 +181,11 @@ int run_levoy(const ClassifyOptions& o, Runtime& rt, const Volume& in, double is
 }
 
 int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, double iso, const std::string& iso_text,
-                    const std::string& iso_warning, const DataMask& mask, Clock::time_point t0) {
+                    const std::string& iso_warning, const DataMask& mask, Clock::time_point t0,
+                    std::shared_ptr<const std::vector<float>> bone_cue, const std::string& bone_cue_text) {
   const IntensityMap map = in.intensity_map();
   VariationalParams p = variational_params(o);
+  p.edge_weight = std::move(bone_cue);
   p.v_iso = map.to_unit(iso);
   check_normalised_iso(p.v_iso, format_iso(iso), map.describe());
   std::cerr << iso_warning;
@@ -231,7 +235,8 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
               << "  params   alpha " << p.alpha << " beta " << p.beta << " gamma " << p.gamma << " omega " << p.omega
               << " delta " << p.delta << " epsilon " << p.epsilon << " u_ind " << p.u_ind << " sigma " << p.sigma_mm
               << " mm, kappa " << p.kappa << " grad-sigma " << p.grad_sigma_mm << " mm"
-              << (p.literal() ? " (the paper's functional)" : "") << "\n";
+              << (p.literal() ? " (the paper's functional)" : "") << "\n"
+              << "  bone cue " << bone_cue_text << "\n";
     if (!p.literal())
       std::cout << "  shell    thickness " << timing.resolved.thickness_mm << " mm, profile power " << p.profile_power
                 << ", reference edge gradient " << std::setprecision(4) << timing.resolved.g_ref
@@ -260,6 +265,10 @@ int run_classify(const ClassifyOptions& o) {
   if (o.mask.empty()) throw InputError("--mask: expected FILE, auto or none");
   if (o.near_field != "remove" && o.near_field != "keep")
     throw InputError("--near-field: expected remove or keep, got '" + o.near_field + "'");
+  BoneCueMode cue_mode = BoneCueMode::Auto;
+  if (!parse_bone_cue_mode(o.bone_cue, cue_mode))
+    throw InputError("--bone-cue: expected auto, on or off, got '" + o.bone_cue + "'");
+  if (o.literal && cue_mode == BoneCueMode::Auto) cue_mode = BoneCueMode::Off;  // the paper's functional exactly
   // Every parameter before any file is read.
   const VariationalParams vp = variational ? variational_params(o) : VariationalParams{};
   if (variational) solver_params(o);
@@ -289,10 +298,12 @@ int run_classify(const ClassifyOptions& o) {
   const std::string iso_warning = given_iso ? iso_outside_data(in, *given_iso) : "";
   step.emplace("mask");
   DataMask mask = make_mask(o.mask, in);
+  int beam_axis = -1;  // the beam axis the near field was found along (-1: not looked for)
   if (o.near_field == "remove") {
     // The bright near field under the probe is an occluder, not the object
     // (docs/real-data.md, "The near field").
     const NearFieldReport nf = remove_near_field(in, mask.scanned);
+    beam_axis = nf.axis;
     std::ostringstream t;
     if (nf.found)
       t << "; near field removed: the first " << std::fixed << std::setprecision(1) << nf.depth_mm
@@ -344,9 +355,29 @@ int run_classify(const ClassifyOptions& o) {
     in = level_isovalue(in, iso_field, iso);
     std::vector<float>().swap(iso_field);  // not held through the solve (4 bytes per voxel)
   }
+  // The bone cue (host/bone_cue.hpp): on the data the classifier sees.
+  std::shared_ptr<const std::vector<float>> cue;
+  std::string cue_text = "off";
+  if (variational && cue_mode != BoneCueMode::Off) {
+    step.emplace("bone cue");
+    const std::vector<std::uint8_t>* sc = mask.scanned.empty() ? nullptr : &mask.scanned;
+    BoneCueParams bp;
+    bp.axis = beam_axis >= 0 ? beam_axis : beam_axis_of(in, sc);
+    BoneCueReport br;
+    cue = bone_cue_weights(in, sc, cue_mode, bp, &br);
+    std::ostringstream t;
+    t << std::fixed << std::setprecision(0) << (cue ? "on" : "off") << " (" << o.bone_cue << ": of the strong edges "
+      << 100 * br.falling_share << " % fall and " << 100 * br.rising_share << " % rise in brightness along the beam ("
+      << "xyz"[bp.axis] << "); auto asks falling >= " << std::setprecision(1) << bp.auto_ratio << " x rising";
+    if (cue) t << "; edges weighted on " << std::setprecision(1) << 100 * br.weighted_share << " % of the voxels";
+    t << ")";
+    cue_text = t.str();
+  } else if (variational) {
+    cue_text = o.literal && o.bone_cue == "auto" ? "off (--literal)" : "off";
+  }
   step.reset();
   return o.method == "levoy" ? run_levoy(o, rt, in, iso, iso_text, iso_warning, mask, t0)
-                             : run_variational(o, rt, in, iso, iso_text, iso_warning, mask, t0);
+                             : run_variational(o, rt, in, iso, iso_text, iso_warning, mask, t0, std::move(cue), cue_text);
 }
 
 }  // namespace
@@ -379,6 +410,13 @@ void add_classify_command(CLI::App& app, Action& action) {
                   "nonzero voxels are scanned; unscanned voxels get opacity 0 (docs/real-data.md)")
       ->capture_default_str()
       ->type_name("FILE|auto|none");
+  sub->add_option("--bone-cue", o->bone_cue,
+                  "Variational: weight the edge strength by the bone cue, a bright echo with an acoustic shadow "
+                  "beneath it along the beam (docs/numerics.md, \"The bone cue\"); auto: on when more of the data's "
+                  "strong edges fall in brightness along the beam (echo over shadow) than rise (fluid over tissue); "
+                  "off with --literal")
+      ->capture_default_str()
+      ->type_name("auto|on|off");
   sub->add_option("--near-field", o->near_field,
                   "remove: the bright layered band under the probe (skin, fat, muscle) is found from the depth "
                   "profile and held at u = 0 like unscanned voxels; keep: classify it like the rest")

@@ -1,0 +1,268 @@
+// The bone cue (host/bone_cue.hpp; docs/numerics.md, "The bone cue").
+#include "bone_cue.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "parallel.hpp"
+
+namespace softshell {
+
+namespace {
+
+// Calls f(line_start) for every line of the grid along `axis` (stride
+// `stride`), split over threads by planes.
+template <class F>
+void for_lines(const Dims3& d, int axis, int threads, F&& f) {
+  const std::size_t nx = d[0], ny = d[1], nz = d[2];
+  if (axis == 0) {
+    parallel_ranges(nz, host_threads(threads), [&](std::size_t b, std::size_t e) {
+      for (std::size_t z = b; z < e; ++z)
+        for (std::size_t y = 0; y < ny; ++y) f(nx * (y + ny * z));
+    });
+  } else if (axis == 1) {
+    parallel_ranges(nz, host_threads(threads), [&](std::size_t b, std::size_t e) {
+      for (std::size_t z = b; z < e; ++z)
+        for (std::size_t x = 0; x < nx; ++x) f(x + nx * ny * z);
+    });
+  } else {
+    parallel_ranges(ny, host_threads(threads), [&](std::size_t b, std::size_t e) {
+      for (std::size_t y = b; y < e; ++y)
+        for (std::size_t x = 0; x < nx; ++x) f(x + nx * y);
+    });
+  }
+}
+
+std::size_t stride_of(const Dims3& d, int axis) { return axis == 0 ? 1 : axis == 1 ? d[0] : d[0] * d[1]; }
+
+double quantile(std::vector<float> s, double q) {
+  if (s.empty()) return 0;
+  const std::size_t k = std::min(s.size() - 1, std::size_t(q * double(s.size() - 1) + 0.5));
+  std::nth_element(s.begin(), s.begin() + std::ptrdiff_t(k), s.end());
+  return s[k];
+}
+
+}  // namespace
+
+namespace bone_cue_detail {
+
+std::vector<float> gaussian(const Volume& v, double sigma_mm, int threads) {
+  std::vector<float> cur = v.data, next(v.data.size());
+  if (!(sigma_mm > 0)) return cur;
+  for (int a = 0; a < 3; ++a) {
+    const long n = long(v.dims[std::size_t(a)]);
+    const double s = sigma_mm / v.spacing[std::size_t(a)];
+    const long r = std::min<long>(long(std::ceil(3 * s)), std::max<long>(n - 1, 0));
+    if (r <= 0 || n < 2) continue;
+    std::vector<double> w(std::size_t(2 * r + 1));
+    double sum = 0;
+    for (long k = -r; k <= r; ++k) sum += w[std::size_t(k + r)] = std::exp(-0.5 * double(k * k) / (s * s));
+    for (double& x : w) x /= sum;
+    const std::size_t st = stride_of(v.dims, a);
+    for_lines(v.dims, a, threads, [&](std::size_t start) {
+      for (long i = 0; i < n; ++i) {
+        double acc = 0;
+        for (long k = -r; k <= r; ++k) {
+          const long j = std::clamp(i + k, 0L, n - 1);
+          acc += w[std::size_t(k + r)] * cur[start + std::size_t(j) * st];
+        }
+        next[start + std::size_t(i) * st] = float(acc);
+      }
+    });
+    std::swap(cur, next);
+  }
+  return cur;
+}
+
+}  // namespace bone_cue_detail
+
+std::vector<float> bone_cue_score(const Volume& v, const std::vector<std::uint8_t>* scanned,
+                                  const BoneCueParams& p, BoneCueReport* report) {
+  const std::size_t n = v.voxels();
+  if (scanned && scanned->size() != n) throw std::invalid_argument("bone_cue_score: mask size differs from the volume");
+  if (p.axis < 0 || p.axis > 2) throw std::invalid_argument("bone_cue_score: beam axis must be 0, 1 or 2");
+  if (!(p.below_to_mm > p.below_from_mm) || !(p.below_from_mm >= 0))
+    throw std::invalid_argument("bone_cue_score: the window below must satisfy 0 <= from < to");
+  auto in = [&](std::size_t i) { return !scanned || (*scanned)[i] != 0; };
+  const std::vector<float> vs = bone_cue_detail::gaussian(v, p.sigma_mm, p.threads);
+  // The spread: q90 - q10 of v~ over the scanned voxels (a regular subsample
+  // of at most ~1 M voxels).
+  std::vector<float> sample;
+  const std::size_t step = std::max<std::size_t>(1, n / 1000000);
+  for (std::size_t i = 0; i < n; i += step)
+    if (in(i)) sample.push_back(vs[i]);
+  const double spread = quantile(sample, 0.9) - quantile(sample, 0.1);
+  sample = {};
+  if (report) report->spread = spread;
+  std::vector<float> score(n, 0.0f);
+  if (!(spread > 0)) return score;
+  const int a = p.axis;
+  const long len = long(v.dims[std::size_t(a)]);
+  const double h = v.spacing[std::size_t(a)];
+  // The window below the voxel along the beam, in voxels.
+  const long k0 = std::max(1L, long(std::lround(p.below_from_mm / h)));
+  const long k2 = std::max(k0, long(std::lround(p.below_to_mm / h)));
+  const std::size_t st = stride_of(v.dims, a);
+  const float inv = float(1.0 / spread);
+  // The depth profile: the median of v~ over the scanned voxels of each
+  // plane across the beam (what an unshadowed voxel at that depth looks
+  // like), and its prefix sums.
+  std::vector<double> profile(std::size_t(len), 0.0);
+  {
+    const std::size_t plane = n / std::size_t(len);
+    parallel_ranges(std::size_t(len), host_threads(p.threads), [&](std::size_t b, std::size_t e) {
+      std::vector<float> vals;
+      for (std::size_t k = b; k < e; ++k) {
+        vals.clear();
+        for (std::size_t j = 0; j < plane; ++j) {
+          // voxel j of plane k: the other two axes in order
+          std::size_t q;
+          if (a == 0) q = k + v.dims[0] * j;
+          else if (a == 1) q = (j % v.dims[0]) + v.dims[0] * (k + v.dims[1] * (j / v.dims[0]));
+          else q = j + plane * k;
+          if (in(q)) vals.push_back(vs[q]);
+        }
+        profile[k] = vals.empty() ? 0.0 : quantile(vals, 0.5);
+      }
+    });
+  }
+  for_lines(v.dims, a, p.threads, [&](std::size_t start) {
+    // Prefix sums of v~ and of the scanned count along the line.
+    std::vector<double> sum(std::size_t(len) + 1, 0.0);
+    std::vector<long> cnt(std::size_t(len) + 1, 0);
+    for (long i = 0; i < len; ++i) {
+      const std::size_t q = start + std::size_t(i) * st;
+      const bool s = in(q);
+      sum[std::size_t(i) + 1] = sum[std::size_t(i)] + (s ? vs[q] : 0.0);
+      cnt[std::size_t(i) + 1] = cnt[std::size_t(i)] + (s ? 1 : 0);
+    }
+    for (long i = 0; i < len; ++i) {
+      const std::size_t q = start + std::size_t(i) * st;
+      if (!in(q)) continue;
+      const long lo = std::min(len, i + k0), hi = std::min(len, i + k2 + 1);
+      const long c = cnt[std::size_t(hi)] - cnt[std::size_t(lo)];
+      if (2 * c < k2 - k0 + 1) continue;  // too little of the window is data
+      const double below = (sum[std::size_t(hi)] - sum[std::size_t(lo)]) / double(c);
+      // A bright voxel over a shadow: brighter than the mean of what lies
+      // below it along the beam, and (depth_term) brighter than its depth
+      // usually is (a bright layer under the probe spans the whole plane).
+      double sc = vs[q] - below;
+      if (p.depth_term) sc = std::min(sc, vs[q] - profile[std::size_t(i)]);
+      score[q] = float(sc) * inv;
+    }
+  });
+  return score;
+}
+
+float bone_cue_weight_of(float s, const BoneCueParams& p) {
+  const double t = std::clamp((double(s) - p.score_lo) / (p.score_hi - p.score_lo), 0.0, 1.0);
+  return float(p.floor + (1.0 - p.floor) * t * t * (3.0 - 2.0 * t));
+}
+
+std::vector<float> bone_cue_weight(const Volume& v, const std::vector<float>& score, const BoneCueParams& p) {
+  if (score.size() != v.voxels()) throw std::invalid_argument("bone_cue_weight: score size differs from the volume");
+  std::vector<float> w0(score.size()), w(score.size());
+  parallel_ranges(score.size(), host_threads(p.threads), [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) w0[i] = bone_cue_weight_of(score[i], p);
+  });
+  // The shell lies on the echo's front flank, above its crest: each voxel
+  // takes the largest weight within reach_mm below it along the beam.
+  const int a = p.axis;
+  const long len = long(v.dims[std::size_t(a)]);
+  const long r = std::max(0L, long(std::lround(p.reach_mm / v.spacing[std::size_t(a)])));
+  const std::size_t st = stride_of(v.dims, a);
+  for_lines(v.dims, a, p.threads, [&](std::size_t start) {
+    for (long i = 0; i < len; ++i) {
+      float m = 0;
+      for (long k = i, e = std::min(len - 1, i + r); k <= e; ++k) m = std::max(m, w0[start + std::size_t(k) * st]);
+      w[start + std::size_t(i) * st] = m;
+    }
+  });
+  return w;
+}
+
+bool bone_cue_auto(const Volume& v, const std::vector<std::uint8_t>* scanned, const BoneCueParams& p,
+                   BoneCueReport* report) {
+  const std::size_t n = v.voxels();
+  const std::vector<float> vs = bone_cue_detail::gaussian(v, p.sigma_mm, p.threads);
+  const std::size_t nx = v.dims[0], ny = v.dims[1], nz = v.dims[2];
+  // |grad v~|^2 per mm, and its component along the beam, at interior
+  // scanned voxels whose six neighbours are scanned (-1 elsewhere).
+  std::vector<float> g2(n, -1.0f), gb(n, 0.0f);
+  const double ih[3] = {0.5 / v.spacing[0], 0.5 / v.spacing[1], 0.5 / v.spacing[2]};
+  const std::size_t sy = nx, sz = nx * ny;
+  auto in = [&](std::size_t i) { return !scanned || (*scanned)[i] != 0; };
+  if (nx >= 3 && ny >= 3 && nz >= 3)
+    parallel_ranges(nz - 2, host_threads(p.threads), [&](std::size_t b, std::size_t e) {
+      for (std::size_t z = b + 1; z < e + 1; ++z)
+        for (std::size_t y = 1; y + 1 < ny; ++y)
+          for (std::size_t x = 1; x + 1 < nx; ++x) {
+            const std::size_t i = x + sy * y + sz * z;
+            if (!in(i) || !in(i - 1) || !in(i + 1) || !in(i - sy) || !in(i + sy) || !in(i - sz) || !in(i + sz))
+              continue;
+            const double g[3] = {(vs[i + 1] - vs[i - 1]) * ih[0], (vs[i + sy] - vs[i - sy]) * ih[1],
+                                 (vs[i + sz] - vs[i - sz]) * ih[2]};
+            g2[i] = float(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+            gb[i] = float(g[p.axis]);
+          }
+    });
+  std::vector<float> usable;
+  usable.reserve(n / 2);
+  for (float x : g2)
+    if (x >= 0) usable.push_back(x);
+  std::size_t edges = 0, falling = 0, rising = 0;
+  if (!usable.empty()) {
+    const double cut = quantile(std::move(usable), 1.0 - p.auto_edge_share);
+    const double c2 = p.auto_beam_cos * p.auto_beam_cos;
+    for (std::size_t i = 0; i < n; ++i)
+      if (g2[i] >= 0 && g2[i] >= cut && cut > 0) {
+        ++edges;
+        // along the beam within acos(auto_beam_cos) of it: brightness
+        // falling with depth (a bright echo over a shadow) or rising (a dark
+        // gap -- fluid, a shadow's end -- over tissue)
+        if (double(gb[i]) * gb[i] >= c2 * g2[i]) (gb[i] < 0 ? falling : rising) += 1;
+      }
+  }
+  const double fall = edges ? double(falling) / double(edges) : 0.0, rise = edges ? double(rising) / double(edges) : 0.0;
+  const bool on = edges > 0 && fall > 0 && fall >= p.auto_ratio * rise;
+  if (report) {
+    report->falling_share = fall;
+    report->rising_share = rise;
+    report->edge_voxels = edges;
+    report->on = on;
+  }
+  return on;
+}
+
+bool parse_bone_cue_mode(const std::string& name, BoneCueMode& mode) {
+  if (name == "off") mode = BoneCueMode::Off;
+  else if (name == "on") mode = BoneCueMode::On;
+  else if (name == "auto") mode = BoneCueMode::Auto;
+  else return false;
+  return true;
+}
+
+std::shared_ptr<const std::vector<float>> bone_cue_weights(const Volume& v, const std::vector<std::uint8_t>* scanned,
+                                                           BoneCueMode mode, const BoneCueParams& p,
+                                                           BoneCueReport* report) {
+  BoneCueReport r;
+  std::shared_ptr<const std::vector<float>> out;
+  if (mode != BoneCueMode::Off) {
+    const bool on = bone_cue_auto(v, scanned, p, &r);
+    r.on = mode == BoneCueMode::On || on;
+    if (r.on) {
+      const std::vector<float> score = bone_cue_score(v, scanned, p, &r);
+      auto w = std::make_shared<std::vector<float>>(bone_cue_weight(v, score, p));
+      std::size_t scanned_n = 0, weighted = 0;
+      for (std::size_t i = 0; i < w->size(); ++i)
+        if (!scanned || (*scanned)[i]) ++scanned_n, weighted += (*w)[i] >= 0.5f;
+      r.weighted_share = scanned_n ? double(weighted) / double(scanned_n) : 0.0;
+      out = std::move(w);
+    }
+  }
+  if (report) *report = r;
+  return out;
+}
+
+}  // namespace softshell
