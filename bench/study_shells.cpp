@@ -181,6 +181,7 @@ int main(int argc, char** argv) {
         else if (k == "floor") cue.floor = x;
         else if (k == "reach") cue.reach_mm = x;
         else if (k == "depth") cue.depth_term = x != 0;
+        else if (k == "lateral") cue.lateral_mm = x;
         else if (k == "ratio") cue.auto_ratio = x;
         else if (k == "beam_cos") cue.auto_beam_cos = x;
         else if (k == "edge_share") cue.auto_edge_share = x;

@@ -105,29 +105,62 @@ std::vector<float> bone_cue_score(const Volume& v, const std::vector<std::uint8_
   const long k2 = std::max(k0, long(std::lround(p.below_to_mm / h)));
   const std::size_t st = stride_of(v.dims, a);
   const float inv = float(1.0 / spread);
-  // The depth profile: the median of v~ over the scanned voxels of each
-  // plane across the beam (what an unshadowed voxel at that depth looks
-  // like), and its prefix sums.
-  std::vector<double> profile(std::size_t(len), 0.0);
-  {
-    const std::size_t plane = n / std::size_t(len);
-    parallel_ranges(std::size_t(len), host_threads(p.threads), [&](std::size_t b, std::size_t e) {
-      std::vector<float> vals;
-      for (std::size_t k = b; k < e; ++k) {
-        vals.clear();
-        for (std::size_t j = 0; j < plane; ++j) {
-          // voxel j of plane k: the other two axes in order
-          std::size_t q;
-          if (a == 0) q = k + v.dims[0] * j;
-          else if (a == 1) q = (j % v.dims[0]) + v.dims[0] * (k + v.dims[1] * (j / v.dims[0]));
-          else q = j + plane * k;
-          if (in(q)) vals.push_back(vs[q]);
-        }
-        profile[k] = vals.empty() ? 0.0 : quantile(vals, 0.5);
+  // The surroundings at the same depth: the mean of v~ over the scanned
+  // voxels of a square of half-width lateral_mm across the beam (a
+  // summed-area table per plane). A bright layer under the probe, flat or
+  // curved, is as bright as its surroundings; a bone echo is not.
+  std::vector<float> around(p.depth_term ? n : 0);
+  if (p.depth_term) {
+    const int u = a == 0 ? 1 : 0, w = a == 2 ? 1 : 2;  // the two lateral axes
+    const long nu = long(v.dims[std::size_t(u)]), nw = long(v.dims[std::size_t(w)]);
+    const std::size_t su = stride_of(v.dims, u), sw = stride_of(v.dims, w);
+    const long ru = std::max(1L, long(std::lround(p.lateral_mm / v.spacing[std::size_t(u)])));
+    const long rw = std::max(1L, long(std::lround(p.lateral_mm / v.spacing[std::size_t(w)])));
+    parallel_ranges(std::size_t(len), host_threads(p.threads), [&](std::size_t b0, std::size_t e0) {
+      std::vector<double> sat(std::size_t((nu + 1) * (nw + 1))), cat(sat.size());
+      for (std::size_t k = b0; k < e0; ++k) {
+        const std::size_t base = k * st;
+        for (long j = 0; j < nw; ++j)
+          for (long i = 0; i < nu; ++i) {
+            const std::size_t q = base + std::size_t(i) * su + std::size_t(j) * sw;
+            const bool s = in(q);
+            const std::size_t c = std::size_t((j + 1) * (nu + 1) + i + 1);
+            sat[c] = (s ? vs[q] : 0.0) + sat[c - 1] + sat[c - std::size_t(nu + 1)] - sat[c - std::size_t(nu + 2)];
+            cat[c] = (s ? 1.0 : 0.0) + cat[c - 1] + cat[c - std::size_t(nu + 1)] - cat[c - std::size_t(nu + 2)];
+          }
+        for (long j = 0; j < nw; ++j)
+          for (long i = 0; i < nu; ++i) {
+            const long i0 = std::max(0L, i - ru), i1 = std::min(nu, i + ru + 1);
+            const long j0 = std::max(0L, j - rw), j1 = std::min(nw, j + rw + 1);
+            auto box = [&](const std::vector<double>& t) {
+              return t[std::size_t(j1 * (nu + 1) + i1)] - t[std::size_t(j0 * (nu + 1) + i1)] -
+                     t[std::size_t(j1 * (nu + 1) + i0)] + t[std::size_t(j0 * (nu + 1) + i0)];
+            };
+            const double c = box(cat);
+            around[base + std::size_t(i) * su + std::size_t(j) * sw] = c > 0 ? float(box(sat) / c) : 0.0f;
+          }
       }
     });
   }
-  for_lines(v.dims, a, p.threads, [&](std::size_t start) {
+  const std::size_t lines = n / std::size_t(len);
+  std::vector<std::size_t> line_start(lines);
+  {
+    std::size_t k = 0;
+    const std::size_t nx = v.dims[0], ny = v.dims[1], nz = v.dims[2];
+    if (a == 0) {
+      for (std::size_t z = 0; z < nz; ++z)
+        for (std::size_t y = 0; y < ny; ++y) line_start[k++] = nx * (y + ny * z);
+    } else if (a == 1) {
+      for (std::size_t z = 0; z < nz; ++z)
+        for (std::size_t x = 0; x < nx; ++x) line_start[k++] = x + nx * ny * z;
+    } else {
+      for (std::size_t y = 0; y < ny; ++y)
+        for (std::size_t x = 0; x < nx; ++x) line_start[k++] = x + nx * y;
+    }
+  }
+  parallel_ranges(lines, host_threads(p.threads), [&](std::size_t b0, std::size_t e0) {
+   for (std::size_t l = b0; l < e0; ++l) {
+    const std::size_t start = line_start[l];
     // Prefix sums of v~ and of the scanned count along the line.
     std::vector<double> sum(std::size_t(len) + 1, 0.0);
     std::vector<long> cnt(std::size_t(len) + 1, 0);
@@ -145,12 +178,14 @@ std::vector<float> bone_cue_score(const Volume& v, const std::vector<std::uint8_
       if (2 * c < k2 - k0 + 1) continue;  // too little of the window is data
       const double below = (sum[std::size_t(hi)] - sum[std::size_t(lo)]) / double(c);
       // A bright voxel over a shadow: brighter than the mean of what lies
-      // below it along the beam, and (depth_term) brighter than its depth
-      // usually is (a bright layer under the probe spans the whole plane).
+      // below it along the beam, and (depth_term) brighter than its
+      // surroundings at the same depth (a bright layer under the probe is
+      // not).
       double sc = vs[q] - below;
-      if (p.depth_term) sc = std::min(sc, vs[q] - profile[std::size_t(i)]);
+      if (p.depth_term) sc = std::min(sc, double(vs[q]) - around[q]);
       score[q] = float(sc) * inv;
     }
+   }
   });
   return score;
 }

@@ -23,15 +23,17 @@ struct BoneCueParams {
   // The window below the voxel along the beam, from ... to ... mm: the
   // voxel is compared with the mean of v~ there.
   double below_from_mm = 1.5;
-  double below_to_mm = 6.0;
-  // Also compare the voxel with the median of v~ at its depth (the plane
-  // across the beam): the score is the smaller of the two differences.
+  double below_to_mm = 10.0;
+  // Also compare the voxel with its surroundings at the same depth: the
+  // mean of v~ over a square of half-width lateral_mm across the beam; the
+  // score is the smaller of the two differences.
   bool depth_term = true;
+  double lateral_mm = 10.0;
   // The weight: floor below score_lo, 1 above score_hi, a smooth step
   // between (scores in units of the spread, the data's q90 - q10).
-  double score_lo = 0.15, score_hi = 0.45;
+  double score_lo = 0.12, score_hi = 0.4;
   double floor = 0.0;
-  double reach_mm = 2.0;         // the weight reaches this far up the beam from a scored voxel
+  double reach_mm = 3.0;         // the weight reaches this far up the beam from a scored voxel
   // The automatic rule (bone_cue_auto): among the strong-edge voxels (the
   // top auto_edge_share of |grad v~|), those whose gradient lies within
   // acos(auto_beam_cos) of the beam are counted as falling (brighter above:
@@ -39,7 +41,7 @@ struct BoneCueParams {
   // cue is on when falling >= auto_ratio x rising.
   double auto_edge_share = 0.03;
   double auto_beam_cos = 0.5;
-  double auto_ratio = 1.0;
+  double auto_ratio = 2.0;
   int threads = 0;               // host threads (0: every core); the result is the same for any count
 };
 
