@@ -77,15 +77,34 @@ std::vector<float> gaussian(const Volume& v, double sigma_mm, int threads) {
 
 }  // namespace bone_cue_detail
 
+namespace {
+std::vector<float> score_of(const Volume& v, const std::vector<std::uint8_t>* scanned, const BoneCueParams& p,
+                            BoneCueReport* report, const std::vector<float>& vs);
+bool auto_of(const Volume& v, const std::vector<std::uint8_t>* scanned, const BoneCueParams& p,
+             BoneCueReport* report, const std::vector<float>& vs);
+}  // namespace
+
 std::vector<float> bone_cue_score(const Volume& v, const std::vector<std::uint8_t>* scanned,
                                   const BoneCueParams& p, BoneCueReport* report) {
+  return score_of(v, scanned, p, report, bone_cue_detail::gaussian(v, p.sigma_mm, p.threads));
+}
+
+bool bone_cue_auto(const Volume& v, const std::vector<std::uint8_t>* scanned, const BoneCueParams& p,
+                   BoneCueReport* report) {
+  if (scanned && scanned->size() != v.voxels()) throw std::invalid_argument("bone_cue_auto: mask size differs from the volume");
+  if (p.axis < 0 || p.axis > 2) throw std::invalid_argument("bone_cue_auto: beam axis must be 0, 1 or 2");
+  return auto_of(v, scanned, p, report, bone_cue_detail::gaussian(v, p.sigma_mm, p.threads));
+}
+
+namespace {
+std::vector<float> score_of(const Volume& v, const std::vector<std::uint8_t>* scanned, const BoneCueParams& p,
+                            BoneCueReport* report, const std::vector<float>& vs) {
   const std::size_t n = v.voxels();
   if (scanned && scanned->size() != n) throw std::invalid_argument("bone_cue_score: mask size differs from the volume");
   if (p.axis < 0 || p.axis > 2) throw std::invalid_argument("bone_cue_score: beam axis must be 0, 1 or 2");
   if (!(p.below_to_mm > p.below_from_mm) || !(p.below_from_mm >= 0))
     throw std::invalid_argument("bone_cue_score: the window below must satisfy 0 <= from < to");
   auto in = [&](std::size_t i) { return !scanned || (*scanned)[i] != 0; };
-  const std::vector<float> vs = bone_cue_detail::gaussian(v, p.sigma_mm, p.threads);
   // The spread: q90 - q10 of v~ over the scanned voxels (a regular subsample
   // of at most ~1 M voxels).
   std::vector<float> sample;
@@ -189,6 +208,7 @@ std::vector<float> bone_cue_score(const Volume& v, const std::vector<std::uint8_
   });
   return score;
 }
+}  // namespace
 
 float bone_cue_weight_of(float s, const BoneCueParams& p) {
   const double t = std::clamp((double(s) - p.score_lo) / (p.score_hi - p.score_lo), 0.0, 1.0);
@@ -217,10 +237,10 @@ std::vector<float> bone_cue_weight(const Volume& v, const std::vector<float>& sc
   return w;
 }
 
-bool bone_cue_auto(const Volume& v, const std::vector<std::uint8_t>* scanned, const BoneCueParams& p,
-                   BoneCueReport* report) {
+namespace {
+bool auto_of(const Volume& v, const std::vector<std::uint8_t>* scanned, const BoneCueParams& p,
+             BoneCueReport* report, const std::vector<float>& vs) {
   const std::size_t n = v.voxels();
-  const std::vector<float> vs = bone_cue_detail::gaussian(v, p.sigma_mm, p.threads);
   const std::size_t nx = v.dims[0], ny = v.dims[1], nz = v.dims[2];
   // |grad v~|^2 per mm, and its component along the beam, at interior
   // scanned voxels whose six neighbours are scanned (-1 elsewhere).
@@ -229,10 +249,12 @@ bool bone_cue_auto(const Volume& v, const std::vector<std::uint8_t>* scanned, co
   const std::size_t sy = nx, sz = nx * ny;
   auto in = [&](std::size_t i) { return !scanned || (*scanned)[i] != 0; };
   if (nx >= 3 && ny >= 3 && nz >= 3)
+    // (statistics: every other voxel along each axis is enough)
     parallel_ranges(nz - 2, host_threads(p.threads), [&](std::size_t b, std::size_t e) {
-      for (std::size_t z = b + 1; z < e + 1; ++z)
-        for (std::size_t y = 1; y + 1 < ny; ++y)
-          for (std::size_t x = 1; x + 1 < nx; ++x) {
+      for (std::size_t z = b + 1; z < e + 1; ++z) {
+        if ((z & 1) == 0) continue;
+        for (std::size_t y = 1; y + 1 < ny; y += 2)
+          for (std::size_t x = 1; x + 1 < nx; x += 2) {
             const std::size_t i = x + sy * y + sz * z;
             if (!in(i) || !in(i - 1) || !in(i + 1) || !in(i - sy) || !in(i + sy) || !in(i - sz) || !in(i + sz))
               continue;
@@ -241,6 +263,7 @@ bool bone_cue_auto(const Volume& v, const std::vector<std::uint8_t>* scanned, co
             g2[i] = float(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
             gb[i] = float(g[p.axis]);
           }
+      }
     });
   std::vector<float> usable;
   usable.reserve(n / 2);
@@ -270,6 +293,8 @@ bool bone_cue_auto(const Volume& v, const std::vector<std::uint8_t>* scanned, co
   return on;
 }
 
+}  // namespace
+
 bool parse_bone_cue_mode(const std::string& name, BoneCueMode& mode) {
   if (name == "off") mode = BoneCueMode::Off;
   else if (name == "on") mode = BoneCueMode::On;
@@ -284,10 +309,14 @@ std::shared_ptr<const std::vector<float>> bone_cue_weights(const Volume& v, cons
   BoneCueReport r;
   std::shared_ptr<const std::vector<float>> out;
   if (mode != BoneCueMode::Off) {
-    const bool on = bone_cue_auto(v, scanned, p, &r);
+    if (scanned && scanned->size() != v.voxels())
+      throw std::invalid_argument("bone_cue_weights: mask size differs from the volume");
+    if (p.axis < 0 || p.axis > 2) throw std::invalid_argument("bone_cue_weights: beam axis must be 0, 1 or 2");
+    const std::vector<float> vs = bone_cue_detail::gaussian(v, p.sigma_mm, p.threads);  // one lowpass for both
+    const bool on = auto_of(v, scanned, p, &r, vs);
     r.on = mode == BoneCueMode::On || on;
     if (r.on) {
-      const std::vector<float> score = bone_cue_score(v, scanned, p, &r);
+      const std::vector<float> score = score_of(v, scanned, p, &r, vs);
       auto w = std::make_shared<std::vector<float>>(bone_cue_weight(v, score, p));
       std::size_t scanned_n = 0, weighted = 0;
       for (std::size_t i = 0; i < w->size(); ++i)

@@ -68,7 +68,8 @@ std::vector<float> bone_cue_weight(const Volume& v, const std::vector<float>& sc
 
 // The automatic rule: among the strong-edge voxels of the data (|grad v~|,
 // central differences per mm, in the top auto_edge_share of the scanned
-// voxels whose six neighbours are scanned), the shares whose gradient points
+// voxels whose six neighbours are scanned; voxels with odd indices only, a
+// subsample of one in eight), the shares whose gradient points
 // up the beam (brightness falling with depth: a bright echo over a shadow,
 // what bone looks like) and down it (rising: fluid over tissue, what a face
 // looks like); on when falling >= auto_ratio x rising. Fills report.

@@ -1,6 +1,6 @@
 // The bone cue (host/bone_cue.hpp): the score and the weight against a
 // brute-force reference written independently here (a direct 3D Gaussian,
-// direct window means and per-plane medians by sorting), the score's
+// direct window and box means), the score's
 // behaviour on a synthetic echo over a shadow, the automatic rule, and the
 // classifier's densities with an edge weight.
 #include <algorithm>
@@ -60,19 +60,20 @@ std::vector<double> ref_score(const Volume& v, const BoneCueParams& p, const std
     if (in(i)) scanned.push_back(vs[i]);
   const double spread = ref_quantile(scanned, 0.9) - ref_quantile(scanned, 0.1);
   const std::size_t nx = v.dims[0], ny = v.dims[1], nz = v.dims[2];
-  // depth below each column's first scanned voxel
-  std::vector<long> first(nx * ny, -1);
-  std::vector<std::vector<double>> by_depth(nz);
-  for (std::size_t y = 0; y < ny; ++y)
-    for (std::size_t x = 0; x < nx; ++x)
-      for (std::size_t z = 0; z < nz; ++z)
-        if (in(v.index(x, y, z))) {
-          if (first[x + nx * y] < 0) first[x + nx * y] = long(z);
-          by_depth[z - std::size_t(first[x + nx * y])].push_back(vs[v.index(x, y, z)]);
-        }
-  std::vector<double> median(nz, 0.0);
-  for (std::size_t d = 0; d < nz; ++d)
-    if (!by_depth[d].empty()) median[d] = ref_quantile(by_depth[d], 0.5);
+  // the surroundings: the mean over the scanned voxels of the square of
+  // half-width lateral_mm across the beam, same z
+  const long rx = std::max(1L, std::lround(p.lateral_mm / v.spacing[0]));
+  const long ry = std::max(1L, std::lround(p.lateral_mm / v.spacing[1]));
+  auto around = [&](std::size_t x, std::size_t y, std::size_t z) {
+    double sum = 0;
+    long c = 0;
+    for (long yy = std::max(0L, long(y) - ry); yy <= std::min(long(ny) - 1, long(y) + ry); ++yy)
+      for (long xx = std::max(0L, long(x) - rx); xx <= std::min(long(nx) - 1, long(x) + rx); ++xx) {
+        const std::size_t i = v.index(std::size_t(xx), std::size_t(yy), z);
+        if (in(i)) sum += vs[i], ++c;
+      }
+    return c ? sum / double(c) : 0.0;
+  };
   const long k0 = std::max(1L, std::lround(p.below_from_mm / v.spacing[2]));
   const long k1 = std::max(k0, std::lround(p.below_to_mm / v.spacing[2]));
   std::vector<double> out(v.voxels(), 0.0);
@@ -88,7 +89,7 @@ std::vector<double> ref_score(const Volume& v, const BoneCueParams& p, const std
         if (2 * c < k1 - k0 + 1) continue;
         const double here = vs[v.index(x, y, z)];
         double s = here - sum / double(c);
-        if (p.depth_term) s = std::min(s, here - median[z - std::size_t(first[x + nx * y])]);
+        if (p.depth_term) s = std::min(s, here - around(x, y, z));
         out[v.index(x, y, z)] = s / spread;
       }
   return out;

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "auto_iso.hpp"
+#include "bone_cue.hpp"
 #include "error.hpp"
 #include "io.hpp"
 #include "filter.hpp"
@@ -44,7 +45,7 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   MaskReport mr;
   in.mask = scanned_mask(v, MaskParams{}, &mr);
   if (mr.unscanned == 0) in.mask.clear();
-  remove_near_field(v, in.mask);  // the near field is an occluder (docs/real-data.md)
+  const NearFieldReport nf = remove_near_field(v, in.mask);  // the near field is an occluder (docs/real-data.md)
   const std::vector<std::uint8_t>* mask = in.mask.empty() ? nullptr : &in.mask;
   Volume filled = mask ? fill_unscanned(v, in.mask) : Volume();
   if (iso_text == "auto") {
@@ -61,6 +62,11 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   }
   in.params.v_iso = in.data.intensity_map().to_unit(in.iso);
   in.params.sigma_mm = 1.0;
+  // The bone cue as classify's default (--bone-cue auto; docs/numerics.md).
+  BoneCueParams bp;
+  bp.axis = nf.axis;
+  BoneCueReport br;
+  in.params.edge_weight = bone_cue_weights(in.data, mask, BoneCueMode::Auto, bp, &br);
   in.u = reclassify(rt, in, in.params, nullptr, &in.report);  // keeps in.classifier
   in.classified = true;
   std::ostringstream note;
@@ -68,7 +74,7 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
        << std::setprecision(4) << in.iso << (iso_text == "auto" ? " (auto)" : "") << ", " << in.report.cycles
        << " iterations, relative residual " << std::scientific << std::setprecision(2)
        << (in.report.residuals.empty() ? 0.0 : in.report.residuals.back())
-       << (in.report.converged ? "" : " (NOT converged)");
+       << (in.report.converged ? "" : " (NOT converged)") << ", bone cue " << (br.on ? "on" : "off");
   in.note = note.str();
   return in;
 }
