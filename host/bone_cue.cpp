@@ -60,14 +60,18 @@ std::vector<float> gaussian(const Volume& v, double sigma_mm, int threads) {
     for (long k = -r; k <= r; ++k) sum += w[std::size_t(k + r)] = std::exp(-0.5 * double(k * k) / (s * s));
     for (double& x : w) x /= sum;
     const std::size_t st = stride_of(v.dims, a);
+    std::vector<float> wf(w.begin(), w.end());
     for_lines(v.dims, a, threads, [&](std::size_t start) {
+      // The line, padded by its end samples (the clamped border), in a
+      // contiguous buffer: the taps then run without a branch.
+      std::vector<float> line(std::size_t(n + 2 * r));
+      for (long i = 0; i < n + 2 * r; ++i)
+        line[std::size_t(i)] = cur[start + std::size_t(std::clamp(i - r, 0L, n - 1)) * st];
       for (long i = 0; i < n; ++i) {
-        double acc = 0;
-        for (long k = -r; k <= r; ++k) {
-          const long j = std::clamp(i + k, 0L, n - 1);
-          acc += w[std::size_t(k + r)] * cur[start + std::size_t(j) * st];
-        }
-        next[start + std::size_t(i) * st] = float(acc);
+        const float* x = line.data() + i;
+        float acc = 0;
+        for (long k = 0; k <= 2 * r; ++k) acc += wf[std::size_t(k)] * x[k];
+        next[start + std::size_t(i) * st] = acc;
       }
     });
     std::swap(cur, next);
