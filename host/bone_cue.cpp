@@ -244,17 +244,19 @@ std::vector<float> bone_cue_weight(const Volume& v, const std::vector<float>& sc
 namespace {
 bool auto_of(const Volume& v, const std::vector<std::uint8_t>* scanned, const BoneCueParams& p,
              BoneCueReport* report, const std::vector<float>& vs) {
-  const std::size_t n = v.voxels();
   const std::size_t nx = v.dims[0], ny = v.dims[1], nz = v.dims[2];
-  // |grad v~|^2 per mm, and its component along the beam, at interior
-  // scanned voxels whose six neighbours are scanned (-1 elsewhere).
-  std::vector<float> g2(n, -1.0f), gb(n, 0.0f);
+  // |grad v~|^2 per mm and its component along the beam at the interior
+  // scanned voxels whose six neighbours are scanned, one in eight (odd
+  // indices: statistics need no more), per range of planes in order.
   const double ih[3] = {0.5 / v.spacing[0], 0.5 / v.spacing[1], 0.5 / v.spacing[2]};
   const std::size_t sy = nx, sz = nx * ny;
   auto in = [&](std::size_t i) { return !scanned || (*scanned)[i] != 0; };
+  const int parts = nz >= 3 ? range_count(nz - 2, host_threads(p.threads)) : 1;
+  std::vector<std::vector<float>> g2s(static_cast<std::size_t>(parts)), gbs(static_cast<std::size_t>(parts));
   if (nx >= 3 && ny >= 3 && nz >= 3)
-    // (statistics: every other voxel along each axis is enough)
-    parallel_ranges(nz - 2, host_threads(p.threads), [&](std::size_t b, std::size_t e) {
+    parallel_ranges_indexed(nz - 2, host_threads(p.threads), [&](int k, std::size_t b, std::size_t e) {
+      std::vector<float>& g2 = g2s[std::size_t(k)];
+      std::vector<float>& gb = gbs[std::size_t(k)];
       for (std::size_t z = b + 1; z < e + 1; ++z) {
         if ((z & 1) == 0) continue;
         for (std::size_t y = 1; y + 1 < ny; y += 2)
@@ -264,21 +266,23 @@ bool auto_of(const Volume& v, const std::vector<std::uint8_t>* scanned, const Bo
               continue;
             const double g[3] = {(vs[i + 1] - vs[i - 1]) * ih[0], (vs[i + sy] - vs[i - sy]) * ih[1],
                                  (vs[i + sz] - vs[i - sz]) * ih[2]};
-            g2[i] = float(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
-            gb[i] = float(g[p.axis]);
+            g2.push_back(float(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]));
+            gb.push_back(float(g[p.axis]));
           }
       }
     });
-  std::vector<float> usable;
-  usable.reserve(n / 2);
-  for (float x : g2)
-    if (x >= 0) usable.push_back(x);
+  std::vector<float> g2, gb;
+  for (int k = 0; k < parts; ++k) {
+    g2.insert(g2.end(), g2s[std::size_t(k)].begin(), g2s[std::size_t(k)].end());
+    gb.insert(gb.end(), gbs[std::size_t(k)].begin(), gbs[std::size_t(k)].end());
+    g2s[std::size_t(k)] = {}, gbs[std::size_t(k)] = {};
+  }
   std::size_t edges = 0, falling = 0, rising = 0;
-  if (!usable.empty()) {
-    const double cut = quantile(std::move(usable), 1.0 - p.auto_edge_share);
+  if (!g2.empty()) {
+    const double cut = quantile(g2, 1.0 - p.auto_edge_share);
     const double c2 = p.auto_beam_cos * p.auto_beam_cos;
-    for (std::size_t i = 0; i < n; ++i)
-      if (g2[i] >= 0 && g2[i] >= cut && cut > 0) {
+    for (std::size_t i = 0; i < g2.size(); ++i)
+      if (g2[i] >= cut && cut > 0) {
         ++edges;
         // along the beam within acos(auto_beam_cos) of it: brightness
         // falling with depth (a bright echo over a shadow) or rising (a dark
