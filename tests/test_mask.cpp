@@ -748,6 +748,8 @@ TEST_F(CliMask, BadMaskOrIsoIsAOneLineError) {
   expect_one_line_error(run({"classify", file("flat.nrrd"), "--iso", "auto", "-o", file("u.nrrd")}), {"constant"});
   expect_one_line_error(run({"classify", in, "--iso", "100", "--near-field", "cut", "-o", file("u.nrrd")}),
                         {"--near-field", "remove or keep"});
+  expect_one_line_error(run({"classify", in, "--iso", "100", "--bone-cue", "maybe", "-o", file("u.nrrd")}),
+                        {"--bone-cue", "auto, on or off", "maybe"});
   expect_one_line_error(run({"classify", in, "--iso", "100", "--shell", "-1", "-o", file("u.nrrd")}), {"--shell"});
   expect_one_line_error(run({"classify", in, "--iso", "100", "--sharpen", "11", "-o", file("u.nrrd")}), {"--sharpen"});
   EXPECT_FALSE(fs::exists(file("u.nrrd")));

@@ -412,9 +412,9 @@ void add_classify_command(CLI::App& app, Action& action) {
       ->type_name("FILE|auto|none");
   sub->add_option("--bone-cue", o->bone_cue,
                   "Variational: weight the edge strength by the bone cue, a bright echo with an acoustic shadow "
-                  "beneath it along the beam (docs/numerics.md, \"The bone cue\"); auto: on when more of the data's "
-                  "strong edges fall in brightness along the beam (echo over shadow) than rise (fluid over tissue); "
-                  "off with --literal")
+                  "beneath it along the beam (docs/numerics.md, \"The bone cue\"); auto: on when at least twice as "
+                  "many of the data's strong edges fall in brightness along the beam (echo over shadow) as rise "
+                  "(fluid over tissue); off with --literal")
       ->capture_default_str()
       ->type_name("auto|on|off");
   sub->add_option("--near-field", o->near_field,
