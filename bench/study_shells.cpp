@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "auto_iso.hpp"
+#include "bone_cue.hpp"
 #include "error.hpp"
 #include "levoy.hpp"
 #include "mask.hpp"
@@ -75,7 +76,9 @@ Volume median3(const Volume& v) {
 // As `softshell classify IN --iso auto -o U` does (host/cli/cmd_classify.cpp):
 // the automatic mask, the near field removed, the local isovalue field
 // levelled out, the defaults.
-Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveReport* rep) {
+// The bone cue as `--bone-cue MODE` (host/bone_cue.hpp), with `cue`'s constants.
+Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveReport* rep, BoneCueMode mode,
+                        BoneCueParams cue, BoneCueReport* cue_report) {
   MaskReport mr;
   std::vector<std::uint8_t> mask = scanned_mask(in, MaskParams{}, &mr);
   if (mr.unscanned == 0) mask.clear();
@@ -93,6 +96,8 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   VariationalParams p;
   scale_length_scales(p, scale);
   p.v_iso = lv.data.intensity_map().to_unit(lv.iso);
+  cue.axis = nf.axis;
+  p.edge_weight = bone_cue_weights(lv.data, mp, mode, cue, cue_report);
   *iso_out = lv.iso;
   return classify_variational(rt, lv.data, p, SolverParams{}, rep, nullptr, mp);
 }
@@ -100,6 +105,7 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
 Metrics score(const Volume& u, const Case& c, double tol_mm) {
   MetricsParams mp;
   mp.beam = c.ph.beam;
+  if (!c.ph.shadow_db.data.empty()) mp.shadow_db = &c.ph.shadow_db;
   if (tol_mm > 0) mp.tolerance_mm = tol_mm;
   return evaluate_opacity(u, c.ph.truth_sdf, mp);
 }
@@ -110,18 +116,19 @@ struct Row {
 };
 
 void print_rows(const std::vector<Case>& cases, const std::vector<Row>& rows) {
-  std::printf("\n#### Per test case\n\n| case | method | precision | mass precision | recall | F1 | blobs6 | normal (deg) "
-              "| surface peak | thickness (mm) | %% opaque |\n|---|---|---|---|---|---|---|---|---|---|---|\n");
+  std::printf("\n#### Per test case\n\n| case | method | precision | mass precision | recall | recall visible | F1 | blobs6 | "
+              "normal (deg) | surface peak | thickness (mm) | %% opaque |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (std::size_t c = 0; c < cases.size(); ++c)
     for (const Row& r : rows) {
       const Metrics& m = r.m[c];
-      std::printf("| %s | %s | %.3f | %.3f | %.3f | %.3f | %zu | %.1f | %.2f | %.2f | %.1f |\n", cases[c].name.c_str(),
-                  r.method.c_str(), m.precision, m.mass_precision, m.recall, m.f1, m.blobs6, m.normal_error_deg,
+      std::printf("| %s | %s | %.3f | %.3f | %.3f | %.3f | %.3f | %zu | %.1f | %.2f | %.2f | %.1f |\n",
+                  cases[c].name.c_str(), r.method.c_str(), m.precision, m.mass_precision, m.recall, m.recall_visible,
+                  m.f1, m.blobs6, m.normal_error_deg,
                   m.surface_peak, m.shell_thickness_mm, m.percent_opaque);
     }
   std::printf("\n#### Worst case and mean over the test cases\n\n| method | setting (from training) | precision | mass "
-              "precision | recall | F1 | blobs6 | normal (deg) | surface peak | %% opaque |\n"
-              "|---|---|---|---|---|---|---|---|---|---|\n");
+              "precision | recall | recall visible | F1 | blobs6 | normal (deg) | surface peak | %% opaque |\n"
+              "|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const Row& r : rows) {
     auto worst = [&](auto get, bool low) {
       double w = low ? 1e300 : -1e300, mean = 0;
@@ -134,10 +141,11 @@ void print_rows(const std::vector<Case>& cases, const std::vector<Row>& rows) {
       std::snprintf(buf, sizeof buf, "%.3g (%.3g)", w, mean);
       return std::string(buf);
     };
-    std::printf("| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n", r.method.c_str(), r.setting.c_str(),
+    std::printf("| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n", r.method.c_str(), r.setting.c_str(),
                 worst([](const Metrics& m) { return m.precision; }, true).c_str(),
                 worst([](const Metrics& m) { return m.mass_precision; }, true).c_str(),
                 worst([](const Metrics& m) { return m.recall; }, true).c_str(),
+                worst([](const Metrics& m) { return m.recall_visible; }, true).c_str(),
                 worst([](const Metrics& m) { return m.f1; }, true).c_str(),
                 worst([](const Metrics& m) { return double(m.blobs6); }, false).c_str(),
                 worst([](const Metrics& m) { return m.normal_error_deg; }, false).c_str(),
@@ -155,6 +163,8 @@ int main(int argc, char** argv) {
   std::string physics = "random";
   int size = 96;
   double tol_mm = 0;
+  bool variational_only = false;
+  BoneCueParams cue;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&] { return i + 1 < argc ? std::string(argv[++i]) : std::string(); };
@@ -164,14 +174,39 @@ int main(int argc, char** argv) {
     else if (a == "--size") size = std::stoi(next());
     else if (a == "--physics") physics = next();
     else if (a == "--tolerance-mm") tol_mm = std::stod(next());
-    else {
+    else if (a == "--variational-only") variational_only = true;
+    else if (a == "--cue") {
+      // key=value,... : the bone cue's constants (tuning on training seeds)
+      for (const std::string& kv : split(next(), ',')) {
+        const std::size_t eq = kv.find('=');
+        const std::string k = kv.substr(0, eq);
+        const double x = std::stod(kv.substr(eq + 1));
+        if (k == "sigma") cue.sigma_mm = x;
+        else if (k == "from") cue.below_from_mm = x;
+        else if (k == "to") cue.below_to_mm = x;
+        else if (k == "lo") cue.score_lo = x;
+        else if (k == "hi") cue.score_hi = x;
+        else if (k == "floor") cue.floor = x;
+        else if (k == "reach") cue.reach_mm = x;
+        else if (k == "depth") cue.depth_term = x != 0;
+        else if (k == "lateral") cue.lateral_mm = x;
+        else if (k == "ratio") cue.auto_ratio = x;
+        else if (k == "beam_cos") cue.auto_beam_cos = x;
+        else if (k == "edge_share") cue.auto_edge_share = x;
+        else {
+          std::fprintf(stderr, "softshell_study_shells: unknown --cue key %s\n", k.c_str());
+          return 2;
+        }
+      }
+    } else {
       std::fprintf(stderr, "usage: softshell_study_shells [--train S,S..] [--test S,S..] [--shapes face,spine] "
-                           "[--size N] [--physics NAME] [--tolerance-mm MM]\n");
+                           "[--size N] [--physics NAME] [--tolerance-mm MM] [--variational-only] "
+                           "[--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..]\n");
       return 2;
     }
   }
   for (const auto& s : train)
-    if (std::find(test.begin(), test.end(), s) != test.end()) {
+    if (!variational_only && std::find(test.begin(), test.end(), s) != test.end()) {
       std::fprintf(stderr, "softshell_study_shells: seed %s is in both the training and the test set\n", s.c_str());
       return 2;
     }
@@ -192,7 +227,8 @@ int main(int argc, char** argv) {
         }
       return out;
     };
-    const std::vector<Case> training = make_cases(train), testing = make_cases(test);
+    const std::vector<Case> training = variational_only ? std::vector<Case>{} : make_cases(train),
+                            testing = make_cases(test);
 
     // Training: each baseline's one setting, by mean F1 over the training set.
     const std::vector<double> isos{30, 50, 70, 90, 110, 130, 150, 170, 190, 210};
@@ -209,7 +245,8 @@ int main(int argc, char** argv) {
     };
     std::vector<Volume> medians_train, medians_test;
     for (const Case& c : training) medians_train.push_back(median3(c.ph.volume));
-    for (const Case& c : testing) medians_test.push_back(median3(c.ph.volume));
+    if (!variational_only)
+      for (const Case& c : testing) medians_test.push_back(median3(c.ph.volume));
     auto train_best = [&](const std::string& kind) {
       Setting best{0, 0, kind == "median-levoy"};
       double best_f1 = -1;
@@ -230,22 +267,32 @@ int main(int argc, char** argv) {
     };
 
     std::vector<Row> rows;
-    {
-      Row r{"variational (defaults, --iso auto)", "none (automatic)", {}};
+    const struct {
+      const char* name;
+      BoneCueMode mode;
+    } variants[] = {{"variational (defaults, --iso auto; --bone-cue off)", BoneCueMode::Off},
+                    {"variational, --bone-cue auto", BoneCueMode::Auto},
+                    {"variational, --bone-cue on", BoneCueMode::On}};
+    for (const auto& variant : variants) {
+      Row r{variant.name, "none (automatic)", {}};
       double seconds = 0;
       for (const Case& c : testing) {
         double iso = 0;
         SolveReport rep;
+        BoneCueReport br;
         const auto t0 = std::chrono::steady_clock::now();
-        const Volume u = classify_default(rt, c.ph.volume, &iso, &rep);
+        const Volume u = classify_default(rt, c.ph.volume, &iso, &rep, variant.mode, cue, &br);
         seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         r.m.push_back(score(u, c, tol_mm));
-        std::fprintf(stderr, "variational %s: iso %.1f, %d iterations%s\n", c.name.c_str(), iso, rep.cycles,
-                     rep.converged ? "" : " (NOT converged)");
+        std::fprintf(stderr, "%s %s: iso %.1f, %d iterations%s, bone cue %s (falling %.3f rising %.3f weighted %.4f), F1 %.3f P %.3f R %.3f Rvis %.3f\n",
+                     variant.name, c.name.c_str(), iso, rep.cycles, rep.converged ? "" : " (NOT converged)",
+                     br.on ? "on" : "off", br.falling_share, br.rising_share, br.weighted_share, r.m.back().f1, r.m.back().precision, r.m.back().recall,
+                     r.m.back().recall_visible);
       }
-      std::fprintf(stderr, "variational: %.2f s per case\n", seconds / double(testing.size()));
+      std::fprintf(stderr, "%s: %.2f s per case\n", variant.name, seconds / double(testing.size()));
       rows.push_back(std::move(r));
     }
+    if (!variational_only)
     for (const std::string kind : {"levoy-raw", "levoy-lowpass", "median-levoy"}) {
       const Setting s = train_best(kind);
       char setting[96];

@@ -272,6 +272,15 @@ void validate(const Volume& opacity, const Volume& truth, const MetricsParams& p
     throw InputError("blob_rel must be in (0, 1], got " + std::to_string(p.blob_rel));
   if (!(p.tensor_sigma >= 0 && p.tensor_sigma <= 8))
     throw InputError("tensor sigma must be in [0, 8] voxels, got " + std::to_string(p.tensor_sigma));
+  if (p.shadow_db) {
+    if (p.shadow_db->dims != truth.dims)
+      throw InputError("dims differ: shadow " + dims_text(p.shadow_db->dims) + " vs truth SDF " + dims_text(truth.dims));
+    if (p.shadow_db->data.size() != p.shadow_db->voxels())
+      throw InputError("evaluate: shadow sample count does not match the dims");
+    for (float x : p.shadow_db->data)
+      if (std::isnan(x)) throw InputError("shadow volume has NaN samples");
+    if (!std::isfinite(p.visible_db)) throw InputError("visible_db must be finite");
+  }
   if (!(p.facing_cos >= -1 && p.facing_cos <= 1))
     throw InputError("facing_cos must be in [-1, 1], got " + std::to_string(p.facing_cos));
   const double b = std::sqrt(p.beam[0] * p.beam[0] + p.beam[1] * p.beam[1] + p.beam[2] * p.beam[2]);
@@ -281,6 +290,7 @@ void validate(const Volume& opacity, const Volume& truth, const MetricsParams& p
 }
 
 std::string json_number(double v) {
+  if (!std::isfinite(v)) return "null";
   char buf[40];
   std::snprintf(buf, sizeof buf, "%.10g", v);
   return buf;
@@ -469,6 +479,12 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
     throw InputError("truth SDF has " + std::to_string(t.non_finite_sdf) + " non-finite samples (NaN or inf)");
   m.splats = t.splats;
   m.facing_surface_voxels = t.facing;
+  if (p.shadow_db) {
+    // The visible facing surface voxels: shadow loss below visible_db.
+    const std::vector<float>& sh = p.shadow_db->data;
+    for (std::size_t i = 0; i < n; ++i)
+      if ((flags[i] & kFacing) && sh[i] < float(p.visible_db)) ++m.visible_surface_voxels;
+  }
   m.normal_voxels = t.normal_voxels;
   m.percent_opaque = 100.0 * double(t.opaque) / double(n);
   m.precision = t.drawn_u > 0 ? t.near_u / t.drawn_u : 0.0;
@@ -487,15 +503,23 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
     drawn = {};
     // Squared distances between voxel centres are integers: compare exactly.
     const double tol2 = std::floor(tol * tol + 1e-9);
-    std::vector<std::size_t> hits(g.nz, 0);
+    std::vector<std::size_t> hits(g.nz, 0), vis_hits(g.nz, 0);
+    const float* sh = p.shadow_db ? p.shadow_db->data.data() : nullptr;
+    const float vis_db = float(p.visible_db);
     parallel_items(g.nz, [&](std::size_t z) {
       for (std::size_t i = z * g.sz, e = i + g.sz; i < e; ++i)
-        if ((flags[i] & kFacing) && double(d2[i]) <= tol2) ++hits[z];
+        if ((flags[i] & kFacing) && double(d2[i]) <= tol2) {
+          ++hits[z];
+          if (sh && sh[i] < vis_db) ++vis_hits[z];
+        }
     });
-    std::size_t hit = 0;
+    std::size_t hit = 0, vis_hit = 0;
     for (std::size_t h : hits) hit += h;
+    for (std::size_t h : vis_hits) vis_hit += h;
     m.recall = double(hit) / double(m.facing_surface_voxels);
+    if (sh && m.visible_surface_voxels > 0) m.recall_visible = double(vis_hit) / double(m.visible_surface_voxels);
   }
+  if (p.shadow_db && m.visible_surface_voxels > 0 && std::isnan(m.recall_visible)) m.recall_visible = 0.0;
 
   // ---- 26-connected components of the drawn set ---------------------------
   std::vector<std::size_t> stack;
@@ -588,7 +612,11 @@ std::string metrics_json(const Metrics& m, const MetricsParams& p) {
     << ", \"spurious_blobs\": " << m.spurious_blobs << ", \"components\": " << m.components
     << ", \"normal_error_deg\": " << json_number(m.normal_error_deg)
     << ", \"percent_opaque\": " << json_number(m.percent_opaque) << ", \"splats\": " << m.splats
-    << ", \"facing_surface_voxels\": " << m.facing_surface_voxels << ", \"normal_voxels\": " << m.normal_voxels
+    << ", \"facing_surface_voxels\": " << m.facing_surface_voxels
+    << ", \"recall_visible\": " << json_number(m.recall_visible)
+    << ", \"visible_surface_voxels\": " << m.visible_surface_voxels
+    << ", \"visible_db\": " << (p.shadow_db ? json_number(p.visible_db) : std::string("null"))
+    << ", \"normal_voxels\": " << m.normal_voxels
     << ", \"spurious_voxels\": " << m.spurious_voxels << ", \"mass_precision\": " << json_number(m.mass_precision)
     << ", \"f1\": " << json_number(m.f1) << ", \"f1_mass\": " << json_number(m.f1_mass)
     << ", \"surface_peak\": " << json_number(m.surface_peak)

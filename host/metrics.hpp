@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstddef>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -32,6 +33,12 @@ struct MetricsParams {
   // sigma in voxels (the renderer's default, host/orientation.hpp); 0 = grad u
   // by central differences (the paper's orientation).
   double tensor_sigma = 1.5;
+  // Visibility (recall_visible): a volume of the two-way shadow loss in dB
+  // (the phantom's shadow_db.nrrd, same dims as the truth) and the loss
+  // below which a surface voxel counts as visible. Null: recall_visible is
+  // not computed.
+  const Volume* shadow_db = nullptr;
+  double visible_db = 20.0;
 };
 
 struct Metrics {
@@ -43,6 +50,11 @@ struct Metrics {
   double percent_opaque = 0;       // 100 * share of voxels with u > opaque
   std::size_t splats = 0;          // voxels with u > threshold
   std::size_t facing_surface_voxels = 0;
+  // With MetricsParams::shadow_db: recall over the facing surface voxels
+  // whose shadow loss is below visible_db (ultrasound cannot see a surface in
+  // full acoustic shadow); NaN (JSON null) without it, or when none is visible.
+  double recall_visible = std::numeric_limits<double>::quiet_NaN();
+  std::size_t visible_surface_voxels = 0;
   std::size_t normal_voxels = 0;    // drawn voxels near a true surface that entered normal_error_deg
   std::size_t spurious_voxels = 0;  // drawn voxels in spurious blobs
 

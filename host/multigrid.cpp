@@ -496,12 +496,13 @@ VariationalClassifier::~VariationalClassifier() = default;
 
 bool VariationalClassifier::can_update(const VariationalParams& p) const {
   return p.beta == params_.beta && p.kappa == params_.kappa && p.sigma_mm == params_.sigma_mm &&
-         p.grad_sigma_mm == params_.grad_sigma_mm && p.edge_share == params_.edge_share && p.g_ref == params_.g_ref;
+         p.grad_sigma_mm == params_.grad_sigma_mm && p.edge_share == params_.edge_share && p.g_ref == params_.g_ref &&
+         p.edge_weight == params_.edge_weight;
 }
 
 void VariationalClassifier::update(const VariationalParams& p) {
   if (!can_update(p))
-    throw std::invalid_argument("VariationalClassifier::update: beta, kappa, the lowpass sigmas and the edge reference need a new setup");
+    throw std::invalid_argument("VariationalClassifier::update: beta, kappa, the lowpass sigmas, the edge reference and the edge weight need a new setup");
   const auto t0 = std::chrono::steady_clock::now();
   sys_->update_point(p);
   mg_->update_point();

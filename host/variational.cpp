@@ -164,6 +164,10 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Densities& d) : DeviceSystem(rt, m
   assemble();
 }
 
+// The bone cue's reference edge: the median of the upper half of the cued
+// voxels' weighted |grad v| (docs/numerics.md, "The bone cue").
+constexpr double kCueEdgeShare = 0.5;
+
 DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams& p,
                            const std::vector<std::uint8_t>* mask)
     : DeviceSystem(rt, make_grid(v.dims, v.spacing)) {
@@ -187,7 +191,23 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
     cl::Kernel kg = rt.kernel(kSystem, "system_grad2");
     Runtime::set_args(kg, dvg, dmask, grad2, grid_);
     rt.enqueue_3d(kg, grid_);
-    resolved_.g_ref = reference_edge_gradient(download<float>(rt, grad2, n), p.edge_share);
+    std::vector<float> g2 = download<float>(rt, grad2, n);
+    if (p.edge_weight) {
+      // With the bone cue the reference is the cued edges' own: the median
+      // weighted |grad v| of the voxels whose weight is at least 1/2 (the
+      // bone echoes are weaker edges than the shadows' walls).
+      if (p.edge_weight->size() != n) throw std::invalid_argument("edge weight size differs from the volume");
+      const std::vector<float>& w = *p.edge_weight;
+      std::size_t cued = 0;
+      for (std::size_t i = 0; i < n; ++i) {
+        if (g2[i] >= 0 && w[i] >= 0.5f) g2[i] *= w[i] * w[i], ++cued;
+        else g2[i] = -1.0f;
+      }
+      if (cued == 0) g2 = download<float>(rt, grad2, n);  // nothing cued: the data's own reference
+      resolved_.g_ref = reference_edge_gradient(g2, cued ? kCueEdgeShare : p.edge_share);
+    } else {
+      resolved_.g_ref = reference_edge_gradient(g2, p.edge_share);
+    }
     // A volume without edges: any positive unit keeps the system defined
     // (F_ind is then delta everywhere).
     if (!(resolved_.g_ref > 0)) resolved_.g_ref = 1.0;
@@ -197,6 +217,19 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
                     T_[3], T_[4], T_[5], fixed_, grad2, resolved_.coeffs(), grid_);
   rt.enqueue_3d(k, grid_);
   assemble();
+  if (p.edge_weight) {
+    // The bone cue: |grad v| weighted per voxel (grad2 by w^2), then mu, rho,
+    // the diagonal and b re-derived from it by the update kernel (T and the
+    // couplings do not depend on |grad v|). g_ref stays the data's own.
+    if (p.edge_weight->size() != n) throw std::invalid_argument("edge weight size differs from the volume");
+    std::vector<float> g2 = download<float>(rt, grad2, n);
+    const std::vector<float>& w = *p.edge_weight;
+    for (std::size_t i = 0; i < n; ++i) g2[i] *= w[i] * w[i];
+    rt.queue().enqueueWriteBuffer(grad2, CL_TRUE, 0, bytes, g2.data());
+    cl::Kernel ku = rt.kernel(kSystem, "system_update_point");
+    Runtime::set_args(ku, dv, dvs, grad2, fixed_, dT_, mu_, rho_, coef_, b_, resolved_.coeffs(), grid_);
+    rt.enqueue_3d(ku, grid_);
+  }
   sources_ = {dv, dvs, grad2};
 }
 

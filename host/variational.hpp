@@ -67,13 +67,19 @@ struct VariationalParams {
   // The resolved reference gradient (per mm of normalised intensity): 0
   // until DeviceSystem takes it from the data (edge_share > 0), or given.
   double g_ref = 0;
+  // The bone cue (host/bone_cue.hpp; docs/numerics.md, "The bone cue"): a
+  // per-voxel factor w in [0, 1] on the edge strength |grad v| wherever it
+  // enters the functional (F_ind's edge weight, F_iso's denominator, the
+  // sharpening's edge gate), so edges without an acoustic shadow beneath
+  // them pull u toward u_ind less. Null: off (w = 1). One entry per voxel.
+  std::shared_ptr<const std::vector<float>> edge_weight;
   ClassifyCoeffs coeffs() const;
   // The paper's functional exactly (no lowpassed |grad v|, no kappa, no
   // shell terms) with the weights chosen for it by the earlier study.
   static VariationalParams literal_defaults();
   bool literal() const {
     return grad_sigma_mm == 0 && kappa == 0 && thickness_mm == 0 && edge_share == 0 && sharpen_iterations == 0 &&
-           max_gain == 0;
+           max_gain == 0 && !edge_weight;
   }
   // The shell thickness in force on a grid of this spacing: thickness_mm,
   // but at least 2 voxels along the coarsest axis (a thinner shell cannot be

@@ -102,7 +102,7 @@ TEST_F(CliArgs, EveryFloatOptionOfEveryCommandRefusesNanAndInfinityNamingItsRang
     }
   }
 #ifdef SOFTSHELL_HAVE_VIEWER
-  EXPECT_EQ(checked, 54);  // classify alone has 26 (--small-volume the 26th); view --overlay
+  EXPECT_EQ(checked, 55);  // classify alone has 26 (--small-volume the 26th); view --overlay; evaluate --visible-db
 #else
   EXPECT_EQ(checked, 41);  // without render, view, figure5, figure6
 #endif

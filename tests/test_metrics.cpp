@@ -183,6 +183,86 @@ TEST(MetricsSphere, OnlySurfacesFacingTheTransducerCountForRecall) {
   EXPECT_NEAR(m.recall, 0.5, 0.1);
 }
 
+// A shadow volume of `inside` dB where x >= kC (the sphere's right half), `outside` elsewhere.
+Volume half_shadow(const Volume& sdf, float inside, float outside = 0.0f) {
+  Volume sh = sdf;
+  for (std::size_t z = 0; z < sh.dims[2]; ++z)
+    for (std::size_t y = 0; y < sh.dims[1]; ++y)
+      for (std::size_t x = 0; x < sh.dims[0]; ++x) sh.at(x, y, z) = double(x) >= kC ? inside : outside;
+  return sh;
+}
+
+TEST(MetricsVisible, RecallVisibleCountsOnlySurfacesOutOfTheShadow) {
+  const Volume sdf = sphere_sdf();
+  const Volume u = shell(sdf);
+  // Only the left half drawn (x < kC), the right half in a 30 dB shadow.
+  Volume left = u;
+  for (std::size_t z = 0; z < kN; ++z)
+    for (std::size_t y = 0; y < kN; ++y)
+      for (std::size_t x = 0; x < kN; ++x)
+        if (double(x) >= kC) left.at(x, y, z) = 0.0f;
+  const Volume shadow = half_shadow(sdf, 30.0f);
+  MetricsParams p;
+  p.shadow_db = &shadow;
+  const Metrics m = evaluate_opacity(left, sdf, p);
+  const Metrics plain = evaluate_opacity(left, sdf);
+  // recall is unchanged by the shadow volume; only the new key sees it.
+  EXPECT_EQ(m.recall, plain.recall);
+  EXPECT_TRUE(std::isnan(plain.recall_visible));
+  EXPECT_EQ(plain.visible_surface_voxels, 0u);
+  // The left half of the facing cap: x < 24 of a sphere centred at 24 (the
+  // plane x = 24 itself lies in the shadow), so a bit less than half.
+  std::size_t left_facing = 0;
+  {
+    // Independent count: facing surface voxels with x < kC, from the
+    // metric's own definition on the analytic sphere (6-neighbour sign
+    // change, outward normal n_z <= -0.3).
+    for (std::size_t z = 1; z + 1 < kN; ++z)
+      for (std::size_t y = 1; y + 1 < kN; ++y)
+        for (std::size_t x = 1; x + 1 < kN; ++x) {
+          const bool in = sdf.at(x, y, z) <= 0;
+          const bool surface = (sdf.at(x - 1, y, z) <= 0) != in || (sdf.at(x + 1, y, z) <= 0) != in ||
+                               (sdf.at(x, y - 1, z) <= 0) != in || (sdf.at(x, y + 1, z) <= 0) != in ||
+                               (sdf.at(x, y, z - 1) <= 0) != in || (sdf.at(x, y, z + 1) <= 0) != in;
+          const double dx = double(x) - kC, dy = double(y) - kC, dz = double(z) - kC;
+          const double r = std::sqrt(dx * dx + dy * dy + dz * dz);
+          if (surface && r > 0 && -dz / r >= 0.3 && double(x) < kC) ++left_facing;
+        }
+  }
+  EXPECT_NEAR(double(m.visible_surface_voxels), double(left_facing), 0.02 * double(left_facing));
+  EXPECT_LT(m.visible_surface_voxels, m.facing_surface_voxels / 2 + 1);
+  EXPECT_GT(m.visible_surface_voxels, m.facing_surface_voxels / 3);
+  EXPECT_GT(m.recall_visible, 0.99);  // every visible surface voxel is drawn
+  EXPECT_LT(m.recall, 0.6);           // the shadowed half is not
+  // The shadowed half drawn instead: nothing visible is recalled (at a
+  // tolerance of 0 voxels; at 2 the seam's neighbours count).
+  Volume right = u;
+  for (std::size_t i = 0; i < right.data.size(); ++i) right.data[i] -= left.data[i];
+  MetricsParams p0 = p;
+  p0.tolerance = 0;
+  EXPECT_EQ(evaluate_opacity(right, sdf, p0).recall_visible, 0.0);
+  EXPECT_EQ(evaluate_opacity(left, sdf, p0).recall_visible, 1.0);
+  // The bound is strict (below visible_db): 20 dB everywhere hides every
+  // surface (recall_visible undefined), 19.9 dB none (recall_visible = recall).
+  const Volume at20 = half_shadow(sdf, 20.0f, 20.0f), below20 = half_shadow(sdf, 19.9f, 19.9f);
+  p.shadow_db = &at20;
+  const Metrics none = evaluate_opacity(left, sdf, p);
+  EXPECT_EQ(none.visible_surface_voxels, 0u);
+  EXPECT_TRUE(std::isnan(none.recall_visible));
+  p.shadow_db = &below20;
+  const Metrics all = evaluate_opacity(left, sdf, p);
+  EXPECT_EQ(all.visible_surface_voxels, all.facing_surface_voxels);
+  EXPECT_EQ(all.recall_visible, all.recall);
+  // visible_db moves the bound.
+  p.shadow_db = &shadow;
+  p.visible_db = 40;
+  EXPECT_EQ(evaluate_opacity(left, sdf, p).visible_surface_voxels, m.facing_surface_voxels);
+  // A shadow volume of other dims is refused.
+  const Volume small = sphere_sdf(16, 8, 5);
+  p.shadow_db = &small;
+  EXPECT_THROW(evaluate_opacity(left, sdf, p), InputError);
+}
+
 TEST(MetricsSphere, RandomOpacityAlongTheSurfaceRaisesNormalError) {
   const Volume sdf = sphere_sdf();
   const Volume clean = smooth_shell(sdf, 1.5);
@@ -667,6 +747,10 @@ std::map<std::string, std::vector<double>> parse_flat_json(const std::string& te
   };
   const auto number = [&] {
     ws();
+    if (text.compare(i, 4, "null") == 0) {  // JSON's null: a metric that was not computed
+      i += 4;
+      return std::numeric_limits<double>::quiet_NaN();
+    }
     const char* begin = text.c_str() + i;
     char* end = nullptr;
     const double v = std::strtod(begin, &end);
@@ -793,6 +877,48 @@ TEST_F(CliEvaluate, JsonForAPerfectShell) {
   EXPECT_NEAR(j["mass_precision"].at(0), mn.mass_precision, 1e-8);
   EXPECT_NEAR(j["percent_opaque"].at(0), mn.percent_opaque, 1e-8);
   EXPECT_GT(mn.percent_opaque, m.percent_opaque);
+}
+
+TEST_F(CliEvaluate, RecallVisibleFromTheShadowBesideTheTruthOrGiven) {
+  const Volume sdf = sphere_sdf();
+  write_volume(file("truth_sdf.nrrd"), sdf);
+  write_volume(file("u.nrrd"), shell(sdf));
+  // No shadow volume: the key is there, null.
+  std::map<std::string, std::vector<double>> j;
+  test::RunResult r = run({"evaluate", file("u.nrrd"), file("truth_sdf.nrrd"), "--json"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  ASSERT_NO_THROW(j = parse_flat_json(r.out)) << r.out;
+  ASSERT_EQ(j.count("recall_visible"), 1u) << r.out;
+  EXPECT_TRUE(std::isnan(j["recall_visible"].at(0))) << r.out;
+  // shadow_db.nrrd beside the truth, as `softshell phantom` writes it, is found.
+  const Volume shadow = half_shadow(sdf, 30.0f);
+  write_volume(file("shadow_db.nrrd"), shadow);
+  MetricsParams p;
+  p.shadow_db = &shadow;
+  const Metrics m = evaluate_opacity(shell(sdf), sdf, p);
+  r = run({"evaluate", file("u.nrrd"), file("truth_sdf.nrrd"), "--json"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  ASSERT_NO_THROW(j = parse_flat_json(r.out)) << r.out;
+  EXPECT_EQ(j["recall_visible"], std::vector<double>{1.0});
+  EXPECT_EQ(j["visible_surface_voxels"], std::vector<double>{double(m.visible_surface_voxels)});
+  EXPECT_EQ(j["visible_db"], std::vector<double>{20.0});
+  EXPECT_EQ(j["recall"], std::vector<double>{1.0});
+  // --shadow none turns it off; --shadow FILE and --visible-db are used.
+  r = run({"evaluate", file("u.nrrd"), file("truth_sdf.nrrd"), "--json", "--shadow", "none"});
+  ASSERT_NO_THROW(j = parse_flat_json(r.out)) << r.out;
+  EXPECT_TRUE(std::isnan(j["recall_visible"].at(0)));
+  write_volume(file("other.nrrd"), half_shadow(sdf, 50.0f));
+  r = run({"evaluate", file("u.nrrd"), file("truth_sdf.nrrd"), "--json", "--shadow", file("other.nrrd"),
+           "--visible-db", "60"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  ASSERT_NO_THROW(j = parse_flat_json(r.out)) << r.out;
+  EXPECT_EQ(j["visible_surface_voxels"], std::vector<double>{double(m.facing_surface_voxels)});
+  // The table names it; a shadow of other dims is a one-line error.
+  r = run({"evaluate", file("u.nrrd"), file("truth_sdf.nrrd")});
+  EXPECT_NE(r.out.find("recall_visible"), std::string::npos) << r.out;
+  write_volume(file("bad.nrrd"), sphere_sdf(16, 8, 5));
+  expect_one_line_error(run({"evaluate", file("u.nrrd"), file("truth_sdf.nrrd"), "--shadow", file("bad.nrrd")}),
+                        {"dims differ", "bad.nrrd"});
 }
 
 TEST_F(CliEvaluate, TableNamesEveryMetric) {

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "auto_iso.hpp"
+#include "bone_cue.hpp"
 #include "error.hpp"
 #include "io.hpp"
 #include "filter.hpp"
@@ -48,14 +49,14 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   MaskReport mr;
   in.mask = scanned_mask(v, MaskParams{}, &mr);
   if (mr.unscanned == 0) in.mask.clear();
-  remove_near_field(v, in.mask);  // the near field is an occluder (docs/real-data.md)
+  const NearFieldReport nf = remove_near_field(v, in.mask);  // the near field is an occluder (docs/real-data.md)
   const std::vector<std::uint8_t>* mask = in.mask.empty() ? nullptr : &in.mask;
   Volume filled = mask ? fill_unscanned(v, in.mask) : Volume();
   // A small volume's length scales shrink with it, as classify's do
   // (host/variational.hpp, small_volume_scale).
+  // Given weights are the user's and stay as they are.
   const double scale = small_volume_scale(v.dims, v.spacing, kSmallVolumeMm);
-  in.params.sigma_mm = 1.0;
-  scale_length_scales(in.params, scale);
+  if (!weights) scale_length_scales(defaults, scale);
   if (iso_text == "auto") {
     // The local rule's field levelled out, as classify does (host/auto_iso.hpp).
     AutoIsoParams ap;
@@ -72,6 +73,11 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   }
   in.params = defaults;
   in.params.v_iso = in.data.intensity_map().to_unit(in.iso);
+  // The bone cue as classify's default (--bone-cue off; docs/parameters.md says why).
+  BoneCueParams bp;
+  bp.axis = nf.axis;
+  BoneCueReport br;
+  in.params.edge_weight = bone_cue_weights(in.data, mask, BoneCueMode::Off, bp, &br);
   in.u = reclassify(rt, in, in.params, nullptr, &in.report);  // keeps in.classifier
   in.classified = true;
   std::ostringstream note;
@@ -79,7 +85,7 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
        << std::setprecision(4) << in.iso << (iso_text == "auto" ? " (auto)" : "") << ", " << in.report.cycles
        << " iterations, relative residual " << std::scientific << std::setprecision(2)
        << (in.report.residuals.empty() ? 0.0 : in.report.residuals.back())
-         << (in.report.converged ? "" : " (NOT converged)");
+       << (in.report.converged ? "" : " (NOT converged)") << ", bone cue " << (br.on ? "on" : "off");
   in.note = note.str();
   return in;
 }

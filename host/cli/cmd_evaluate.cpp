@@ -9,6 +9,7 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
+#include <fstream>
 #include <iomanip>
 #include <iostream>
 #include <memory>
@@ -26,6 +27,7 @@ namespace {
 
 struct EvaluateOptions {
   std::string opacity, truth, beam = "0,0,1";
+  std::string shadow = "auto";  // shadow_db volume: auto (beside the truth), none, or FILE
   bool json = false;
   bool tolerance_mm_given = false;  // --tolerance-mm was on the command line
   MetricsParams params;
@@ -121,6 +123,27 @@ int run_evaluate(EvaluateOptions o) {
     throw InputError("dims differ: " + dims_text(u.dims) + " (" + o.opacity + ") vs " + dims_text(sdf.dims) + " (" +
                      o.truth + ")");
   check_signed_distance(sdf, o.truth);
+  // The shadow loss for recall_visible: given, or shadow_db.nrrd beside the
+  // truth as `softshell phantom` writes it.
+  std::string shadow_path;
+  if (o.shadow == "auto") {
+    const std::size_t slash = o.truth.find_last_of('/');
+    const std::string beside = (slash == std::string::npos ? std::string() : o.truth.substr(0, slash + 1)) +
+                               "shadow_db.nrrd";
+    if (std::ifstream(beside).good()) shadow_path = beside;
+  } else if (o.shadow != "none") {
+    shadow_path = o.shadow;
+  }
+  Volume shadow;
+  if (!shadow_path.empty()) {
+    shadow = read_volume(shadow_path);
+    if (shadow.dims != sdf.dims)
+      throw InputError("dims differ: " + dims_text(shadow.dims) + " (" + shadow_path + ", --shadow) vs " +
+                       dims_text(sdf.dims) + " (" + o.truth + ")");
+    for (float x : shadow.data)
+      if (std::isnan(x)) throw input_error(shadow_path, "--shadow has NaN samples (expected a loss in dB)");
+    o.params.shadow_db = &shadow;
+  }
   const double t_read = seconds_since(t0);
   const auto t1 = Clock::now();
   const Metrics m = evaluate_opacity(u, sdf, o.params);
@@ -144,6 +167,11 @@ int run_evaluate(EvaluateOptions o) {
       {"precision", fixed(m.precision, 4), "share of drawn opacity (u > " + thr + ") within " + tol + " of a true surface"},
       {"recall", fixed(m.recall, 4),
        "share of true surface voxels facing the transducer with a drawn voxel within " + tol},
+      {"recall_visible", p.shadow_db ? fixed(m.recall_visible, 4) : std::string("-"),
+       p.shadow_db ? "recall over the " + std::to_string(m.visible_surface_voxels) +
+                         " facing surface voxels not in acoustic shadow (shadow loss < " + fixed(p.visible_db, 1) +
+                         " dB, " + shadow_path + ")"
+                   : std::string("not computed: no shadow volume (--shadow FILE, or shadow_db.nrrd beside the truth)")},
       {"spurious_blobs", std::to_string(m.spurious_blobs),
        "drawn 26-connected blobs nowhere within " + tol + " of a true surface (" + std::to_string(m.spurious_voxels) +
            " voxels)"},
@@ -218,6 +246,16 @@ void add_evaluate_command(CLI::App& app, Action& action) {
       ->check(real_range(0, 1, "", Ends::OpenLow));
   sub->add_option("--beam", o->beam, "Beam direction X,Y,Z (transducer on the z = 0 face: 0,0,1)")
       ->capture_default_str();
+  sub->add_option("--shadow", o->shadow,
+                  "Shadow loss volume in dB (a phantom's shadow_db.nrrd) for recall_visible, the recall over the "
+                  "surface voxels whose loss is below --visible-db: auto (shadow_db.nrrd beside TRUTH_SDF when there "
+                  "is one), none, or FILE")
+      ->capture_default_str()
+      ->type_name("auto|none|FILE");
+  sub->add_option("--visible-db", o->params.visible_db,
+                  "recall_visible counts the surface voxels whose shadow loss is below this (dB)")
+      ->capture_default_str()
+      ->check(real_range(-1000, 1000, "dB"));
   sub->add_option("--facing-cos", o->params.facing_cos,
                   "A surface faces the transducer if its outward normal n has n.(-beam) >= this")
       ->capture_default_str()
