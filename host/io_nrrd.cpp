@@ -176,6 +176,7 @@ HeaderScan scan_header(const std::string& path) {
   // are refused here with the message Teem would give.
   bool have_dimension = false, block_size = false;
   std::string type;
+  int space_dim = 0;  // from "space" or "space dimension" (0: none yet)
   for (int n = 2; next_line(); ++n) {
     if (n > kMaxHeaderLines) throw input_error(path, "header longer than 100000 lines");
     if (line.empty()) break;  // end of the header
@@ -206,6 +207,30 @@ HeaderScan scan_header(const std::string& path) {
     if (key == "type") type = trim(line.substr(colon + 1));
     if (!have_dimension && std::find(std::begin(kPerAxis), std::end(kPerAxis), key) != std::end(kPerAxis))
       throw input_error(path, "field '" + trim(line.substr(0, colon)) + "' comes before 'dimension'");
+    if (key == "space") {
+      const std::string name = lower(trim(line.substr(colon + 1)));
+      space_dim = name.size() > 5 && name.compare(name.size() - 5, 5, "-time") == 0 ? 4 : 3;
+    }
+    if (key == "spacedimension") space_dim = std::atoi(trim(line.substr(colon + 1)).c_str());
+    // "space units": Teem leaks on an unterminated quote and on more units
+    // than the space has (found by garbling softshell's own headers); one
+    // complete quoted unit per world axis, checked here.
+    if (key == "spaceunits" && space_dim > 0) {
+      const std::string value = line.substr(colon + 1);
+      int units = 0;
+      std::size_t i = 0;
+      bool well_formed = true;
+      while (well_formed) {
+        while (i < value.size() && (value[i] == ' ' || value[i] == '\t')) ++i;
+        if (i == value.size()) break;
+        const std::size_t close = value[i] == '"' ? value.find('"', i + 1) : std::string::npos;
+        if (close == std::string::npos) well_formed = false;
+        else ++units, i = close + 1;
+      }
+      if (!well_formed || units > space_dim)
+        throw input_error(path, "space units: expected one quoted unit per world axis (" + std::to_string(space_dim) +
+                                    "), e.g. \"mm\" \"mm\" \"mm\"");
+    }
     if (key != "datafile") continue;
     std::string value = line.substr(colon + 1);
     value.erase(0, value.find_first_not_of(" \t"));

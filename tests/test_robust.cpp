@@ -307,6 +307,13 @@ TEST_F(Robust, ReproTeemErrorPaths) {
   // per-axis field before "dimension"), found by the 1 M-execution run.
   expect_one_line_error(run({"info", repro("nrrd_nul_in_field_name.nrrd")}),
                         {"header line 3 contains a NUL byte: not a NRRD header"});
+  // "space units" with an unterminated quote, or more units than the space has: Teem leaks
+  // on both error paths (found when the test above garbled softshell's own headers, which
+  // state their units since NRRD space units are read).
+  expect_one_line_error(run({"info", repro("nrrd_space_units_open_quote.nrrd")}),
+                        {"space units: expected one quoted unit per world axis (3)"});
+  expect_one_line_error(run({"info", repro("nrrd_space_units_too_many.nrrd")}),
+                        {"space units: expected one quoted unit per world axis (3)"});
   expect_one_line_error(run({"info", write("nul.nrrd", std::string("NRRD0004\nkinds\0: x\n", 19) + tail)}),
                         {"header line 2 contains a NUL byte"});
   const unsigned char gz[] = {0x1f, 0x8b, 8, 0, 0, 0, 0, 0, 0, 3, 0x63, 0x65, 0x63, 0x63, 0x67, 0x63, 0x67, 0xe7, 4, 0, 0};
@@ -325,6 +332,7 @@ TEST(RobustRepro, EveryReproFileIsCovered) {
       "stdin.nhdr",        "teem_leak.nhdr",    "teem_overread_list.nhdr", "nrrd_nul_in_field_name.nrrd",
       "classify_converged_nan.bin",  // fuzz inputs: FuzzRegression.ReproInputsGetDocumentedAnswers
       "classify_iso_field_inf_1.bin", "classify_iso_field_inf_2.bin",
+      "nrrd_space_units_open_quote.nrrd", "nrrd_space_units_too_many.nrrd",  // Robust.ReproTeemErrorPaths
       "vti_zlib_last_block_4g.vti"};  // tests/test_vti.cpp: Vti.ReproHugeBlockIsRefusedAtOnce
   for (const auto& e : fs::directory_iterator(repro(""))) {
     const std::string name = e.path().filename().string();
