@@ -154,15 +154,21 @@ HeaderScan scan_header(const std::string& path) {
   FilePtr f = open_for_reading(path);
   HeaderScan scan;
   std::string line;
+  // Lines end as Teem's reader ends them (airOneLine): at "\n", "\r\n" or a
+  // lone "\r" (a "\r" inside a field ended it early for Teem, and an
+  // unterminated "space units" quote leaked: found by garbling headers).
   auto next_line = [&]() -> bool {
     line.clear();
     int c;
-    while ((c = std::fgetc(f.get())) != EOF && c != '\n') {
+    while ((c = std::fgetc(f.get())) != EOF && c != '\n' && c != '\r') {
       line += static_cast<char>(c);
       if (line.size() > kMaxHeaderLine) throw input_error(path, "header line longer than 64 KiB: not a NRRD header");
     }
+    if (c == '\r') {
+      const int d = std::fgetc(f.get());
+      if (d != '\n' && d != EOF) std::ungetc(d, f.get());
+    }
     if (std::ferror(f.get())) throw input_error(path, "read error: " + std::string(std::strerror(errno)));
-    if (!line.empty() && line.back() == '\r') line.pop_back();
     return c != EOF || !line.empty();
   };
   // Without the magic Teem would try its other formats (plain text tables,

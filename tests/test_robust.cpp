@@ -314,6 +314,9 @@ TEST_F(Robust, ReproTeemErrorPaths) {
                         {"space units: expected one quoted unit per world axis (3)"});
   expect_one_line_error(run({"info", repro("nrrd_space_units_too_many.nrrd")}),
                         {"space units: expected one quoted unit per world axis (3)"});
+  // A carriage return inside the quotes ends the line for Teem (lines end at \n, \r\n or \r).
+  expect_one_line_error(run({"info", repro("nrrd_space_units_cr_in_quote.nrrd")}),
+                        {"space units: expected one quoted unit per world axis (3)"});
   expect_one_line_error(run({"info", write("nul.nrrd", std::string("NRRD0004\nkinds\0: x\n", 19) + tail)}),
                         {"header line 2 contains a NUL byte"});
   const unsigned char gz[] = {0x1f, 0x8b, 8, 0, 0, 0, 0, 0, 0, 3, 0x63, 0x65, 0x63, 0x63, 0x67, 0x63, 0x67, 0xe7, 4, 0, 0};
@@ -333,6 +336,7 @@ TEST(RobustRepro, EveryReproFileIsCovered) {
       "classify_converged_nan.bin",  // fuzz inputs: FuzzRegression.ReproInputsGetDocumentedAnswers
       "classify_iso_field_inf_1.bin", "classify_iso_field_inf_2.bin",
       "nrrd_space_units_open_quote.nrrd", "nrrd_space_units_too_many.nrrd",  // Robust.ReproTeemErrorPaths
+      "nrrd_space_units_cr_in_quote.nrrd",
       "vti_zlib_last_block_4g.vti"};  // tests/test_vti.cpp: Vti.ReproHugeBlockIsRefusedAtOnce
   for (const auto& e : fs::directory_iterator(repro(""))) {
     const std::string name = e.path().filename().string();
