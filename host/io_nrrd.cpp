@@ -203,6 +203,10 @@ HeaderScan scan_header(const std::string& path) {
       if (is_tracked_frame_key(kv_key)) throw tracked_frame_error(path, kv_key);
       continue;
     }
+    // A field is "<name>: <value>" (colon and space): Teem does not take
+    // "dimension:<garbage>" as the dimension, so per-axis fields after it
+    // still come before a dimension for Teem (found by fuzzing).
+    if (colon + 1 >= line.size() || line[colon + 1] != ' ') continue;
     std::string key;
     for (char c : line.substr(0, colon))
       if (c != ' ' && c != '\t') key += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
