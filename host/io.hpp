@@ -248,6 +248,9 @@ Volume read_metaimage(const std::string& path);
 // NIfTI (host/io_nifti.cpp; only when nifti_supported()).
 Volume read_nifti(const std::string& path);
 VolumeHeader read_nifti_header(const std::string& path);
+// The whole of `in` deflated: a zlib stream (as MetaIO, ITK, VTK and PLUS
+// write MetaImage data), or with `gzip` one gzip member (.nii.gz).
+std::vector<unsigned char> deflate_all(const std::string& path, const std::vector<unsigned char>& in, bool gzip = false);
 // `gzipped`: .nii.gz. NIfTI-1, sform and qform in RAS (host/io_nifti.cpp).
 void write_nifti(const std::string& path, const Volume& v, const WriteOptions& opt, bool gzipped);
 // VTK XML ImageData (host/io_vti.cpp).

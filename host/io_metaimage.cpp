@@ -227,34 +227,6 @@ void inflate_capped(const std::string& path, const std::vector<unsigned char>& i
   out.resize(out_pos);
 }
 
-// Deflates `in` to a zlib stream, as MetaIO (ITK, VTK, PLUS) writes it.
-std::vector<unsigned char> deflate_all(const std::string& path, const std::vector<unsigned char>& in) {
-  z_stream zs{};
-  if (deflateInit(&zs, Z_DEFAULT_COMPRESSION) != Z_OK) throw input_error(path, "zlib initialisation failed");
-  struct End {
-    z_stream* z;
-    ~End() { deflateEnd(z); }
-  } end{&zs};
-  std::vector<unsigned char> out;
-  std::vector<unsigned char> buf(1 << 20);
-  std::size_t in_pos = 0;
-  int rc = Z_OK;
-  do {
-    if (zs.avail_in == 0 && in_pos < in.size()) {
-      const std::size_t chunk = std::min<std::size_t>(in.size() - in_pos, UINT_MAX);
-      zs.next_in = const_cast<Bytef*>(in.data() + in_pos);
-      zs.avail_in = static_cast<uInt>(chunk);
-      in_pos += chunk;
-    }
-    const int flush = (in_pos == in.size() && zs.avail_in == 0) ? Z_FINISH : Z_NO_FLUSH;
-    zs.next_out = buf.data();
-    zs.avail_out = static_cast<uInt>(buf.size());
-    rc = deflate(&zs, flush);
-    if (rc == Z_STREAM_ERROR) throw input_error(path, "cannot write: zlib compression failed");
-    out.insert(out.end(), buf.data(), buf.data() + (buf.size() - zs.avail_out));
-  } while (rc != Z_STREAM_END);
-  return out;
-}
 
 // Shortest text that reads back as exactly `x`.
 std::string exact(double x) {
@@ -498,6 +470,35 @@ Volume read_metaimage(const std::string& path) {
   v.frame = m.header.frame;
   decode_samples(bytes.data(), v.voxels(), m.header.type, m.msb != host_is_big_endian(), v.data.data());
   return v;
+}
+
+std::vector<unsigned char> deflate_all(const std::string& path, const std::vector<unsigned char>& in, bool gzip) {
+  z_stream zs{};
+  if (deflateInit2(&zs, Z_DEFAULT_COMPRESSION, Z_DEFLATED, gzip ? 15 + 16 : 15, 8, Z_DEFAULT_STRATEGY) != Z_OK)
+    throw input_error(path, "zlib initialisation failed");
+  struct End {
+    z_stream* z;
+    ~End() { deflateEnd(z); }
+  } end{&zs};
+  std::vector<unsigned char> out;
+  std::vector<unsigned char> buf(1 << 20);
+  std::size_t in_pos = 0;
+  int rc = Z_OK;
+  do {
+    if (zs.avail_in == 0 && in_pos < in.size()) {
+      const std::size_t chunk = std::min<std::size_t>(in.size() - in_pos, UINT_MAX);
+      zs.next_in = const_cast<Bytef*>(in.data() + in_pos);
+      zs.avail_in = static_cast<uInt>(chunk);
+      in_pos += chunk;
+    }
+    const int flush = (in_pos == in.size() && zs.avail_in == 0) ? Z_FINISH : Z_NO_FLUSH;
+    zs.next_out = buf.data();
+    zs.avail_out = static_cast<uInt>(buf.size());
+    rc = deflate(&zs, flush);
+    if (rc == Z_STREAM_ERROR) throw input_error(path, "cannot write: zlib compression failed");
+    out.insert(out.end(), buf.data(), buf.data() + (buf.size() - zs.avail_out));
+  } while (rc != Z_STREAM_END);
+  return out;
 }
 
 void write_metaimage(const std::string& path, const Volume& v, const WriteOptions& opt,

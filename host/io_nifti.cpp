@@ -331,36 +331,6 @@ Volume read_nifti(const std::string& path) {
 
 namespace {
 
-// The whole of `in` as one gzip member (zlib's window bits 15 + 16).
-std::vector<unsigned char> gzip_all(const std::string& path, const std::vector<unsigned char>& in) {
-  z_stream zs{};
-  if (deflateInit2(&zs, Z_DEFAULT_COMPRESSION, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) != Z_OK)
-    throw input_error(path, "zlib initialisation failed");
-  struct End {
-    z_stream* z;
-    ~End() { deflateEnd(z); }
-  } end{&zs};
-  std::vector<unsigned char> out;
-  std::vector<unsigned char> buf(1 << 20);
-  std::size_t in_pos = 0;
-  int rc = Z_OK;
-  do {
-    if (zs.avail_in == 0 && in_pos < in.size()) {
-      const std::size_t chunk = std::min<std::size_t>(in.size() - in_pos, UINT_MAX);
-      zs.next_in = const_cast<Bytef*>(in.data() + in_pos);
-      zs.avail_in = static_cast<uInt>(chunk);
-      in_pos += chunk;
-    }
-    const int flush = (in_pos == in.size() && zs.avail_in == 0) ? Z_FINISH : Z_NO_FLUSH;
-    zs.next_out = buf.data();
-    zs.avail_out = static_cast<uInt>(buf.size());
-    rc = deflate(&zs, flush);
-    if (rc == Z_STREAM_ERROR) throw input_error(path, "cannot write: zlib compression failed");
-    out.insert(out.end(), buf.data(), buf.data() + (buf.size() - zs.avail_out));
-  } while (rc != Z_STREAM_END);
-  return out;
-}
-
 int nifti_datatype_of(ScalarType t) {
   switch (t) {
     case ScalarType::Int8: return DT_INT8;
@@ -435,7 +405,7 @@ void write_nifti(const std::string& path, const Volume& v, const WriteOptions& o
   std::memcpy(bytes.data(), &h, sizeof h);
   const std::vector<unsigned char> samples = encode_samples(v.data, type);
   bytes.insert(bytes.end(), samples.begin(), samples.end());
-  if (gzipped) bytes = gzip_all(path, bytes);
+  if (gzipped) bytes = deflate_all(path, bytes, true);
   AtomicFile out(path);
   out.write(bytes.data(), bytes.size());
   out.commit();

@@ -118,19 +118,6 @@ void expect_same_volume(const Volume& got, const Volume& want, double geom_tol =
   }
 }
 
-// Runs `fn`, expecting an InputError whose one-line message contains all
-// of `parts`.
-template <typename Fn>
-void expect_input_error(Fn fn, std::initializer_list<std::string> parts) {
-  try {
-    fn();
-    ADD_FAILURE() << "no InputError thrown";
-  } catch (const InputError& e) {
-    const std::string msg = e.what();
-    EXPECT_EQ(msg.find('\n'), std::string::npos) << "message is not one line: " << msg;
-    for (const std::string& p : parts) EXPECT_NE(msg.find(p), std::string::npos) << "'" << p << "' not in: " << msg;
-  }
-}
 
 struct NrrdDeleter {
   void operator()(Nrrd* n) const { nrrdNix(n); }
@@ -326,11 +313,11 @@ TEST(IoParse, DimsAndVectors) {
   EXPECT_DOUBLE_EQ(s[2], 2.0);
   for (const char* bad : {"abc", "1,2", "1,2,3,4", "0,1,1", "-1,2,3", "1.5,2,3", "1,,3", "", "1,2,x",
                           "99999999999999999999999,1,1"}) {
-    expect_input_error([&] { parse_dims(bad, "--raw"); },
+    test::expect_input_error([&] { parse_dims(bad, "--raw"); },
                        {"--raw: expected X,Y,Z with positive integers, got '" + std::string(bad) + "'"});
   }
   for (const char* bad : {"abc", "1,2", "0,1,1", "-1,2,3", "nan,1,1", "inf,1,1", "1e999,1,1", "1;2;3"}) {
-    expect_input_error([&] { parse_vec3(bad, "--spacing"); }, {"--spacing:", bad});
+    test::expect_input_error([&] { parse_vec3(bad, "--spacing"); }, {"--spacing:", bad});
   }
 }
 
@@ -440,12 +427,12 @@ TEST(IoWrite, OutputTypeRoundsAndClamps) {
 TEST(IoWrite, UnsupportedExtensionAndUnwritablePlace) {
   ScratchDir dir;
   const Volume v = test_volume(ScalarType::UInt8);
-  expect_input_error([&] { write_volume(dir.file("out.xyz"), v); },
+  test::expect_input_error([&] { write_volume(dir.file("out.xyz"), v); },
                      {"out.xyz", "unsupported output extension '.xyz' (use .nrrd, .mha, .mhd, .nii, .nii.gz or .vti)"});
-  expect_input_error([&] { write_volume(dir.file("no/such/dir/out.nrrd"), v); },
+  test::expect_input_error([&] { write_volume(dir.file("no/such/dir/out.nrrd"), v); },
                      {"out.nrrd", "No such file or directory"});
   fs::create_directory(dir.file("sub.nrrd"));
-  expect_input_error([&] { write_volume(dir.file("sub.nrrd"), v); }, {"sub.nrrd", "Is a directory"});
+  test::expect_input_error([&] { write_volume(dir.file("sub.nrrd"), v); }, {"sub.nrrd", "Is a directory"});
   EXPECT_EQ(dir.listing(), std::vector<std::string>{"sub.nrrd"});
 }
 
@@ -546,37 +533,37 @@ TEST(IoNrrd, ErrorsAreOneLineAndNameTheFile) {
   };
   const std::string trunc = nrrd("trunc.nrrd", "NRRD0004\ntype: uint16\ndimension: 3\nsizes: 4 4 4\n"
                                                "endian: little\nencoding: raw\n\nabc");
-  expect_input_error([&] { read_volume(trunc); }, {trunc + ": ", "truncated"});
+  test::expect_input_error([&] { read_volume(trunc); }, {trunc + ": ", "truncated"});
   const std::string gz = nrrd("trunc_gz.nrrd", "NRRD0004\ntype: uint16\ndimension: 3\nsizes: 4 4 4\n"
                                                "endian: little\nencoding: gzip\n\nabc");
-  expect_input_error([&] { read_volume(gz); }, {gz + ": "});
+  test::expect_input_error([&] { read_volume(gz); }, {gz + ": "});
   const std::string d2 = nrrd("d2.nrrd", "NRRD0004\ntype: uint8\ndimension: 2\nsizes: 4 5\nencoding: raw\n\n");
-  expect_input_error([&] { read_volume(d2); }, {d2 + ": expected a 3-D scalar volume, found 2-D data (sizes 4 5)"});
+  test::expect_input_error([&] { read_volume(d2); }, {d2 + ": expected a 3-D scalar volume, found 2-D data (sizes 4 5)"});
   // 4-D: a sequence of frames when the last axis is a list (or time, domain, no kind), else refused.
   const std::string d4 = nrrd("d4.nrrd", "NRRD0004\ntype: uint8\ndimension: 4\nsizes: 3 4 5 6\n"
                                          "kinds: domain domain domain vector\nencoding: raw\n\n");
-  expect_input_error([&] { read_volume(d4); },
+  test::expect_input_error([&] { read_volume(d4); },
                      {"found 4-D data (sizes 3 4 5 6) whose last axis (kind vector) is not a list of frames"});
   const std::string s4 = nrrd("s4.nrrd", "NRRD0004\ntype: uint8\ndimension: 4\nsizes: 3 4 5 6\nencoding: raw\n\n");
-  expect_input_error([&] { read_volume(s4); }, {"data truncated: expected 360 bytes of raw data"});
+  test::expect_input_error([&] { read_volume(s4); }, {"data truncated: expected 360 bytes of raw data"});
   const std::string block = nrrd("block.nrrd", "NRRD0004\ntype: block\nblock size: 4\ndimension: 3\n"
                                                "sizes: 2 2 2\nendian: little\nencoding: raw\n\n");
-  expect_input_error([&] { read_volume(block); }, {block + ": unsupported NRRD type 'block'"});
+  test::expect_input_error([&] { read_volume(block); }, {block + ": unsupported NRRD type 'block'"});
   const std::string ovf = nrrd("ovf.nrrd", "NRRD0004\ntype: uint8\ndimension: 3\n"
                                            "sizes: 4294967296 4294967296 4294967296\nencoding: raw\n\n");
-  expect_input_error([&] { read_volume(ovf); },
+  test::expect_input_error([&] { read_volume(ovf); },
                      {ovf + ": sizes 4294967296 4294967296 4294967296 overflow the voxel count"});
   const std::string ovf2 = nrrd("ovf2.nrrd", "NRRD0004\ntype: float\ndimension: 3\n"
                                              "sizes: 2000000 2000000 2000000\nendian: little\nencoding: raw\n\n");
-  expect_input_error([&] { read_volume(ovf2); }, {ovf2 + ": ", "overflow"});
+  test::expect_input_error([&] { read_volume(ovf2); }, {ovf2 + ": ", "overflow"});
   const std::string big = nrrd("big.nrrd", "NRRD0004\ntype: uint8\ndimension: 3\n"
                                            "sizes: 100000 100000 1000\nencoding: raw\n\nabc");
-  expect_input_error([&] { read_volume(big); }, {big + ": ", "memory"});
+  test::expect_input_error([&] { read_volume(big); }, {big + ": ", "memory"});
   const std::string garbage = nrrd("garbage.nrrd", "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2\n");
-  expect_input_error([&] { read_volume(garbage); }, {garbage + ": "});
+  test::expect_input_error([&] { read_volume(garbage); }, {garbage + ": "});
   const std::string missing = nrrd("det.nhdr", "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\n"
                                                "data file: nothere.raw\nencoding: raw\n");
-  expect_input_error([&] { read_volume(missing); }, {missing + ": ", "nothere.raw"});
+  test::expect_input_error([&] { read_volume(missing); }, {missing + ": ", "nothere.raw"});
 }
 
 // ---- MetaImage files written by hand ----------------------------------------------------------
@@ -633,10 +620,10 @@ TEST(IoMetaImage, DetachedDataFiles) {
   // Wrong size without HeaderSize.
   write_bytes(dir.file("data/w.raw"), as_bytes(s) + "x");
   write_bytes(dir.file("w.mhd"), "NDims = 3\nDimSize = 2 2 2\nElementType = MET_FLOAT\nElementDataFile = data/w.raw\n");
-  expect_input_error([&] { read_volume(dir.file("w.mhd")); },
+  test::expect_input_error([&] { read_volume(dir.file("w.mhd")); },
                      {dir.file("w.mhd") + ": data file data/w.raw has 33 bytes, expected 32"});
   write_bytes(dir.file("m.mhd"), "NDims = 3\nDimSize = 2 2 2\nElementType = MET_FLOAT\nElementDataFile = gone.raw\n");
-  expect_input_error([&] { read_volume(dir.file("m.mhd")); }, {"m.mhd: data file ", "gone.raw", "No such file"});
+  test::expect_input_error([&] { read_volume(dir.file("m.mhd")); }, {"m.mhd: data file ", "gone.raw", "No such file"});
 }
 
 TEST(IoMetaImage, CompressedWithoutCompressedDataSize) {
@@ -659,36 +646,36 @@ TEST(IoMetaImage, ErrorsAreOneLineAndNameTheFile) {
   };
   const std::string head = "ObjectType = Image\nNDims = 3\nDimSize = 4 4 4\n";
   const std::string t = mha("t.mha", head + "ElementType = MET_UCHAR\nElementDataFile = LOCAL\nabc");
-  expect_input_error([&] { read_volume(t); }, {t + ": data truncated: expected 64 bytes, found 3"});
+  test::expect_input_error([&] { read_volume(t); }, {t + ": data truncated: expected 64 bytes, found 3"});
   const std::string foo = mha("foo.mha", head + "ElementType = MET_FOO\nElementDataFile = LOCAL\n");
-  expect_input_error([&] { read_volume(foo); }, {foo + ": unknown ElementType MET_FOO"});
+  test::expect_input_error([&] { read_volume(foo); }, {foo + ": unknown ElementType MET_FOO"});
   const std::string d2 = mha("d2.mha", "NDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n");
-  expect_input_error([&] { read_volume(d2); }, {d2 + ": expected a 3-D scalar volume, found 2-D data (DimSize 4 4)"});
+  test::expect_input_error([&] { read_volume(d2); }, {d2 + ": expected a 3-D scalar volume, found 2-D data (DimSize 4 4)"});
   const std::string rgb = mha("rgb.mha", head + "ElementNumberOfChannels = 3\nElementType = MET_UCHAR\n"
                                                 "ElementDataFile = LOCAL\n");
-  expect_input_error([&] { read_volume(rgb); }, {rgb + ": ElementNumberOfChannels = 3"});
+  test::expect_input_error([&] { read_volume(rgb); }, {rgb + ": ElementNumberOfChannels = 3"});
   const std::string list = mha("list.mhd", head + "ElementType = MET_UCHAR\nElementDataFile = LIST\na.raw\n");
-  expect_input_error([&] { read_volume(list); }, {list + ": ElementDataFile LIST/pattern not supported"});
+  test::expect_input_error([&] { read_volume(list); }, {list + ": ElementDataFile LIST/pattern not supported"});
   const std::string pat = mha("pat.mhd", head + "ElementType = MET_UCHAR\nElementDataFile = s%03d.raw 1 4 1\n");
-  expect_input_error([&] { read_volume(pat); }, {"ElementDataFile LIST/pattern not supported"});
+  test::expect_input_error([&] { read_volume(pat); }, {"ElementDataFile LIST/pattern not supported"});
   const std::string ovf = mha("ovf.mha", "NDims = 3\nDimSize = 4294967296 4294967296 4294967296\n"
                                          "ElementType = MET_UCHAR\nElementDataFile = LOCAL\n");
-  expect_input_error([&] { read_volume(ovf); }, {ovf + ": dims 4294967296x4294967296x4294967296 overflow"});
+  test::expect_input_error([&] { read_volume(ovf); }, {ovf + ": dims 4294967296x4294967296x4294967296 overflow"});
   const std::string big = mha("big.mha", "NDims = 3\nDimSize = 100000 100000 1000\n"
                                          "ElementType = MET_UCHAR\nElementDataFile = LOCAL\nabc");
-  expect_input_error([&] { read_volume(big); }, {big + ": ", "memory"});
+  test::expect_input_error([&] { read_volume(big); }, {big + ": ", "memory"});
   const std::string noend = mha("noend.mha", head + "ElementType = MET_UCHAR\n");
-  expect_input_error([&] { read_volume(noend); }, {noend + ": ", "ElementDataFile"});
+  test::expect_input_error([&] { read_volume(noend); }, {noend + ": ", "ElementDataFile"});
   const std::string bad = mha("bad.mha", "NDims = 3\nthis line has no equals sign\n");
-  expect_input_error([&] { read_volume(bad); }, {bad + ": malformed header line 2"});
+  test::expect_input_error([&] { read_volume(bad); }, {bad + ": malformed header line 2"});
   const std::string nodims = mha("nodims.mha", "NDims = 3\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n");
-  expect_input_error([&] { read_volume(nodims); }, {nodims + ": missing DimSize"});
+  test::expect_input_error([&] { read_volume(nodims); }, {nodims + ": missing DimSize"});
   const std::string corrupt = mha("corrupt.mha", head + "ElementType = MET_UCHAR\nCompressedData = True\n"
                                                         "ElementDataFile = LOCAL\nthis is not zlib data");
-  expect_input_error([&] { read_volume(corrupt); }, {corrupt + ": corrupt compressed data"});
+  test::expect_input_error([&] { read_volume(corrupt); }, {corrupt + ": corrupt compressed data"});
   const std::string spacing = mha("sp.mha", head + "ElementSpacing = 1 x 1\nElementType = MET_UCHAR\n"
                                                    "ElementDataFile = LOCAL\n");
-  expect_input_error([&] { read_volume(spacing); }, {spacing + ": ElementSpacing"});
+  test::expect_input_error([&] { read_volume(spacing); }, {spacing + ": ElementSpacing"});
 }
 
 TEST(IoMetaImage, CompressedTruncationIsReported) {
@@ -700,13 +687,13 @@ TEST(IoMetaImage, CompressedTruncationIsReported) {
   const std::string full = read_bytes(dir.file("z.mha"));
   // With CompressedDataSize the reader notices before inflating.
   write_bytes(dir.file("cut.mha"), full.substr(0, full.size() - 100));
-  expect_input_error([&] { read_volume(dir.file("cut.mha")); }, {"cut.mha: compressed data truncated"});
+  test::expect_input_error([&] { read_volume(dir.file("cut.mha")); }, {"cut.mha: compressed data truncated"});
   // Without it, inflate runs out of input.
   std::string nosize = full.substr(0, full.size() - 100);
   const auto a = nosize.find("CompressedDataSize");
   nosize.erase(a, nosize.find('\n', a) + 1 - a);
   write_bytes(dir.file("cut2.mha"), nosize);
-  expect_input_error([&] { read_volume(dir.file("cut2.mha")); }, {"cut2.mha: data truncated"});
+  test::expect_input_error([&] { read_volume(dir.file("cut2.mha")); }, {"cut2.mha: data truncated"});
 }
 
 // ---- raw -------------------------------------------------------------------------------------
@@ -738,7 +725,7 @@ TEST(IoRaw, SizeMustMatchExactly) {
   ScratchDir dir;
   write_bytes(dir.file("v.raw"), std::string(100, '\0'));
   RawSpec spec{{17, 23, 9}, ScalarType::UInt16, {1, 1, 1}, false};
-  expect_input_error([&] { read_volume(dir.file("v.raw"), spec); },
+  test::expect_input_error([&] { read_volume(dir.file("v.raw"), spec); },
                      {dir.file("v.raw") + ": file has 100 bytes, but 17x23x9 uint16 needs 7038 bytes"});
 }
 
@@ -746,17 +733,17 @@ TEST(IoRaw, SizeMustMatchExactly) {
 
 TEST(IoDispatch, UnreadablePathsAndUnknownFormats) {
   ScratchDir dir;
-  expect_input_error([&] { read_volume(dir.file("nope.nrrd")); },
+  test::expect_input_error([&] { read_volume(dir.file("nope.nrrd")); },
                      {dir.file("nope.nrrd") + ": cannot open: No such file or directory"});
-  expect_input_error([&] { read_volume(dir.path()); }, {dir.path() + ": cannot open: Is a directory"});
+  test::expect_input_error([&] { read_volume(dir.path()); }, {dir.path() + ": cannot open: Is a directory"});
   RawSpec spec{{1, 1, 1}, ScalarType::UInt8, {1, 1, 1}, false};
-  expect_input_error([&] { read_volume(dir.file("nope.raw"), spec); }, {"nope.raw: cannot open: No such file"});
+  test::expect_input_error([&] { read_volume(dir.file("nope.raw"), spec); }, {"nope.raw: cannot open: No such file"});
   write_bytes(dir.file("v.xyz"), "hello");
-  expect_input_error([&] { read_volume(dir.file("v.xyz")); },
+  test::expect_input_error([&] { read_volume(dir.file("v.xyz")); },
                      {dir.file("v.xyz") +
                       ": unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, or --raw X,Y,Z --type T)"});
   write_bytes(dir.file("empty.mha"), "");
-  expect_input_error([&] { read_volume(dir.file("empty.mha")); }, {"empty.mha: "});
+  test::expect_input_error([&] { read_volume(dir.file("empty.mha")); }, {"empty.mha: "});
   // Extensions are matched case-insensitively.
   write_volume(dir.file("UP.MHA"), test_volume(ScalarType::UInt8));
   EXPECT_EQ(read_volume(dir.file("UP.MHA")).dims, (Dims3{7, 5, 3}));
@@ -766,19 +753,19 @@ TEST(IoDispatch, EnsureDistinctOutput) {
   ScratchDir dir;
   write_bytes(dir.file("in.nrrd"), "x");
   const std::string msg = ": output would overwrite the input file";
-  expect_input_error([&] { ensure_distinct_output(dir.file("in.nrrd"), dir.file("in.nrrd")); },
+  test::expect_input_error([&] { ensure_distinct_output(dir.file("in.nrrd"), dir.file("in.nrrd")); },
                      {dir.file("in.nrrd") + msg});
   // Another spelling of the same file, a hard link and a symlink.
   const std::string other = dir.path() + "/./sub/../in.nrrd";
   fs::create_directory(dir.file("sub"));
-  expect_input_error([&] { ensure_distinct_output(dir.file("in.nrrd"), other); }, {msg});
+  test::expect_input_error([&] { ensure_distinct_output(dir.file("in.nrrd"), other); }, {msg});
   fs::create_hard_link(dir.file("in.nrrd"), dir.file("hard.nrrd"));
-  expect_input_error([&] { ensure_distinct_output(dir.file("in.nrrd"), dir.file("hard.nrrd")); }, {msg});
+  test::expect_input_error([&] { ensure_distinct_output(dir.file("in.nrrd"), dir.file("hard.nrrd")); }, {msg});
   fs::create_symlink(dir.file("in.nrrd"), dir.file("link.nrrd"));
-  expect_input_error([&] { ensure_distinct_output(dir.file("link.nrrd"), dir.file("in.nrrd")); }, {msg});
+  test::expect_input_error([&] { ensure_distinct_output(dir.file("link.nrrd"), dir.file("in.nrrd")); }, {msg});
   // A .mhd output writes <stem>.raw, which must not be the input either.
   write_bytes(dir.file("vol.raw"), "x");
-  expect_input_error([&] { ensure_distinct_output(dir.file("vol.raw"), dir.file("vol.mhd")); },
+  test::expect_input_error([&] { ensure_distinct_output(dir.file("vol.raw"), dir.file("vol.mhd")); },
                      {"vol.mhd: output's data file", "would overwrite the input file"});
   EXPECT_NO_THROW(ensure_distinct_output(dir.file("in.nrrd"), dir.file("out.nrrd")));
   EXPECT_NO_THROW(ensure_distinct_output(dir.file("in.nrrd"), dir.file("in.mha")));

@@ -8,14 +8,30 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
+#include <initializer_list>
 #include <random>
 #include <string>
 #include <vector>
 
 #include "cl_runtime.hpp"
+#include "error.hpp"
 #include "volume.hpp"
 
 namespace softshell::test {
+
+// Runs `fn`, expecting an InputError whose one-line message contains all
+// of `parts`.
+template <typename Fn>
+void expect_input_error(Fn fn, std::initializer_list<std::string> parts) {
+  try {
+    fn();
+    ADD_FAILURE() << "no InputError thrown";
+  } catch (const InputError& e) {
+    const std::string msg = e.what();
+    EXPECT_EQ(msg.find('\n'), std::string::npos) << "message is not one line: " << msg;
+    for (const std::string& p : parts) EXPECT_NE(msg.find(p), std::string::npos) << "'" << p << "' not in: " << msg;
+  }
+}
 
 // One runtime per test process, created on first use; prints the device.
 Runtime& runtime();

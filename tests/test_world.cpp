@@ -430,17 +430,6 @@ TEST_F(WorldIo, PlusTrackedFrameSequenceIsRefused) {
 
 // ---- 3D+t sequences -----------------------------------------------------------------------------
 
-template <class Fn>
-void expect_input_error(Fn fn, std::initializer_list<std::string> parts) {
-  try {
-    fn();
-    ADD_FAILURE() << "no InputError";
-  } catch (const InputError& e) {
-    const std::string msg = e.what();
-    for (const std::string& p : parts) EXPECT_NE(msg.find(p), std::string::npos) << "'" << p << "' not in: " << msg;
-  }
-}
-
 TEST_F(WorldIo, SequenceFramesAreReadOneAtATime) {
   // Three frames of 16^3 (a growing ball), a 4-D NRRD as 3D Slicer's Sequences module writes it.
   const Dims3 d{16, 16, 16};
@@ -472,19 +461,19 @@ TEST_F(WorldIo, SequenceFramesAreReadOneAtATime) {
     EXPECT_EQ(h.frames, 3u);
     EXPECT_EQ(h.dims, d);
   }
-  expect_input_error([&] { read_volume(file("seq.nrrd")); },
+  test::expect_input_error([&] { read_volume(file("seq.nrrd")); },
                      {"a sequence of 3 3-D frames of 16x16x16: choose one with --frame K (0 to 2)"});
-  expect_input_error([&] { read_volume_header(file("seq.nrrd")); }, {"choose one with --frame K"});
-  expect_input_error([&] { read_volume(file("seq.nrrd"), std::nullopt, std::size_t(3)); },
+  test::expect_input_error([&] { read_volume_header(file("seq.nrrd")); }, {"choose one with --frame K"});
+  test::expect_input_error([&] { read_volume(file("seq.nrrd"), std::nullopt, std::size_t(3)); },
                      {"--frame 3: the file holds 3 frames (0 to 2)"});
   EXPECT_EQ(read_any_header(file("seq.nrrd")).frames, 3u);
   // A 3-D file is frame 0 of one, whatever its format.
   write("one.nrrd", nrrd_header(d, sp, axes, org, "left-posterior-superior") + frames[1]);
   EXPECT_EQ(read_volume(file("one.nrrd"), std::nullopt, std::size_t(0)).voxels(), d[0] * d[1] * d[2]);
-  expect_input_error([&] { read_volume(file("one.nrrd"), std::nullopt, std::size_t(1)); },
+  test::expect_input_error([&] { read_volume(file("one.nrrd"), std::nullopt, std::size_t(1)); },
                      {"--frame 1: the file holds 1 frame (0)"});
   write_volume(file("one.mha"), read_volume(file("one.nrrd")));
-  expect_input_error([&] { read_volume(file("one.mha"), std::nullopt, std::size_t(2)); },
+  test::expect_input_error([&] { read_volume(file("one.mha"), std::nullopt, std::size_t(2)); },
                      {"--frame 2: a 3-D volume has one frame (0)"});
 
   // The command line: info counts the frames; classify --frame K gives exactly what the frame
