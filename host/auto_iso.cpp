@@ -423,4 +423,14 @@ LevelledVolume auto_iso_levelled(const Volume& v, const std::vector<std::uint8_t
   return out;
 }
 
+std::string iso_outside_data(const Volume& in, double iso) {
+  float lo = INFINITY, hi = -INFINITY;
+  for (float x : in.data) lo = std::min(lo, x), hi = std::max(hi, x);
+  if (!(lo <= hi) || (iso >= lo && iso <= hi)) return "";
+  std::ostringstream w;
+  w << "softshell: warning: --iso " << iso << " is outside the data's value range [" << lo << ", " << hi << "] ("
+    << scalar_type_name(in.source_type) << " samples); no boundary lies at that value\n";
+  return w.str();
+}
+
 }  // namespace softshell

@@ -28,6 +28,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "volume.hpp"
@@ -87,5 +88,13 @@ LevelledVolume auto_iso_levelled(const Volume& v, const std::vector<std::uint8_t
 // usable (an empty mask, a volume thinner than 3 voxels) or v~ is constant.
 double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const AutoIsoParams& params = {},
                 AutoIsoReport* report = nullptr);
+
+// The warning (one line, newline-terminated; empty: none) for an explicit
+// --iso outside the samples' values [min, max]: no boundary of the data lies
+// at that value, so the result is empty (or everything). Not an error: a
+// user may mean it. Callers (classify, figure2, and the renderers through
+// viewer::load_opacity) print it once the isovalue has passed the checks
+// that refuse it.
+std::string iso_outside_data(const Volume& in, double iso);
 
 }  // namespace softshell

@@ -173,6 +173,29 @@ TEST_F(RenderCli, RawVolumeIsClassifiedFirst) {
   EXPECT_GT(covered(read_png(file("raw.png"))), 0.05);
 }
 
+TEST_F(RenderCli, IsoOutsideTheDataWarnsInRenderAndView) {
+  // As classify warns (CliArgs.IsoOutsideTheDataWarnsOnce): an explicit
+  // --iso outside the samples' range draws nothing useful, so say so, for
+  // every renderer that classifies a raw volume, and for the viewer.
+  const std::string in = file("raw.nrrd");
+  ASSERT_EQ(run({"synthetic", "--size", "24", "-o", in, "-q"}).status, 0);  // uint8
+  for (const char* method : {"splat", "raycast"}) {
+    SCOPED_TRACE(method);
+    const RunResult r = run({"render", in, "--method", method, "--iso", "300", "-q", "-o", file("w.png"), "--size", "64x64"});
+    // The warning comes first; with nothing above the level the renderer
+    // then refuses an empty picture (exit 2), which the warning explains.
+    EXPECT_TRUE(r.status == 0 || r.status == 2) << r.err;
+    EXPECT_EQ(r.err.rfind("softshell: warning: --iso 300 is outside the data's value range [0, 255] (uint8 samples); "
+                          "no boundary lies at that value\n", 0), 0u) << r.err;
+    const RunResult ok = run({"render", in, "--method", method, "--iso", "100", "-q", "-o", file("w.png"), "--size", "64x64"});
+    EXPECT_EQ(ok.status, 0) << ok.err;
+    EXPECT_EQ(ok.err, "");
+  }
+  const RunResult v = run({"view", in, "--iso", "-5", "--frames", "1", "--screenshot", file("v.png"), "--size", "64x64"});
+  EXPECT_EQ(v.status, 0) << v.err;
+  EXPECT_NE(v.err.find("softshell: warning: --iso -5 is outside the data's value range [0, 255]"), std::string::npos) << v.err;
+}
+
 TEST_F(RenderCli, ViewerReSolveUpdatesTheClassifierInPlaceForAnIsoChange) {
   // The viewer's "re-solve" (viewer::reclassify): a new v_iso re-uses the
   // classifier (same object, no new setup) and gives the cold

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <iomanip>
+#include <iostream>
 #include <sstream>
 
 #include "auto_iso.hpp"
@@ -69,6 +70,7 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
     in.iso = std::strtod(iso_text.c_str(), &end);
     if (iso_text.empty() || *end != '\0' || !std::isfinite(in.iso))
       throw InputError("--iso: expected a number in the input's intensity units or 'auto', got '" + iso_text + "'");
+    std::cerr << iso_outside_data(in.bmode, in.iso);  // as classify warns; in.bmode: the samples as read
     in.data = mask ? std::move(filled) : std::move(v);
   }
   in.params = defaults;

@@ -144,16 +144,6 @@ std::vector<std::string> unranged_number_options(const CLI::App& sub) {
   return names;
 }
 
-std::string iso_outside_data(const Volume& in, double iso) {
-  float lo = INFINITY, hi = -INFINITY;
-  for (float x : in.data) lo = std::min(lo, x), hi = std::max(hi, x);
-  if (!(lo <= hi) || (iso >= lo && iso <= hi)) return "";
-  std::ostringstream w;
-  w << "softshell: warning: --iso " << iso << " is outside the data's value range [" << lo << ", " << hi << "] ("
-    << scalar_type_name(in.source_type) << " samples); no boundary lies at that value\n";
-  return w.str();
-}
-
 void check_output(const std::string& path, OutputKind kind, const std::string& option) {
   const std::string who = option + " " + path;
   if (path.empty()) throw InputError(option + ": expected a path, got an empty one");

@@ -59,11 +59,4 @@ enum class OutputKind {
 // outlives the call.
 void check_output(const std::string& path, OutputKind kind, const std::string& option = "-o");
 
-// The warning (one line, newline-terminated; empty: none) for an explicit
-// --iso outside the samples' values [min, max]: no boundary of the data lies
-// at that value, so the result is empty (or everything). Not an error: a
-// user may mean it. Callers print it once the isovalue has passed the checks
-// that refuse it.
-std::string iso_outside_data(const Volume& in, double iso);
-
 }  // namespace softshell::cli
