@@ -884,6 +884,29 @@ void write_volume(const std::string& path, const Volume& v, const WriteOptions& 
   }
 }
 
+std::vector<Volume> read_frames(const std::string& path) {
+  if (format_of(path) == Format::Nrrd) return io_detail::read_nrrd_frames(path);
+  std::vector<Volume> one;
+  one.push_back(read_volume(path));
+  return one;
+}
+
+void write_frames(const std::string& path, const std::vector<Volume>& frames, const WriteOptions& opt) {
+  if (frames.empty()) throw input_error(path, "cannot write: no frames");
+  if (frames.size() == 1) return write_volume(path, frames.front(), opt);
+  if (extension_of(path) != ".nrrd")
+    throw input_error(path, "a sequence of " + std::to_string(frames.size()) +
+                                " frames is written as a 4-D NRRD only: use a .nrrd output");
+  std::vector<const Volume*> list;
+  for (const Volume& f : frames) {
+    if (f.dims != frames.front().dims || f.data.size() != f.voxels() || f.voxels() == 0)
+      throw input_error(path, "cannot write: the frames differ in dims (" + dims_text(f.dims) + " and " +
+                                  dims_text(frames.front().dims) + ")");
+    list.push_back(&f);
+  }
+  io_detail::write_nrrd_frames(path, list, opt);
+}
+
 // ---- input / output identity ---------------------------------------------------
 
 std::vector<std::string> output_files(const std::string& path) {

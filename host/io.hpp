@@ -53,6 +53,10 @@ Vec3d parse_vec3(const std::string& text, const std::string& what);
 Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw = std::nullopt,
                    std::optional<std::size_t> frame = std::nullopt);
 
+// 3D+t: every frame of `path` (a 3-D file of any format is one frame), read
+// once. Throws InputError like read_volume.
+std::vector<Volume> read_frames(const std::string& path);
+
 // True when this build reads NIfTI (.nii, .nii.gz, .hdr/.img; niftilib was found).
 bool nifti_supported();
 
@@ -110,6 +114,11 @@ struct WriteOptions {
 // round to nearest and clamp to the type's range. Throws InputError for an
 // unknown extension or an unwritable place.
 void write_volume(const std::string& path, const Volume& v, const WriteOptions& opt = {});
+// Writes `frames` (one geometry, at least one) as a 4-D NRRD sequence (one
+// frame: the 3-D file write_volume writes). Only .nrrd holds a sequence:
+// another extension is an InputError naming the path; so are frames of
+// different dims.
+void write_frames(const std::string& path, const std::vector<Volume>& frames, const WriteOptions& opt = {});
 // True when write_volume knows the path's extension; the list for messages.
 bool is_volume_output(const std::string& path);
 std::string volume_output_extensions();  // ".nrrd, .mha, .mhd, .nii, .nii.gz or .vti"
@@ -244,6 +253,10 @@ Volume read_nrrd(const std::string& path, std::optional<std::size_t> frame = std
 VolumeHeader read_nrrd_header(const std::string& path, std::optional<std::size_t> frame = std::nullopt,
                               bool any_frame = false);
 void write_nrrd(const std::string& path, const Volume& v, const WriteOptions& opt);
+// Every frame of a NRRD (one for a 3-D file); `frames` of one geometry as a
+// 4-D NRRD (frame axis kind list, label "frame"; one frame: a 3-D file).
+std::vector<Volume> read_nrrd_frames(const std::string& path);
+void write_nrrd_frames(const std::string& path, const std::vector<const Volume*>& frames, const WriteOptions& opt);
 Volume read_metaimage(const std::string& path);
 // NIfTI (host/io_nifti.cpp; only when nifti_supported()).
 Volume read_nifti(const std::string& path);

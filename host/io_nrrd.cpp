@@ -624,13 +624,54 @@ Volume read_nrrd(const std::string& path, std::optional<std::size_t> frame) {
   return v;
 }
 
+std::vector<Volume> read_nrrd_frames(const std::string& path) {
+  const std::lock_guard<std::mutex> lock(teem_mutex());
+  nrrdStateVerboseIO = 0;
+  const VolumeHeader h = checked_header(path);
+  const NrrdOwned n(nrrdNew());
+  load(n.get(), path, false);
+  const unsigned dim = h.frames > 1 || n->dim == 4 ? 4u : 3u;
+  if (n->dim != dim || n->type != nrrd_type_of(h.type) || n->axis[0].size != h.dims[0] ||
+      n->axis[1].size != h.dims[1] || n->axis[2].size != h.dims[2] || (dim == 4 && n->axis[3].size != h.frames) ||
+      !n->data) {
+    throw input_error(path, "file changed while being read");
+  }
+  std::vector<Volume> frames(h.frames);
+  for (std::size_t k = 0; k < h.frames; ++k) {
+    Volume& v = frames[k];
+    v.dims = h.dims;
+    v.source_type = h.type;
+    v.spacing = h.spacing;
+    v.origin = h.origin;
+    v.frame = h.frame;
+    v.data.resize(v.voxels());
+    const std::size_t offset = k * v.voxels() * scalar_type_size(h.type);
+    decode_samples(static_cast<const unsigned char*>(n->data) + offset, v.voxels(), h.type, false, v.data.data());
+  }
+  return frames;
+}
+
 void write_nrrd(const std::string& path, const Volume& v, const WriteOptions& opt) {
+  write_nrrd_frames(path, {&v}, opt);
+}
+
+void write_nrrd_frames(const std::string& path, const std::vector<const Volume*>& frames, const WriteOptions& opt) {
+  const Volume& v = *frames.front();
   const ScalarType type = opt.type.value_or(v.source_type);
-  // Float samples are written as they are (Teem only reads the wrapped
-  // data): no second copy of the volume.
+  const std::size_t count = frames.size();
+  // Float samples of one frame are written as they are (Teem only reads the
+  // wrapped data): no second copy of the volume. A sequence's frames are
+  // laid end to end, frame slowest.
   std::vector<unsigned char> bytes;
-  if (type != ScalarType::Float32) bytes = encode_samples(v.data, type);
-  void* samples = type == ScalarType::Float32 ? const_cast<float*>(v.data.data()) : static_cast<void*>(bytes.data());
+  std::vector<float> joined;
+  const std::vector<float>* all = &v.data;
+  if (count > 1) {
+    joined.reserve(v.data.size() * count);
+    for (const Volume* f : frames) joined.insert(joined.end(), f->data.begin(), f->data.end());
+    all = &joined;
+  }
+  if (type != ScalarType::Float32) bytes = encode_samples(*all, type);
+  void* samples = type == ScalarType::Float32 ? const_cast<float*>(all->data()) : static_cast<void*>(bytes.data());
 
   AtomicFile out(path);
   {
@@ -639,10 +680,11 @@ void write_nrrd(const std::string& path, const Volume& v, const WriteOptions& op
     const NrrdWrapper n(nrrdNew());
     const IoStatePtr nio(nrrdIoStateNew());
     if (!n || !nio) throw input_error(path, "out of memory");
-    if (nrrdWrap_va(n.get(), samples, nrrd_type_of(type), 3u, v.dims[0], v.dims[1],
-                    v.dims[2]) != 0) {
-      throw input_error(path, "cannot write: " + take_biff_message());
-    }
+    const int wrapped = count > 1 ? nrrdWrap_va(n.get(), samples, nrrd_type_of(type), 4u, v.dims[0], v.dims[1],
+                                                v.dims[2], count)
+                                  : nrrdWrap_va(n.get(), samples, nrrd_type_of(type), 3u, v.dims[0], v.dims[1],
+                                                v.dims[2]);
+    if (wrapped != 0) throw input_error(path, "cannot write: " + take_biff_message());
     // The volume's world: its own space when it names one Teem knows, else
     // left-posterior-superior (ITK's physical space, what MetaImage and
     // raw inputs mean), so 3D Slicer and ITK place it the same way.
@@ -660,15 +702,26 @@ void write_nrrd(const std::string& path, const Volume& v, const WriteOptions& op
       const bool same = e && e->spacing[a] == v.spacing[a] && e->axes[a] == v.frame.axes[a];
       for (int c = 0; c < 3; ++c) dirs[a][c] = same ? e->directions[a][c] : v.spacing[a] * v.frame.axes[a][c];
     }
-    nrrdAxisInfoSet_va(n.get(), nrrdAxisInfoSpaceDirection, dirs[0], dirs[1], dirs[2]);
+    double none[NRRD_SPACE_DIM_MAX];
+    nrrdSpaceVecSetNaN(none);  // the frame axis has no direction in space
+    if (count > 1)
+      nrrdAxisInfoSet_va(n.get(), nrrdAxisInfoSpaceDirection, dirs[0], dirs[1], dirs[2], none);
+    else
+      nrrdAxisInfoSet_va(n.get(), nrrdAxisInfoSpaceDirection, dirs[0], dirs[1], dirs[2]);
     if (v.frame.measurement_frame) {
       for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) n->measurementFrame[i][j] = (*v.frame.measurement_frame)[i][j];
     }
-    const int kinds[3] = {nrrdKindSpace, nrrdKindSpace, nrrdKindSpace};
+    // A sequence's frame axis is a list (3D Slicer's Sequences module writes
+    // and reads it so), labelled "frame".
+    const int kinds[4] = {nrrdKindSpace, nrrdKindSpace, nrrdKindSpace, nrrdKindList};
     nrrdAxisInfoSet_nva(n.get(), nrrdAxisInfoKind, kinds);
-    const int centers[3] = {nrrdCenterCell, nrrdCenterCell, nrrdCenterCell};
+    const int centers[4] = {nrrdCenterCell, nrrdCenterCell, nrrdCenterCell, nrrdCenterUnknown};
     nrrdAxisInfoSet_nva(n.get(), nrrdAxisInfoCenter, centers);
+    if (count > 1) {
+      airFree(n->axis[3].label);
+      n->axis[3].label = airStrdup("frame");
+    }
     double origin[NRRD_SPACE_DIM_MAX];
     nrrdSpaceVecSetNaN(origin);
     for (int c = 0; c < 3; ++c) origin[c] = v.origin[c];

@@ -512,7 +512,10 @@ void VariationalClassifier::update(const VariationalParams& p) {
   update_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, bool warm) {
+Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, bool warm, const SequenceStart* sequence) {
+  const std::vector<float>* linear_in = sequence ? sequence->linear_in : nullptr;
+  if (linear_in && linear_in->size() != geometry_.voxels())
+    throw std::invalid_argument("sequence start has another voxel count than the volume");
   if (init && init->dims != geometry_.dims)
     throw std::invalid_argument("initial opacity has other dims than the volume");
   if (sharpened_) {
@@ -532,8 +535,9 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
   // the last solution: a re-solve then equals a cold classification.
   SolveReport local;
   if (!report) report = &local;
-  std::vector<float> u = steps > 0 ? mg_->solve(report, nullptr, false, loose)
-                                   : mg_->solve(report, init ? &init->data : nullptr, warm);
+  std::vector<float> u = steps > 0 ? mg_->solve(report, linear_in, false, loose)
+                                   : mg_->solve(report, init ? &init->data : linear_in, warm);
+  if (sequence && sequence->linear_out) *sequence->linear_out = u;
   double crest = 0;
   // A linear solve that did not converge is reported as it is: sharpening
   // would only spend more cycles on it.
@@ -590,13 +594,13 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
 
 Volume classify_variational(Runtime& rt, const Volume& v, const VariationalParams& params, const SolverParams& sp,
                             SolveReport* report, const Volume* init, const std::vector<std::uint8_t>* mask,
-                            ClassifyTiming* timing) {
+                            ClassifyTiming* timing, const SequenceStart* sequence) {
   if (init && init->dims != v.dims) throw std::invalid_argument("initial opacity has other dims than the volume");
   std::optional<progress::Stage> setup(std::in_place, "setup (lowpass, gradients, system, levels)");
   VariationalClassifier c(rt, v, params, sp, mask);
   setup.reset();
   const auto t1 = std::chrono::steady_clock::now();
-  Volume u = c.solve(report, init);
+  Volume u = c.solve(report, init, false, sequence);
   if (timing) {
     timing->setup = c.setup_seconds();
     timing->solve = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();

@@ -312,6 +312,18 @@ std::vector<float> solve(DeviceSystem& fine, const SolverParams& sp, SolveReport
 // (docs/numerics.md, "Re-solving"). `v` is in its own intensity units;
 // params.v_iso is normalised (IntensityMap::to_unit). With a `mask`, pass the
 // volume through fill_unscanned first (see classify_variational).
+// A 3D+t warm start (classify over a sequence, docs/formats.md): the linear
+// solve starts from `linear_in` (the previous frame's linear solution, one
+// float per voxel) instead of full multigrid, with sharpening too (unlike
+// `init`), and `linear_out` receives this solve's linear solution for the
+// next frame. With sharpening the result then differs from a cold solve by
+// what the loose linear tolerance lets through (tested: within the solver's
+// tolerance of the cold frame). Either may be null.
+struct SequenceStart {
+  const std::vector<float>* linear_in = nullptr;
+  std::vector<float>* linear_out = nullptr;
+};
+
 class VariationalClassifier {
  public:
   VariationalClassifier(Runtime& rt, const Volume& v, const VariationalParams& params, const SolverParams& sp = {},
@@ -330,7 +342,9 @@ class VariationalClassifier {
   // `init` when given, else from the previous solution when `warm`, else cold.
   // With sharpening (the default) every solve starts cold: `init` and `warm`
   // apply to the linear functional only (sharpen_iterations 0).
-  Volume solve(SolveReport* report = nullptr, const Volume* init = nullptr, bool warm = false);
+  // `sequence`: a 3D+t warm start (SequenceStart).
+  Volume solve(SolveReport* report = nullptr, const Volume* init = nullptr, bool warm = false,
+               const SequenceStart* sequence = nullptr);
   // The factor the last solve scaled u by (u_ind from the data, max_gain).
   double gain() const { return gain_; }
   double setup_seconds() const { return setup_seconds_; }    // the constructor, hierarchy included
@@ -361,6 +375,7 @@ struct ClassifyTiming {
 };
 Volume classify_variational(Runtime& rt, const Volume& v, const VariationalParams& params, const SolverParams& sp,
                             SolveReport* report = nullptr, const Volume* init = nullptr,
-                            const std::vector<std::uint8_t>* mask = nullptr, ClassifyTiming* timing = nullptr);
+                            const std::vector<std::uint8_t>* mask = nullptr, ClassifyTiming* timing = nullptr,
+                            const SequenceStart* sequence = nullptr);
 
 }  // namespace softshell

@@ -102,9 +102,9 @@ TEST_F(CliArgs, EveryFloatOptionOfEveryCommandRefusesNanAndInfinityNamingItsRang
     }
   }
 #ifdef SOFTSHELL_HAVE_VIEWER
-  EXPECT_EQ(checked, 55);  // classify alone has 26 (--small-volume the 26th); view --overlay; evaluate --visible-db
+  EXPECT_EQ(checked, 57);  // classify alone has 26 (--small-volume the 26th); view --overlay; evaluate --visible-db; phantom --turn, --drift
 #else
-  EXPECT_EQ(checked, 41);  // without render, view, figure5, figure6
+  EXPECT_EQ(checked, 43);  // without render, view, figure5, figure6
 #endif
 }
 

@@ -84,6 +84,50 @@ std::array<int, 4> covered_box(const Image& img) {
   return b;
 }
 
+TEST_F(RenderCli, ViewerPlaysAnOpacitySequence) {
+  // Three frames of a shell moving 4 voxels along x per frame, as classify
+  // writes a sequence (a 4-D NRRD). The camera is fitted on the start frame;
+  // playing (one sequence frame per drawn frame) to frame 2 moves the drawn
+  // shell right on the screen by about 8 voxels' worth.
+  const Volume shell = shell_volume(32);
+  std::vector<Volume> frames;
+  for (int k = 0; k < 3; ++k) {
+    Volume f = shell;
+    for (std::size_t z = 0; z < f.dims[2]; ++z)
+      for (std::size_t y = 0; y < f.dims[1]; ++y)
+        for (std::size_t x = 0; x < f.dims[0]; ++x)
+          f.at(x, y, z) = x >= std::size_t(4 * k) ? shell.at(x - std::size_t(4 * k), y, z) : 0.0f;
+    frames.push_back(std::move(f));
+  }
+  const std::string seq = file("useq.nrrd");
+  write_frames(seq, frames);
+  const auto shot = [&](const std::vector<std::string>& extra, const std::string& name) {
+    std::vector<std::string> args{"view", seq, "--size", "320x240", "-q", "--screenshot", file(name)};
+    args.insert(args.end(), extra.begin(), extra.end());
+    const RunResult r = run(args);
+    EXPECT_EQ(r.status, 0) << r.err;
+    return read_png(file(name));
+  };
+  const Image f0 = shot({"--frames", "1"}, "f0.png");
+  const Image f2 = shot({"--frames", "2", "--play", "30"}, "f2.png");
+  const auto b0 = covered_box(f0), b2 = covered_box(f2);
+  ASSERT_GE(b0[2], 0);
+  ASSERT_GE(b2[2], 0);
+  EXPECT_GT(b2[0] - b0[0], 10) << "left edge " << b0[0] << " -> " << b2[0];
+  EXPECT_GT(b2[2] - b0[2], 10) << "right edge " << b0[2] << " -> " << b2[2];
+  // Starting on frame 2 (camera fitted there) draws what frame 2 is.
+  EXPECT_GT(covered(shot({"--frames", "1", "--frame", "2"}, "s2.png")), 0.02);
+  expect_one_line_error(run({"view", seq, "--frame", "3", "--frames", "1", "--screenshot", file("x.png")}),
+                        {"--frame 3: the file holds 3 frames (0 to 2)"});
+  // A sequence of raw frames: one frame, or classify first.
+  ASSERT_EQ(run({"phantom", "--size", "24", "--frames", "2", "-o", file("p"), "-q"}).status, 0);
+  expect_one_line_error(run({"view", file("p/volume.nrrd"), "--frames", "1", "--screenshot", file("x.png")}),
+                        {"a sequence of 2 raw 3-D frames: classify it first"});
+  const RunResult one = run({"view", file("p/volume.nrrd"), "--frame", "1", "--frames", "1", "--size", "160x120",
+                             "--screenshot", file("r1.png"), "-q"});
+  EXPECT_EQ(one.status, 0) << one.err;
+}
+
 TEST_F(RenderCli, ViewerStartsInEachRendererAndTheyLineUp) {
   const std::string in = file("u.nrrd");
   write_volume(in, shell_volume(24));

@@ -486,9 +486,91 @@ TEST_F(WorldIo, SequenceFramesAreReadOneAtATime) {
   r = run({"classify", file("one.nrrd"), "--iso", "110", "--mask", "none", "-o", file("u_one.nrrd")});
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_EQ(read_volume(file("u1.nrrd")).data, read_volume(file("u_one.nrrd")).data);
-  r = run({"classify", file("seq.nrrd"), "--iso", "110", "-o", file("u.nrrd")});
-  expect_one_line_error(r, {"seq.nrrd: a sequence of 3 3-D frames of 16x16x16: choose one with --frame K (0 to 2)"});
-  EXPECT_FALSE(fs::exists(file("u.nrrd")));
+  // Without --frame classify takes every frame and writes a 4-D NRRD; each
+  // frame (cold, the default) is exactly what --frame K gives.
+  r = run({"classify", file("seq.nrrd"), "--iso", "110", "--mask", "none", "-o", file("u.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("sequence 3 frames of 16x16x16, warm start off"), std::string::npos) << r.out;
+  const std::vector<Volume> us = read_frames(file("u.nrrd"));
+  ASSERT_EQ(us.size(), 3u);
+  EXPECT_EQ(us[1].data, read_volume(file("u1.nrrd")).data);
+  for (int a = 0; a < 3; ++a)  // the input's geometry on every frame
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(us[0].frame.axes[a][c], axes[a][c], 1e-12);
+  EXPECT_EQ(us[2].origin, org);
+  // A 4-D output needs NRRD: refused before any work, nothing written.
+  r = run({"classify", file("seq.nrrd"), "--iso", "110", "-o", file("u.mha")});
+  expect_one_line_error(r, {"is a sequence of 3 frames, written as a 4-D NRRD only: use a .nrrd output"});
+  EXPECT_FALSE(fs::exists(file("u.mha")));
+  expect_one_line_error(run({"classify", file("seq.nrrd"), "--iso", "110", "--init", file("u1.nrrd"), "-o", file("v.nrrd")}),
+                        {"--init: not with a sequence"});
+}
+
+TEST_F(WorldIo, MovingPhantomSequenceIsClassifiedWithAndWithoutWarmStart) {
+  // softshell phantom --frames: the scene drifts 12 mm along x over 4 frames
+  // (no turn): the sphere's centroid moves by that, frame to frame.
+  RunResult r = run({"phantom", "--shape", "sphere", "--size", "24", "--frames", "4", "--turn", "0", "--drift", "12",
+                     "-o", file("p"), "-q"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const std::vector<Volume> labels = read_frames(file("p/labels.nrrd"));
+  const std::vector<Volume> bmode = read_frames(file("p/volume.nrrd"));
+  ASSERT_EQ(labels.size(), 4u);
+  ASSERT_EQ(read_frames(file("p/truth_sdf.nrrd")).size(), 4u);
+  const auto centroid_x = [](const Volume& l) {
+    double sx = 0, n = 0;
+    for (std::size_t z = 0; z < l.dims[2]; ++z)
+      for (std::size_t y = 0; y < l.dims[1]; ++y)
+        for (std::size_t x = 0; x < l.dims[0]; ++x)
+          if (l.at(x, y, z) == 1.0f) sx += double(x), n += 1;
+    return n > 0 ? sx / n * l.spacing[0] : 0.0;
+  };
+  const double step = 12.0 / 3.0;  // mm per frame
+  for (int k = 1; k < 4; ++k) {
+    SCOPED_TRACE(k);
+    EXPECT_NEAR(centroid_x(labels[k]) - centroid_x(labels[k - 1]), step, 0.2 * step);
+    EXPECT_NE(bmode[k].data, bmode[k - 1].data);
+  }
+  // Every frame classified, cold and warm; warm frames land within the
+  // solver's tolerance of the cold ones (sharpening's loose linear solve lets
+  // a little through: the largest difference is checked, and most voxels agree).
+  r = run({"classify", file("p/volume.nrrd"), "--iso", "auto", "-o", file("cold.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  r = run({"classify", file("p/volume.nrrd"), "--iso", "auto", "--warm-start", "on", "-o", file("warm.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("iterations (warm)"), std::string::npos) << r.out;
+  const std::vector<Volume> cold = read_frames(file("cold.nrrd")), warm = read_frames(file("warm.nrrd"));
+  ASSERT_EQ(cold.size(), 4u);
+  ASSERT_EQ(warm.size(), 4u);
+  EXPECT_EQ(warm[0].data, cold[0].data);  // frame 0 starts cold either way
+  for (int k = 1; k < 4; ++k) {
+    SCOPED_TRACE(k);
+    std::size_t differ = 0;
+    float worst = 0;
+    for (std::size_t i = 0; i < cold[k].voxels(); ++i) {
+      const float d = std::fabs(warm[k].data[i] - cold[k].data[i]);
+      worst = std::max(worst, d);
+      differ += d > 0.05f;
+    }
+    EXPECT_LT(double(differ), 0.01 * double(cold[k].voxels())) << "worst " << worst;
+  }
+  // On a still scene (same speckle in every frame) the warm start saves
+  // iterations: the frames' solver counts as the report prints them.
+  r = run({"phantom", "--size", "48", "--frames", "3", "--turn", "0", "--drift", "0", "--frame-speckle", "same", "-o",
+           file("still"), "-q"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const auto iterations = [](const std::string& out, int k) {
+    const std::size_t at = out.find("frame " + std::to_string(k) + ": iso ");
+    const std::size_t comma = out.find(", ", at);
+    return at == std::string::npos ? -1 : std::atoi(out.c_str() + comma + 2);
+  };
+  const RunResult c = run({"classify", file("still/volume.nrrd"), "--iso", "auto", "-o", file("sc.nrrd")});
+  const RunResult w = run({"classify", file("still/volume.nrrd"), "--iso", "auto", "--warm-start", "on", "-o", file("sw.nrrd")});
+  ASSERT_EQ(c.status, 0) << c.err;
+  ASSERT_EQ(w.status, 0) << w.err;
+  for (int k = 1; k < 3; ++k) {
+    SCOPED_TRACE(c.out + w.out);
+    ASSERT_GT(iterations(c.out, k), 0);
+    EXPECT_LT(iterations(w.out, k), iterations(c.out, k));
+  }
 }
 
 TEST_F(WorldIo, MaskInitAndTruthPlacedElsewhereAreNamedInAWarning) {

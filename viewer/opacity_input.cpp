@@ -24,9 +24,39 @@ bool looks_like_opacity(const Volume& v) {
 }
 
 OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, const std::string& iso_text,
-                          const VariationalParams* weights) {
+                          const VariationalParams* weights, std::optional<std::size_t> frame) {
   OpacityInput in;
-  Volume v = read_volume(path);
+  Volume v;
+  if (const std::size_t frames = read_any_header(path).frames; frames > 1) {
+    // 3D+t: an opacity sequence is played (every frame kept); a raw one
+    // needs a frame chosen, classified alone.
+    const std::string range = " (0 to " + std::to_string(frames - 1) + ")";
+    if (frame && *frame >= frames)
+      throw input_error(path, "--frame " + std::to_string(*frame) + ": the file holds " + std::to_string(frames) +
+                                  " frames" + range);
+    std::vector<Volume> all = read_frames(path);
+    for (const Volume& f : all)
+      require_finite(f, path, "replace them first (e.g. softshell lowpass IN --sigma 0 --replace-non-finite 0 -o OUT)");
+    const bool opacity = kind != InputKind::Raw && std::all_of(all.begin(), all.end(), looks_like_opacity);
+    if (opacity) {
+      in.frame = frame.value_or(0);
+      in.u = all[in.frame];
+      in.sequence = std::move(all);
+      in.note = "opacity sequence " + path + ": " + std::to_string(frames) + " frames, frame " +
+                std::to_string(in.frame);
+      return in;
+    }
+    if (kind == InputKind::Opacity)
+      throw input_error(path, "not an opacity sequence (expected float samples in [0, 1] in every frame); drop "
+                              "--opacity to classify one frame");
+    if (!frame)
+      throw input_error(path, "a sequence of " + std::to_string(frames) + " raw 3-D frames: classify it first "
+                              "(softshell classify " + path + " --iso auto -o U.nrrd, then view U.nrrd), or choose "
+                              "one frame with --frame K" + range);
+    v = std::move(all[*frame]);
+  } else {
+    v = read_volume(path, std::nullopt, frame);
+  }
   require_finite(v, path, "replace them first (e.g. softshell lowpass IN --sigma 0 --replace-non-finite 0 -o OUT)");
   const bool opacity = kind == InputKind::Opacity || (kind == InputKind::Auto && looks_like_opacity(v));
   if (opacity) {

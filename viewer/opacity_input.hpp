@@ -40,6 +40,11 @@ struct OpacityInput {
   // parameters (v_iso, alpha, gamma, omega, delta, epsilon) updates it in
   // place; beta or the lowpasses rebuild it.
   std::shared_ptr<VariationalClassifier> classifier;
+  // A 3D+t opacity sequence (a 4-D NRRD of u, as `classify` writes one):
+  // every frame's u; `u` is frame `frame`. Empty: one volume.
+  std::vector<Volume> sequence;
+  std::vector<Volume> bmode_sequence;  // the B-mode frames behind it (`view --volume`), or empty
+  std::size_t frame = 0;
 };
 
 // Reads `path` and returns its opacity (see above). `iso` is "auto" or a
@@ -48,8 +53,12 @@ struct OpacityInput {
 // `kind`.
 // `weights`: the classification parameters other than v_iso (default:
 // VariationalParams{} with sigma 1 mm, as classify's defaults).
+// A 3D+t file (a 4-D NRRD): an opacity sequence is read whole (`sequence`),
+// starting on `frame` (default 0); a sequence of raw frames needs `frame`,
+// which is then classified alone.
 OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, const std::string& iso = "auto",
-                          const VariationalParams* weights = nullptr);
+                          const VariationalParams* weights = nullptr,
+                          std::optional<std::size_t> frame = std::nullopt);
 
 // Re-solves with new parameters (normalised v_iso), warm-starting from
 // `init` when given. Re-uses in.classifier when only pointwise parameters

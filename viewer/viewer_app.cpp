@@ -124,6 +124,7 @@ class ViewerApp {
     if (o.background)
       settings_.background = {float((*o.background)[0]), float((*o.background)[1]), float((*o.background)[2])};
     std::snprintf(save_prefix_, sizeof save_prefix_, "%s", "softshell-view");
+    if (o.play_fps > 0) playing_ = true, play_fps_ = float(o.play_fps);
   }
 
   int run() {
@@ -259,6 +260,41 @@ class ViewerApp {
     resolve_pending_ = false;
   }
 
+  // 3D+t: show frame k of the opacity sequence (new splats, mesh, ray
+  // caster and slices; the splat renderer's buffers are re-used).
+  void set_frame(std::size_t k) {
+    if (input_.sequence.empty() || k >= input_.sequence.size() || solving_.valid()) return;
+    input_.frame = k;
+    input_.u.data = input_.sequence[k].data;
+    if (k < input_.bmode_sequence.size()) input_.bmode.data = input_.bmode_sequence[k].data;
+    upload_u();
+    regenerate();
+    mesh_dirty_ = caster_dirty_ = slices_dirty_ = true;
+    ++u_version_;
+    last_frame_switch_ = Clock::now();
+  }
+
+  // Playing: the next frame once 1 / fps has passed (scripted runs: every
+  // drawn frame).
+  void advance_sequence() {
+    if (input_.sequence.empty() || !playing_ || play_fps_ <= 0) return;
+    if (o_.frames == 0 && since(last_frame_switch_) < 1.0 / play_fps_) return;
+    set_frame((input_.frame + 1) % input_.sequence.size());
+  }
+
+  void sequence_controls() {
+    int k = int(input_.frame);
+    const int n = int(input_.sequence.size());
+    ImGui::Text("frame %d (0 to %d)", k, n - 1);
+    if (ImGui::SliderInt("frame", &k, 0, n - 1)) set_frame(std::size_t(k));
+    if (ImGui::Button(playing_ ? "pause" : "play")) playing_ = !playing_, last_frame_switch_ = Clock::now();
+    ImGui::SameLine();
+    if (ImGui::Button("<")) set_frame((input_.frame + std::size_t(n) - 1) % std::size_t(n));
+    ImGui::SameLine();
+    if (ImGui::Button(">")) set_frame((input_.frame + 1) % std::size_t(n));
+    ImGui::SliderFloat("frames/s", &play_fps_, 1.0f, 30.0f, "%.0f");
+  }
+
   static bool same_params(const VariationalParams& a, const VariationalParams& b) {
     return a.v_iso == b.v_iso && a.alpha == b.alpha && a.beta == b.beta && a.gamma == b.gamma && a.omega == b.omega &&
            a.delta == b.delta && a.epsilon == b.epsilon && a.kappa == b.kappa && a.sigma_mm == b.sigma_mm;
@@ -283,6 +319,7 @@ class ViewerApp {
 
   void update() {
     if (solving_.valid() && solving_.wait_for(std::chrono::seconds(0)) == std::future_status::ready) update_solve();
+    advance_sequence();
     ImGuiIO& io = ImGui::GetIO();
     if (!io.WantCaptureMouse) {
       if (io.MouseDown[0]) camera_.rotate(io.MouseDelta.x, io.MouseDelta.y);
@@ -607,6 +644,8 @@ class ViewerApp {
     ImGui::TextDisabled("drag: rotate, right-drag: pan, wheel: zoom\nclick a slice: move the cursor, wheel: page\nS: screenshot, R: reset view, Esc: quit\naxes: x red, y green, z (depth) blue");
     if (!status_.empty()) ImGui::TextWrapped("%s", status_.c_str());
 
+    if (!input_.sequence.empty() && ImGui::CollapsingHeader("Sequence", ImGuiTreeNodeFlags_DefaultOpen))
+      sequence_controls();
     if (ImGui::CollapsingHeader("Data and isovalue", ImGuiTreeNodeFlags_DefaultOpen)) histogram();
 
     if (ImGui::CollapsingHeader("Classification", ImGuiTreeNodeFlags_DefaultOpen)) classification();
@@ -1053,6 +1092,10 @@ class ViewerApp {
   std::optional<RayCaster> caster_;
   bool caster_dirty_ = true;
   int u_version_ = 0;
+  // 3D+t playback
+  bool playing_ = false;
+  float play_fps_ = 10.0f;
+  Clock::time_point last_frame_switch_ = Clock::now();
   float ray_cut_ = 0.2f;  // the splats' epsilon, as `render --method raycast`
   std::vector<float> caster_key_, ray_key_;
   GLuint quad_program_ = 0, quad_vao_ = 0, ray_texture_ = 0;

@@ -42,6 +42,10 @@ struct ViewerOptions {
   // From a parameters file: camera distance (mm), light AZ,EL, colours R,G,B.
   std::optional<float> distance;
   std::optional<std::vector<double>> light, colour, background;
+  // A 3D+t opacity sequence: play it at this many frames per second from
+  // the start (0: paused; the panel's frame slider and play button);
+  // with `frames` (scripted), one sequence frame per drawn frame.
+  double play_fps = 0;
 };
 
 // Runs until the window closes, Esc, or `frames` frames. Returns 0.

@@ -48,6 +48,17 @@ struct ClassifyOptions {
   std::string scale_text;          // for the report, when the length scales shrank
   RawOptions raw;
   NonFiniteOption non_finite;
+  std::string warm_start = "off";  // 3D+t: on, each frame's linear solve starts from the previous frame's
+  // 3D+t (run_sequence): one frame's classification hands its results here
+  // instead of writing and printing them; null for a 3-D classification.
+  struct FrameHooks {
+    Runtime* rt = nullptr;      // the sequence's device, set up once
+    SequenceStart start;        // the warm start (variational)
+    Volume* u = nullptr;        // the frame's opacity
+    SolveReport* report = nullptr;
+    double* iso = nullptr;      // the isovalue used (file units)
+  };
+  FrameHooks* hooks = nullptr;
 };
 
 // A number, or nullopt for "auto".
@@ -182,6 +193,11 @@ int run_levoy(const ClassifyOptions& o, Runtime& rt, const Volume& in, double is
   if (!mask.scanned.empty())
     for (std::size_t i = 0; i < u.data.size(); ++i)
       if (!mask.scanned[i]) u.data[i] = 0.0f;
+  if (o.hooks) {
+    *o.hooks->u = std::move(u);
+    if (o.hooks->iso) *o.hooks->iso = iso;
+    return 0;
+  }
   write_opacity(o, u);
   if (!o.quiet) {
     std::size_t drawn = 0;
@@ -231,8 +247,9 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
   }
   SolveReport report;
   ClassifyTiming timing;
-  const Volume u = classify_variational(rt, in, p, sp, &report, init ? &*init : nullptr,
-                                       mask.scanned.empty() ? nullptr : &mask.scanned, &timing);
+  Volume u = classify_variational(rt, in, p, sp, &report, init ? &*init : nullptr,
+                                 mask.scanned.empty() ? nullptr : &mask.scanned, &timing,
+                                 o.hooks ? &o.hooks->start : nullptr);
   auto history = [&] {
     std::ostringstream s;
     s << std::scientific << std::setprecision(2);
@@ -245,6 +262,12 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
         << report.residuals.back() << " after " << report.cycles << " iterations (--tol " << sp.tol
         << "); nothing written; try --max-cycles, or check the parameters (history:" << history() << ")";
     throw NotConvergedError(msg.str());
+  }
+  if (o.hooks) {
+    *o.hooks->u = std::move(u);
+    if (o.hooks->report) *o.hooks->report = report;
+    if (o.hooks->iso) *o.hooks->iso = iso;
+    return 0;
   }
   write_opacity(o, u);
   if (!o.quiet) {
@@ -301,6 +324,76 @@ ClassifyOptions with_params_file(ClassifyOptions o) {
   return o;
 }
 
+int run_classify(const ClassifyOptions& given_options);
+
+// Every frame of a 3D+t sequence (docs/formats.md, "3D+t sequences"): each
+// frame classified as `classify --frame K` would (its own mask, near field
+// and automatic isovalue), on one device, the linear solve warm-started from
+// the previous frame's (--warm-start on); the frames written as one 4-D NRRD
+// at the end (atomically: an interrupted run leaves no output).
+int run_sequence(const ClassifyOptions& o, const VolumeHeader& head, Clock::time_point t0) {
+  const std::size_t n = head.frames;
+  std::string ext = o.out.size() >= 5 ? o.out.substr(o.out.size() - 5) : o.out;
+  for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (ext != ".nrrd")
+    throw InputError("-o " + o.out + ": " + o.in + " is a sequence of " + std::to_string(n) +
+                     " frames, written as a 4-D NRRD only: use a .nrrd output, or --frame K for one frame");
+  if (!o.init.empty())
+    throw InputError("--init: not with a sequence (each frame starts from the previous one; --warm-start off for "
+                     "cold starts), or choose one frame with --frame K");
+  const bool warm = o.warm_start == "on" && o.method == "variational";
+  const progress::Stage command("classify " + std::to_string(n) + " frames");
+  Runtime rt(o.device);
+  std::vector<Volume> us(n);
+  std::vector<float> linear, next_linear;
+  std::vector<double> isos(n, 0.0), secs(n, 0.0);
+  std::vector<int> iterations(n, 0);
+  for (std::size_t k = 0; k < n; ++k) {
+    const auto tk = Clock::now();
+    const progress::Stage frame("frame " + std::to_string(k + 1) + "/" + std::to_string(n));
+    ClassifyOptions f = o;
+    f.raw.frame = k;
+    f.quiet = true;
+    ClassifyOptions::FrameHooks h;
+    SolveReport report;
+    h.rt = &rt;
+    h.u = &us[k];
+    h.report = &report;
+    h.iso = &isos[k];
+    h.start.linear_in = warm && k > 0 ? &linear : nullptr;
+    h.start.linear_out = warm ? &next_linear : nullptr;
+    f.hooks = &h;
+    run_classify(f);
+    linear.swap(next_linear);
+    secs[k] = seconds_since(tk);
+    iterations[k] = report.cycles;
+    if (!o.quiet)
+      std::cout << std::fixed << std::setprecision(3) << "  frame " << k << ": iso " << std::setprecision(2) << isos[k]
+                << ", " << report.cycles << " iterations" << (warm && k > 0 ? " (warm)" : "") << ", "
+                << std::setprecision(3) << secs[k] << " s\n"
+                << std::flush;
+  }
+  {
+    const progress::Stage stage("write");
+    WriteOptions w;
+    w.type = ScalarType::Float32;
+    w.compress = o.compress;
+    write_frames(o.out, us, w);
+  }
+  if (!o.quiet) {
+    double total = 0;
+    for (double t : secs) total += t;
+    const auto [lo, hi] = std::minmax_element(isos.begin(), isos.end());
+    std::cout << std::fixed << std::setprecision(3) << "classify (" << o.method << ") " << o.in << " -> " << o.out
+              << '\n'
+              << "  sequence " << n << " frames of " << dims_text(head.dims) << ", warm start "
+              << (warm ? "on" : "off") << ", iso " << std::setprecision(2) << *lo << " to " << *hi << '\n'
+              << std::setprecision(3) << "  time     " << total / double(n) << " s per frame (" << std::setprecision(2)
+              << double(n) / total << " frames/s), total " << std::setprecision(3) << seconds_since(t0) << " s\n";
+  }
+  return 0;
+}
+
 int run_classify(const ClassifyOptions& given_options) {
   const auto t0 = Clock::now();
   // The parameters file first; then the length scales may shrink with a small volume.
@@ -341,6 +434,11 @@ int run_classify(const ClassifyOptions& given_options) {
   ensure_distinct_outputs({o.in, mask_file, o.init, o.params}, {o.out});
   check_output(o.out, OutputKind::Volume);  // before any work: a typo costs nothing
   const auto raw = o.raw.spec();
+  // A 3D+t sequence without --frame: every frame (run_sequence).
+  if (!o.hooks && !raw && !o.raw.frame) {
+    const VolumeHeader any = read_any_header(o.in);
+    if (any.frames > 1) return run_sequence(o, any, t0);
+  }
   // The header first: sizes, data files, the lowpasses' widths and the
   // memory the classifier needs are all checked before a sample is read.
   const VolumeHeader head = read_volume_header(o.in, raw, o.raw.frame);
@@ -370,9 +468,11 @@ int run_classify(const ClassifyOptions& given_options) {
   } else {
     check_lowpass_sigma(o.sigma.value_or(0.0), head.spacing, "--sigma");
   }
-  const progress::Stage command("classify");
+  std::optional<progress::Stage> command;
+  if (!o.hooks) command.emplace("classify");
   std::optional<progress::Stage> step(std::in_place, "device");
-  Runtime rt(o.device);
+  std::optional<Runtime> own_rt;
+  Runtime& rt = o.hooks && o.hooks->rt ? *o.hooks->rt : own_rt.emplace(o.device);
   step.emplace("read");
   // A tolerance below 1e-4 is reached by float64 refinement (host/multigrid.cpp).
   check_classify_memory(rt, o.in, head.dims, variational ? Classifier::Variational : Classifier::Levoy,
@@ -654,6 +754,12 @@ void add_classify_command(CLI::App& app, Action& action) {
   g->add_option("--init", o->init,
                 "Warm start from this opacity volume (the linear functional only: with --sharpen > 0, the default, "
                 "every solve starts cold so the result does not depend on the start)");
+  g->add_option("--warm-start", o->warm_start,
+                "A 3D+t sequence (a 4-D NRRD, every frame classified when no --frame is given): on, each frame's "
+                "solve starts from the previous frame's linear solution; off, every frame from full multigrid, which "
+                "needs fewer iterations on a moving scene (docs/formats.md)")
+      ->capture_default_str()
+      ->check(one_of({"on", "off"}));
   g->add_flag("--stats", o->stats, "Print the residual history");
   auto* lg = sub->add_option_group("levoy", "Levoy's classifier");
   lg->add_option("--thickness", o->thickness, "Transition thickness r in voxels")

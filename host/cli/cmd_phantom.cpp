@@ -35,7 +35,24 @@ struct PhantomOptions {
   // apply to --physics other than default).
   std::vector<std::string> fixed_physics_options;
   bool fov_given = false;
+  // 3D+t: frames > 1 writes 4-D sequences of a moving scene.
+  int frames = 1;
+  double turn_deg = 10, drift_mm = 3;
+  std::string frame_speckle = "new";  // new: seed + k per frame; same: the seed for every frame
 };
+
+// The pose of frame k of n: the scene turns by `turn` degrees about the
+// beam (yaw) and drifts `drift` mm along x over the sequence, centred on
+// the base pose, at a constant rate.
+PhantomPhysics frame_physics(const PhantomPhysics& base, int k, int n, double turn, double drift) {
+  PhantomPhysics p = base;
+  const double t = n > 1 ? double(k) / double(n - 1) - 0.5 : 0.0;
+  p.yaw_deg = base.yaw_deg + turn * t;
+  if (p.yaw_deg > 180) p.yaw_deg -= 360;
+  if (p.yaw_deg < -180) p.yaw_deg += 360;
+  p.shift_mm[0] = base.shift_mm[0] + drift * t;
+  return p;
+}
 
 // The physics parameters for the console, a few to a line.
 std::string physics_summary(const PhantomPhysics& p) {
@@ -116,6 +133,24 @@ int run_phantom(PhantomOptions o) {
   } else if (!o.physics_set.empty()) {
     throw InputError("--physics-set needs --physics NAME");
   }
+  if (o.frames > 1) {
+    // A moving scene needs the physics in mm (its pose); without --physics
+    // the shape's own preset.
+    if (!o.params.physics) {
+      if (!o.physics.empty() || !o.fixed_physics_options.empty())
+        throw InputError("--frames: a moving scene is posed by the physics in mm: use --physics NAME (not default), "
+                         "not the fixed physics' options");
+      o.physics = o.params.shape == PhantomShape::Face ? "obstetric" : o.params.shape == PhantomShape::Spine ? "spine" : "clean";
+      o.params.physics_name = o.physics;
+      o.params.physics = phantom_physics(o.physics, o.params.shape, o.params.seed);
+      if (!o.dims.empty()) throw InputError("--dims cannot be combined with --frames (cubic volumes only)");
+      if (o.fov_given) o.params.physics->fov_mm = o.params.fov_mm;
+    }
+    if (std::fabs(o.drift_mm) > 0.5 * o.params.physics->fov_mm)
+      throw InputError("--drift: at most half the field of view (" + std::to_string(0.5 * o.params.physics->fov_mm) + " mm)");
+    for (int k : {0, o.frames - 1})
+      validate_phantom_physics(frame_physics(*o.params.physics, k, o.frames, o.turn_deg, o.drift_mm));
+  }
   validate_phantom_params(o.params);  // before anything touches the disk or the device
 
   const fs::path dir(o.out);
@@ -127,17 +162,57 @@ int run_phantom(PhantomOptions o) {
 
   Runtime rt(o.device);  // a missing device leaves nothing behind
   std::optional<progress::Stage> stage(std::in_place, "phantom");
-  const Phantom p = make_phantom(rt, o.params);
+  Phantom p;
+  // 3D+t: every frame, each with its pose and its own speckle (seed + k).
+  std::vector<Volume> volumes, truths, labels, shadows;
+  std::string poses;
+  if (o.frames > 1) {
+    const PhantomPhysics base = *o.params.physics;
+    for (int k = 0; k < o.frames; ++k) {
+      stage.emplace("phantom: frame " + std::to_string(k + 1) + "/" + std::to_string(o.frames));
+      PhantomParams fp = o.params;
+      fp.seed = o.params.seed + (o.frame_speckle == "new" ? std::uint64_t(k) : 0u);
+      fp.physics = frame_physics(base, k, o.frames, o.turn_deg, o.drift_mm);
+      Phantom f = make_phantom(rt, fp);
+      if (k == 0) p = f;  // frame 0 for phantom.json, the medians and --slices
+      std::ostringstream pose;
+      pose << (k ? ", " : "") << "{\"frame\": " << k << ", \"seed\": " << fp.seed << ", \"yaw_deg\": " << fp.physics->yaw_deg
+           << ", \"shift_x_mm\": " << fp.physics->shift_mm[0] << "}";
+      poses += pose.str();
+      volumes.push_back(std::move(f.volume));
+      truths.push_back(std::move(f.truth_sdf));
+      labels.push_back(std::move(f.labels));
+      if (!f.shadow_db.data.empty()) shadows.push_back(std::move(f.shadow_db));
+    }
+  } else {
+    p = make_phantom(rt, o.params);
+  }
   stage.emplace("phantom: write");
 
   const auto t1 = Clock::now();
   fs::create_directories(dir, ec);
   if (ec) throw InputError("-o " + o.out + ": cannot create directory: " + ec.message());
-  write_volume((dir / "volume.nrrd").string(), p.volume);
-  write_volume((dir / "truth_sdf.nrrd").string(), p.truth_sdf);
-  if (!o.params.physics_name.empty()) write_volume((dir / "labels.nrrd").string(), p.labels);
-  if (!p.shadow_db.data.empty()) write_volume((dir / "shadow_db.nrrd").string(), p.shadow_db);
-  write_text_atomically((dir / "phantom.json").string(), phantom_json(o.params, p));
+  if (o.frames > 1) {
+    write_frames((dir / "volume.nrrd").string(), volumes);
+    write_frames((dir / "truth_sdf.nrrd").string(), truths);
+    write_frames((dir / "labels.nrrd").string(), labels);
+    if (shadows.size() == volumes.size()) write_frames((dir / "shadow_db.nrrd").string(), shadows);
+    std::string json = phantom_json(o.params, p);
+    const std::size_t close = json.rfind('}');
+    std::ostringstream seq;
+    seq << ",\n  \"frames\": " << o.frames << ",\n  \"turn_deg\": " << o.turn_deg << ",\n  \"drift_mm\": " << o.drift_mm
+        << ",\n  \"frame_poses\": [" << poses << "]\n";
+    std::size_t end = close;
+    while (end > 0 && (json[end - 1] == '\n' || json[end - 1] == ' ')) --end;
+    json = json.substr(0, end) + seq.str() + json.substr(close);
+    write_text_atomically((dir / "phantom.json").string(), json);
+  } else {
+    write_volume((dir / "volume.nrrd").string(), p.volume);
+    write_volume((dir / "truth_sdf.nrrd").string(), p.truth_sdf);
+    if (!o.params.physics_name.empty()) write_volume((dir / "labels.nrrd").string(), p.labels);
+    if (!p.shadow_db.data.empty()) write_volume((dir / "shadow_db.nrrd").string(), p.shadow_db);
+    write_text_atomically((dir / "phantom.json").string(), phantom_json(o.params, p));
+  }
   Image slices;
   if (!o.slices.empty()) {
     slices = phantom_slices(p);
@@ -213,6 +288,24 @@ void add_phantom_command(CLI::App& app, Action& action) {
           "", "non-negative"))
       ->capture_default_str();
   sub->add_option("-o,--output", o->out, "Output directory (created if missing)")->required();
+  sub->add_option("--frames", o->frames,
+                  "3D+t: write N frames of a moving scene as 4-D NRRDs (volume, truth_sdf, labels), the scene "
+                  "turning by --turn degrees about the beam and drifting --drift mm along x over the sequence, each "
+                  "frame's speckle drawn anew (seed + frame); needs the physics in mm (--physics NAME; default "
+                  "obstetric for face, spine for spine, clean for sphere)")
+      ->capture_default_str()
+      ->check(int_range(1, 200));
+  sub->add_option("--frame-speckle", o->frame_speckle,
+                  "--frames: new, each frame's scatterers drawn anew (seed + frame: speckle fully decorrelated between "
+                  "frames); same, every frame from --seed")
+      ->capture_default_str()
+      ->check(one_of({"new", "same"}));
+  sub->add_option("--turn", o->turn_deg, "--frames: the scene's turn about the beam over the sequence, degrees")
+      ->capture_default_str()
+      ->check(real_range(-90, 90, "degrees"));
+  sub->add_option("--drift", o->drift_mm, "--frames: the scene's drift along x over the sequence, mm")
+      ->capture_default_str()
+      ->check(real_range(-100, 100, "mm"));
   sub->add_option("--physics", o->physics,
                   "Image formation in physical units (mm): default (the fixed physics below, bit for bit; adds "
                   "labels.nrrd), clean, obstetric, spine, curvilinear, harsh (named presets), or random (every "

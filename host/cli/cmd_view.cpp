@@ -29,6 +29,8 @@ struct ViewOptions {
   std::set<std::string> given;  // long option names given on the command line
   bool screenshot_panel = false;
   int frames = 0;
+  std::optional<std::size_t> frame;  // --frame K: 3D+t
+  double play = 0;                   // --play FPS
   bool quiet = false;
   SplatViewOptions splat;
 };
@@ -121,17 +123,24 @@ int run_view(const ViewOptions& given_options) {
   v.iso_text = o.iso;
   v.save_params = o.save_params, v.save_u = o.save_u, v.save_mesh = o.save_mesh;
   v.frames = o.frames;
+  v.play_fps = o.play;
   v.screenshot = o.screenshot;
   v.screenshot_panel = o.screenshot_panel;
   v.quiet = o.quiet;
   std::optional<progress::Stage> stage(std::in_place, "view: load");
   Runtime rt(o.device);
   viewer::OpacityInput input =
-      viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, have_weights ? &weights : nullptr);
+      viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, have_weights ? &weights : nullptr, o.frame);
   if (!o.volume.empty()) {
     // The B-mode data behind an opacity volume, for the slice views.
-    Volume b = read_volume(o.volume);
-    require_finite(b, o.volume, "the B-mode volume must be finite");
+    // A B-mode sequence behind an opacity sequence: frame by frame.
+    std::vector<Volume> frames = read_frames(o.volume);
+    if (frames.size() > 1 && frames.size() != input.sequence.size())
+      throw input_error(o.volume, "--volume holds " + std::to_string(frames.size()) + " frames, the opacity " +
+                                      std::to_string(std::max<std::size_t>(input.sequence.size(), 1)));
+    for (const Volume& f : frames) require_finite(f, o.volume, "the B-mode volume must be finite");
+    Volume b = frames.size() > 1 ? frames[input.frame] : std::move(frames.front());
+    if (frames.size() > 1) input.bmode_sequence = std::move(frames);
     if (b.dims != input.u.dims)
       throw input_error(o.volume, "--volume has dims " + dims_text(b.dims) + ", the opacity " + dims_text(input.u.dims));
     input.bmode = std::move(b);
@@ -171,6 +180,16 @@ void add_view_command(CLI::App& app, Action& action) {
       ->check(one_of({"splat", "isosplat", "mc", "raycast"}));
   sub->add_option("--frames", o->frames, "Draw N frames, then quit (for scripts and tests); prints the mean time per frame after the first")
       ->check(int_range(0, 1000000));
+  sub->add_option("--frame", o->frame,
+                  "3D+t (a 4-D NRRD): the frame to start on (an opacity sequence: all frames are loaded and the "
+                  "panel's slider and play button step through them); a sequence of raw frames needs one, "
+                  "classified alone")
+      ->type_name("K");
+  sub->add_option("--play", o->play,
+                  "3D+t: play the opacity sequence from the start at this many frames per second (with --frames N, "
+                  "one sequence frame per drawn frame)")
+      ->type_name("FPS")
+      ->check(real_range(0, 120));
   sub->add_option("--screenshot", o->screenshot, "With --frames: save the last frame's 3-D view alone, at the window size, as PNG");
   sub->add_flag("--screenshot-panel", o->screenshot_panel,
                 "Save the whole window as --screenshot instead (panel, 3-D view with scale bar and axes, slice views) and print "
