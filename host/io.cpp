@@ -678,7 +678,7 @@ Volume read_raw(const std::string& path, const RawSpec& spec) {
 }
 
 // NRRD by content (its magic) or extension, MetaImage, NIfTI and VTK ImageData by extension.
-enum class Format { Nrrd, MetaImage, Nifti, Vti };
+enum class Format { Nrrd, MetaImage, Nifti, Vti, Kretz };
 Format format_of(const std::string& path) {
   char magic[8] = {};
   {
@@ -690,6 +690,7 @@ Format format_of(const std::string& path) {
   if (std::memcmp(magic, "NRRD000", 7) == 0 || ext == ".nrrd" || ext == ".nhdr") return Format::Nrrd;
   if (ext == ".mha" || ext == ".mhd") return Format::MetaImage;
   if (ext == ".vti") return Format::Vti;
+  if (std::memcmp(magic, "KRETZFIL", 8) == 0 || ext == ".vol") return Format::Kretz;
   const std::string name = lower(fs::path(path).filename().string());
   const bool nii_gz = name.size() > 7 && name.compare(name.size() - 7, 7, ".nii.gz") == 0;
   if (ext == ".nii" || ext == ".hdr" || nii_gz) {
@@ -698,7 +699,7 @@ Format format_of(const std::string& path) {
     return Format::Nifti;
   }
   throw input_error(path,
-                    "unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, or --raw X,Y,Z --type T)");
+                    "unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, .vol (Kretz), or --raw X,Y,Z --type T)");
 }
 
 }  // namespace
@@ -803,6 +804,7 @@ Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw, s
     case Format::MetaImage: return io_detail::read_metaimage(path);
     case Format::Nifti: return io_detail::read_nifti(path);
     case Format::Vti: return io_detail::read_vti(path);
+    case Format::Kretz: return io_detail::read_kretz(path);
   }
   return {};
 }
@@ -841,6 +843,7 @@ VolumeHeader read_volume_header(const std::string& path, const std::optional<Raw
     case Format::MetaImage: return io_detail::read_metaimage_header(path);
     case Format::Nifti: return io_detail::read_nifti_header(path);
     case Format::Vti: return io_detail::read_vti_header(path);
+    case Format::Kretz: return io_detail::read_kretz_header(path);
   }
   return {};
 }

@@ -266,6 +266,9 @@ VolumeHeader read_nifti_header(const std::string& path);
 std::vector<unsigned char> deflate_all(const std::string& path, const std::vector<unsigned char>& in, bool gzip = false);
 // `gzipped`: .nii.gz. NIfTI-1, sform and qform in RAS (host/io_nifti.cpp).
 void write_nifti(const std::string& path, const Volume& v, const WriteOptions& opt, bool gzipped);
+// GE Kretz .vol (host/io_kretz.cpp): scan-converted to a Cartesian grid.
+Volume read_kretz(const std::string& path);
+VolumeHeader read_kretz_header(const std::string& path);
 // VTK XML ImageData (host/io_vti.cpp).
 Volume read_vti(const std::string& path);
 // Raw appended samples (zlib blocks when opt.compress), LPS world.

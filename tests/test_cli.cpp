@@ -136,7 +136,7 @@ TEST_F(CliTest, UnreadablePath) {
 
 TEST_F(CliTest, UnknownExtension) {
   const std::string p = write("volume.xyz", "hello world");
-  info_fails(p, {p + ": unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, or --raw X,Y,Z --type T)"});
+  info_fails(p, {p + ": unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, .vol (Kretz), or --raw X,Y,Z --type T)"});
 }
 
 TEST_F(CliTest, GarbledHeaders) {

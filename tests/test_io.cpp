@@ -741,7 +741,7 @@ TEST(IoDispatch, UnreadablePathsAndUnknownFormats) {
   write_bytes(dir.file("v.xyz"), "hello");
   test::expect_input_error([&] { read_volume(dir.file("v.xyz")); },
                      {dir.file("v.xyz") +
-                      ": unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, or --raw X,Y,Z --type T)"});
+                      ": unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, .vol (Kretz), or --raw X,Y,Z --type T)"});
   write_bytes(dir.file("empty.mha"), "");
   test::expect_input_error([&] { read_volume(dir.file("empty.mha")); }, {"empty.mha: "});
   // Extensions are matched case-insensitively.

@@ -487,8 +487,8 @@ TEST_F(WorldIo, SequenceFramesAreReadOneAtATime) {
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_EQ(read_volume(file("u1.nrrd")).data, read_volume(file("u_one.nrrd")).data);
   // Without --frame classify takes every frame and writes a 4-D NRRD; each
-  // frame (cold, the default) is exactly what --frame K gives.
-  r = run({"classify", file("seq.nrrd"), "--iso", "110", "--mask", "none", "-o", file("u.nrrd")});
+  // frame (cold: --warm-start off) is exactly what --frame K gives.
+  r = run({"classify", file("seq.nrrd"), "--iso", "110", "--mask", "none", "--warm-start", "off", "-o", file("u.nrrd")});
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_NE(r.out.find("sequence 3 frames of 16x16x16, warm start off"), std::string::npos) << r.out;
   const std::vector<Volume> us = read_frames(file("u.nrrd"));
@@ -532,7 +532,7 @@ TEST_F(WorldIo, MovingPhantomSequenceIsClassifiedWithAndWithoutWarmStart) {
   // Every frame classified, cold and warm; warm frames land within the
   // solver's tolerance of the cold ones (sharpening's loose linear solve lets
   // a little through: the largest difference is checked, and most voxels agree).
-  r = run({"classify", file("p/volume.nrrd"), "--iso", "auto", "-o", file("cold.nrrd")});
+  r = run({"classify", file("p/volume.nrrd"), "--iso", "auto", "--warm-start", "off", "-o", file("cold.nrrd")});
   ASSERT_EQ(r.status, 0) << r.err;
   r = run({"classify", file("p/volume.nrrd"), "--iso", "auto", "--warm-start", "on", "-o", file("warm.nrrd")});
   ASSERT_EQ(r.status, 0) << r.err;
@@ -562,7 +562,7 @@ TEST_F(WorldIo, MovingPhantomSequenceIsClassifiedWithAndWithoutWarmStart) {
     const std::size_t comma = out.find(", ", at);
     return at == std::string::npos ? -1 : std::atoi(out.c_str() + comma + 2);
   };
-  const RunResult c = run({"classify", file("still/volume.nrrd"), "--iso", "auto", "-o", file("sc.nrrd")});
+  const RunResult c = run({"classify", file("still/volume.nrrd"), "--iso", "auto", "--warm-start", "off", "-o", file("sc.nrrd")});
   const RunResult w = run({"classify", file("still/volume.nrrd"), "--iso", "auto", "--warm-start", "on", "-o", file("sw.nrrd")});
   ASSERT_EQ(c.status, 0) << c.err;
   ASSERT_EQ(w.status, 0) << w.err;

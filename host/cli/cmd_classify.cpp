@@ -48,7 +48,7 @@ struct ClassifyOptions {
   std::string scale_text;          // for the report, when the length scales shrank
   RawOptions raw;
   NonFiniteOption non_finite;
-  std::string warm_start = "off";  // 3D+t: on, each frame's linear solve starts from the previous frame's
+  std::string warm_start = "on";  // 3D+t: each frame's linear solve starts from the previous frame's
   // 3D+t (run_sequence): one frame's classification hands its results here
   // instead of writing and printing them; null for a 3-D classification.
   struct FrameHooks {
@@ -756,8 +756,8 @@ void add_classify_command(CLI::App& app, Action& action) {
                 "every solve starts cold so the result does not depend on the start)");
   g->add_option("--warm-start", o->warm_start,
                 "A 3D+t sequence (a 4-D NRRD, every frame classified when no --frame is given): on, each frame's "
-                "solve starts from the previous frame's linear solution; off, every frame from full multigrid, which "
-                "needs fewer iterations on a moving scene (docs/formats.md)")
+                "solve starts from the previous frame's linear solution instead of full multigrid (4-28 % faster per "
+                "frame, docs/formats.md); off, every frame exactly as --frame K classifies it")
       ->capture_default_str()
       ->check(one_of({"on", "off"}));
   g->add_flag("--stats", o->stats, "Print the residual history");
