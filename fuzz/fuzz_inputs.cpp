@@ -243,6 +243,11 @@ bool run_vti(const std::uint8_t* data, std::size_t size) {
   return run_reader(place(data, size, "v.vti", "v.vti"));
 }
 
+bool run_kretz(const std::uint8_t* data, std::size_t size) {
+  current_input(data, size);
+  return run_reader(place(data, size, "v.vol", "v.vol"));
+}
+
 bool run_raw(const std::uint8_t* data, std::size_t size) {
   current_input(data, size);
   // The option parsers on the first line.
@@ -600,6 +605,33 @@ std::vector<Seed> seeds(const std::string& harness) {
     NiftiSpec p;
     p.pair = true;
     s.push_back({"pair.hdr", nifti_header(p) + std::string(kDataSeparator, 4) + std::string(8, '\x11')});
+  } else if (harness == "kretz") {
+    // Items: little-endian uint16 group, uint16 element, uint32 length.
+    const auto item = [](unsigned g, unsigned e, const std::string& d) {
+      std::string t;
+      for (unsigned v : {g & 0xFFu, g >> 8, e & 0xFFu, e >> 8}) t += char(v);
+      for (int i = 0; i < 4; ++i) t += char((d.size() >> (8 * i)) & 0xFF);
+      return t + d;
+    };
+    const auto u16 = [](unsigned v) { return std::string{char(v & 0xFF), char(v >> 8)}; };
+    const auto f64 = [](const std::vector<double>& v) {
+      std::string t(8 * v.size(), '\0');
+      for (std::size_t i = 0; i < v.size(); ++i) std::memcpy(&t[8 * i], &v[i], 8);  // little-endian hosts
+      return t;
+    };
+    const std::string sig = "KRETZFILE 1.0   ";
+    const std::string dims = item(0xC000, 1, u16(6)) + item(0xC000, 2, u16(4)) + item(0xC000, 3, u16(3));
+    std::string samples;
+    for (int i = 0; i < 72; ++i) samples += char(i * 3);
+    const std::string fan = item(0xC100, 1, f64({0.0005})) + item(0xC200, 1, f64({10})) + item(0xC200, 2, f64({-4})) +
+                            item(0xC300, 1, f64({1.4, 1.57, 1.74})) + item(0xC300, 2, f64({1.3, 1.5, 1.6, 1.8}));
+    s.push_back({"fan.vol", sig + dims + fan + item(0xD000, 1, samples)});
+    s.push_back({"fan-extra-items.vol", sig + item(0x0001, 2, "name") + dims + fan + item(0xD000, 1, samples) +
+                                            item(0xD100, 1, "tail")});
+    s.push_back({"cartesian.vol", sig + dims + item(0x0010, 0x0022, f64({0.6})) + item(0xD000, 1, samples)});
+    s.push_back({"decreasing-angles.vol", sig + dims + item(0xC100, 1, f64({0.001})) + item(0xC200, 1, f64({5})) +
+                                              item(0xC200, 2, f64({0})) + item(0xC300, 1, f64({1.8, 1.57, 1.3})) +
+                                              item(0xC300, 2, f64({1.9, 1.6, 1.5, 1.2})) + item(0xD000, 1, samples)});
   } else if (harness == "vti") {
     const std::string head = "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" version=\"1.0\" byte_order=\"LittleEndian\"";
     auto image = [](const std::string& extra, const std::string& arrays, const std::string& tail) {

@@ -40,6 +40,8 @@ bool run_raw(const std::uint8_t* data, std::size_t size);
 bool run_nifti(const std::uint8_t* data, std::size_t size);
 // VTK XML ImageData: "v.vti"; the same checks.
 bool run_vti(const std::uint8_t* data, std::size_t size);
+// GE Kretz .vol: "v.vol"; the same checks (the scan conversion included).
+bool run_kretz(const std::uint8_t* data, std::size_t size);
 // The classify pipeline on a tiny volume (dims 3..8 per axis): the first
 // kClassifyHeader bytes choose dims, spacing, sample type, the method, the
 // mask rule, the near-field removal, the isovalue (a value, or auto by the
@@ -79,6 +81,6 @@ struct Seed {
   std::string name;
   std::string bytes;
 };
-std::vector<Seed> seeds(const std::string& harness);  // "nrrd", "metaimage", "raw", "nifti", "vti", "classify"
+std::vector<Seed> seeds(const std::string& harness);  // "nrrd", "metaimage", "raw", "nifti", "vti", "kretz", "classify"
 
 }  // namespace softshell::fuzz

@@ -40,8 +40,9 @@ namespace {
 constexpr char kSignature[] = "KRETZFILE 1.0   ";  // 16 bytes
 constexpr std::size_t kSignatureSize = 16;
 // The Cartesian grid: the radial resolution, coarsened so that no axis has
-// more than this many voxels.
-constexpr double kMaxCartesianVoxels = 256;
+// more than kMaxCartesianVoxels voxels and the grid no more than
+// kMaxUpsampling voxels per sample of the file.
+constexpr double kMaxCartesianVoxels = 256, kMaxUpsampling = 8;
 
 std::string tag_text(unsigned group, unsigned element) {
   char t[16];
@@ -230,7 +231,12 @@ Cartesian cartesian_grid(const std::string& path, const KretzFile& k, const Geom
     if (!std::isfinite(lo[a]) || !std::isfinite(hi[a])) throw input_error(path, "the probe geometry is not finite");
     extent = std::max(extent, hi[a] - lo[a]);
   }
-  c.spacing = std::max(k.resolution_mm, extent / kMaxCartesianVoxels);
+  // No axis beyond kMaxCartesianVoxels, and no more than kMaxUpsampling
+  // voxels per sample (finer adds no information, only time).
+  double box = 1;
+  for (int a = 0; a < 3; ++a) box *= std::max(hi[a] - lo[a], k.resolution_mm);
+  const double samples = double(ni) * double(nj) * double(nk);
+  c.spacing = std::max({k.resolution_mm, extent / kMaxCartesianVoxels, std::cbrt(box / (kMaxUpsampling * samples))});
   for (int a = 0; a < 3; ++a) {
     c.dims[a] = std::size_t(std::floor((hi[a] - lo[a]) / c.spacing)) + 1;
     c.origin[a] = lo[a];
@@ -318,7 +324,7 @@ Volume read_kretz(const std::string& path) {
           const double wt = (c8 & 1 ? w[0] : 1 - w[0]) * (c8 & 2 ? w[1] : 1 - w[1]) * (c8 & 4 ? w[2] : 1 - w[2]);
           acc += wt * sample(ii, jj, kk);
         }
-        v.at(x, y, z) = float(acc);
+        v.at(x, y, z) = float(std::round(acc));  // 8-bit data stays 8-bit (as written back)
       }
   return v;
 }

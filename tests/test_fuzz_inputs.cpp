@@ -18,7 +18,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-const char* const kHarnesses[] = {"nrrd", "metaimage", "raw", "nifti", "vti", "classify"};
+const char* const kHarnesses[] = {"nrrd", "metaimage", "raw", "nifti", "vti", "kretz", "classify"};
 
 bool run(const std::string& harness, const std::string& bytes) {
   const auto* p = reinterpret_cast<const std::uint8_t*>(bytes.data());
@@ -27,6 +27,7 @@ bool run(const std::string& harness, const std::string& bytes) {
   if (harness == "raw") return fuzz::run_raw(p, bytes.size());
   if (harness == "nifti") return fuzz::run_nifti(p, bytes.size());
   if (harness == "vti") return fuzz::run_vti(p, bytes.size());
+  if (harness == "kretz") return fuzz::run_kretz(p, bytes.size());
   return fuzz::run_classify(p, bytes.size());
 }
 
