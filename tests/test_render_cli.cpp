@@ -84,7 +84,7 @@ std::array<int, 4> covered_box(const Image& img) {
   return b;
 }
 
-TEST_F(RenderCli, ViewerPlaysAnOpacitySequence) {
+TEST_F(RenderCli, ViewerAndRenderPlayAnOpacitySequence) {
   // Three frames of a shell moving 4 voxels along x per frame, as classify
   // writes a sequence (a 4-D NRRD). The camera is fitted on the start frame;
   // playing (one sequence frame per drawn frame) to frame 2 moves the drawn
@@ -119,6 +119,23 @@ TEST_F(RenderCli, ViewerPlaysAnOpacitySequence) {
   EXPECT_GT(covered(shot({"--frames", "1", "--frame", "2"}, "s2.png")), 0.02);
   expect_one_line_error(run({"view", seq, "--frame", "3", "--frames", "1", "--screenshot", file("x.png")}),
                         {"--frame 3: the file holds 3 frames (0 to 2)"});
+  // render draws every frame (OUT-000.png ...), the camera fitted on frame 0:
+  // the shell moves right; --frame K draws one; the other renderers refuse.
+  RunResult rr = run({"render", seq, "-o", file("r.png"), "--size", "320x240", "-q"});
+  ASSERT_EQ(rr.status, 0) << rr.err;
+  const auto r0 = covered_box(read_png(file("r-000.png"))), r2 = covered_box(read_png(file("r-002.png")));
+  EXPECT_GT(r2[0] - r0[0], 10) << "left edge " << r0[0] << " -> " << r2[0];
+  EXPECT_TRUE(fs::exists(file("r-001.png")));
+  EXPECT_FALSE(fs::exists(file("r-003.png")));
+  rr = run({"render", seq, "--frame", "1", "-o", file("one.png"), "--size", "160x120", "-q"});
+  EXPECT_EQ(rr.status, 0) << rr.err;
+  EXPECT_TRUE(fs::exists(file("one.png")));
+  expect_one_line_error(run({"render", seq, "--method", "mc", "-o", file("mc.png")}),
+                        {"--method mc draws a 3-D volume", "is a sequence of 3 frames"});
+  expect_one_line_error(run({"render", seq, "--turntable", "4", "-o", file("t.png")}),
+                        {"--turntable on a sequence of 3 frames: choose one with --frame K"});
+  EXPECT_FALSE(fs::exists(file("mc.png")));
+  EXPECT_FALSE(fs::exists(file("t-000.png")));
   // A sequence of raw frames: one frame, or classify first.
   ASSERT_EQ(run({"phantom", "--size", "24", "--frames", "2", "-o", file("p"), "-q"}).status, 0);
   expect_one_line_error(run({"view", file("p/volume.nrrd"), "--frames", "1", "--screenshot", file("x.png")}),

@@ -28,6 +28,7 @@ namespace {
 struct RenderOptions {
   std::string in, out, device, size = "400x400", view = "0,0", crop, iso = "auto";
   int turntable = 0, benchmark = 0;
+  std::optional<std::size_t> frame;  // 3D+t: one frame; default every frame (splats)
   bool quiet = false;
   SplatViewOptions splat;
   std::shared_ptr<RaycastRenderOptions> raycast;  // --method raycast (cmd_figures.cpp)
@@ -99,6 +100,18 @@ std::array<Vec3d, 2> kept_box(const SplatSet& set, const viewer::RenderSettings&
 
 int run_render(const RenderOptions& o) {
   const auto t0 = Clock::now();
+  // A 3D+t opacity sequence: the splat renderers draw every frame (or
+  // --frame K); the others draw 3-D volumes only.
+  const std::size_t sequence = read_any_header(o.in).frames;
+  const bool splats = o.splat.method == "splat" || o.splat.method == "isosplat";
+  if (sequence > 1 && !splats)
+    throw InputError("--method " + o.splat.method + " draws a 3-D volume, and " + o.in + " is a sequence of " +
+                     std::to_string(sequence) + " frames: use --method splat or isosplat (one PNG per frame, or --frame K)");
+  if (o.frame && sequence <= 1 && *o.frame > 0)
+    throw InputError("--frame " + std::to_string(*o.frame) + ": " + o.in + " is a 3-D volume (one frame, 0)");
+  if (sequence > 1 && !o.frame && o.turntable > 0)
+    throw InputError("--turntable on a sequence of " + std::to_string(sequence) + " frames: choose one with --frame K");
+  const bool every_frame = sequence > 1 && !o.frame;
   if (o.splat.method == "raycast")
     return run_raycast_render(*o.raycast, {o.in, o.out, o.device, o.size, o.view, o.crop, o.iso, o.turntable,
                                            o.benchmark, o.quiet, o.splat.opacity, o.splat.classify});
@@ -112,25 +125,26 @@ int run_render(const RenderOptions& o) {
   if (o.turntable < 0 || o.turntable > 3600) throw InputError("--turntable must be in [0, 3600]");
   if (o.benchmark < 0 || o.benchmark > 100000) throw InputError("--benchmark must be in [0, 100000]");
   if (o.out.size() < 4 || o.out.substr(o.out.size() - 4) != ".png") throw InputError("-o " + o.out + ": expected a .png file");
-  if (o.out.find('%') != std::string::npos && o.turntable == 0)
-    throw InputError("-o " + o.out + ": a %d pattern needs --turntable");
+  if (o.out.find('%') != std::string::npos && o.turntable == 0 && !every_frame)
+    throw InputError("-o " + o.out + ": a %d pattern needs --turntable (or a sequence)");
   viewer::RenderSettings settings = o.splat.settings();
   if (!o.crop.empty()) parse_crop(o.crop, settings);
   // Every file this run writes, checked against the input before anything
   // is drawn (a turntable frame may be named like the input).
   std::vector<std::string> outputs;
-  for (int i = 0; i < std::max(o.turntable, 1); ++i) outputs.push_back(o.turntable ? frame_path(o.out, i) : o.out);
+  const int frames = every_frame ? int(sequence) : std::max(o.turntable, 1);
+  for (int i = 0; i < frames; ++i) outputs.push_back(o.turntable || every_frame ? frame_path(o.out, i) : o.out);
   ensure_distinct_outputs({o.in}, outputs);
   for (const std::string& f : outputs) check_output(f, OutputKind::Png);
 
   const progress::Stage command("render");
   std::optional<progress::Stage> step(std::in_place, "input");
   Runtime rt(o.device);
-  const viewer::OpacityInput input = viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso);
+  const viewer::OpacityInput input = viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, nullptr, o.frame);
   SplatTiming st;
   step.emplace("splats");
   const SplatSet set = generate_splats(rt, input.u, o.splat.params(), &st);
-  step.emplace(frames_label(o.turntable));
+  step.emplace(every_frame ? "sequence, " + std::to_string(frames) + " frames" : frames_label(o.turntable));
   if (set.splats.empty())
     throw input_error(o.in, "no voxel has opacity above the threshold " + format_number(o.splat.threshold) +
                                 " (all-zero opacity?); nothing to render");
@@ -143,10 +157,14 @@ int run_render(const RenderOptions& o) {
   cam.azimuth = az;
   cam.elevation = el;
 
-  const int frames = std::max(o.turntable, 1);
   viewer::DrawStats stats;
   for (int i = 0; i < frames; ++i) {
-    cam.azimuth = az + 360.0f * float(i) / float(frames);
+    if (every_frame) {
+      // Each frame's splats, the camera fitted on frame 0 (the scene's motion shows).
+      if (i > 0) r.upload(generate_splats(rt, input.sequence[std::size_t(i)], o.splat.params(), nullptr));
+    } else {
+      cam.azimuth = az + 360.0f * float(i) / float(frames);
+    }
     stats = r.render(cam, settings);
     write_png(outputs[std::size_t(i)], r.read().rgb());
     step->fraction(double(i + 1) / frames, "frame " + std::to_string(i + 1) + " of " + std::to_string(frames));
@@ -168,7 +186,7 @@ int run_render(const RenderOptions& o) {
 
   if (!o.quiet) {
     std::cout << std::fixed << std::setprecision(3) << "render (" << method_name(settings) << ") " << o.in << " -> "
-              << (o.turntable ? frame_path(o.out, 0) + " ... (" + std::to_string(frames) + " frames)" : o.out) << '\n'
+              << (o.turntable || every_frame ? frame_path(o.out, 0) + " ... (" + std::to_string(frames) + " frames)" : o.out) << '\n'
               << "  input    " << input.note << '\n'
               << "  splats   " << set.splats.size() << " (u > " << format_number(o.splat.threshold) << ", a = "
               << set.a << " voxels, lambda " << set.lambda << " (" << splat_gaussian_name(set.params.gaussian) << "), normals " << splat_normals_name(set.params.normals)
@@ -203,6 +221,10 @@ void add_render_command(CLI::App& app, Action& action) {
                   "-y up")
       ->capture_default_str()
       ->type_name("AZ,EL");
+  sub->add_option("--frame", o->frame,
+                  "3D+t (a 4-D NRRD): draw frame K; without it the splat renderers draw every frame of a sequence "
+                  "(OUT-000.png, ... or a %d pattern), the camera fitted on frame 0")
+      ->type_name("K");
   sub->add_option("--turntable", o->turntable, "Write N frames around the object (azimuth steps of 360/N)")
       ->check(int_range(0, 3600));
   sub->add_option("--crop", o->crop,
