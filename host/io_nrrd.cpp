@@ -141,6 +141,9 @@ std::string sizes_text(const Nrrd* n) {
 // ---- the header, scanned before Teem reads it -------------------------------------
 
 constexpr std::size_t kMaxHeaderLine = 64 * 1024;
+// Longest field line (content excepted) handed to Teem: its error messages
+// quote a field into a 1 KiB buffer.
+constexpr std::size_t kMaxFieldLine = 800;
 constexpr int kMaxHeaderLines = 100000;
 
 struct HeaderScan {
@@ -194,7 +197,16 @@ HeaderScan scan_header(const std::string& path) {
       throw input_error(path, "header line " + std::to_string(n) + " contains a NUL byte: not a NRRD header");
     if (line[0] == '#') continue;  // a comment
     const auto colon = line.find(':');
-    if (colon == std::string::npos) continue;  // Teem reports it
+    // Teem formats a line it cannot parse into a fixed 1 KiB error buffer
+    // with vsprintf: a long unparsable line overflowed it ("buffer overflow
+    // detected", found by fuzzing). Such lines are refused here, and field
+    // lines Teem could quote in an error are kept short.
+    const auto unparsable = [&] {
+      return input_error(path, "header line " + std::to_string(n) +
+                                   " is neither a NRRD field (\"name: value\"), a key/value pair (\"key:=value\") nor a "
+                                   "comment");
+    };
+    if (colon == std::string::npos) throw unparsable();
     // A key/value pair has ":=" at its first colon; a field may hold ":="
     // further on (Teem parses it as the field: found by fuzzing).
     if (colon + 1 < line.size() && line[colon + 1] == '=') {
@@ -206,10 +218,20 @@ HeaderScan scan_header(const std::string& path) {
     // A field is "<name>: <value>" (colon and space): Teem does not take
     // "dimension:<garbage>" as the dimension, so per-axis fields after it
     // still come before a dimension for Teem (found by fuzzing).
-    if (colon + 1 >= line.size() || line[colon + 1] != ' ') continue;
+    if (colon + 1 >= line.size() || line[colon + 1] != ' ') throw unparsable();
     std::string key;
     for (char c : line.substr(0, colon))
       if (c != ' ' && c != '\t') key += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    // Teem's fields (nrrdField, spaces ignored); content is free text Teem never quotes back.
+    static const char* const kFields[] = {
+        "content", "number", "type", "blocksize", "dimension", "space", "spacedimension", "sizes", "spacings",
+        "thicknesses", "axismins", "axismaxs", "spacedirections", "centers", "centerings", "kinds", "labels", "units",
+        "min", "max", "oldmin", "oldmax", "endian", "encoding", "lineskip", "byteskip", "sampleunits", "spaceunits",
+        "spaceorigin", "measurementframe", "datafile"};
+    if (std::find(std::begin(kFields), std::end(kFields), key) == std::end(kFields)) throw unparsable();
+    if (key != "content" && line.size() > kMaxFieldLine)
+      throw input_error(path, "header line " + std::to_string(n) + " (field '" + trim(line.substr(0, colon)) +
+                                  "') is longer than " + std::to_string(kMaxFieldLine) + " characters");
     static const char* const kPerAxis[] = {"sizes", "spacings", "thicknesses", "axismins", "axismaxs", "centers",
                                            "centerings", "labels", "units", "kinds", "spacedirections"};
     if (key == "dimension") have_dimension = true;

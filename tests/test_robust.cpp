@@ -316,8 +316,26 @@ TEST_F(Robust, ReproTeemErrorPaths) {
                         {"space units: expected one quoted unit per world axis (3)"});
   // "dimension:" without the space after the colon is no field to Teem: the per-axis fields
   // that follow come before any dimension (found by a 2.4 M-execution run of fuzz_nrrd).
+  // (Since the long-line fix below it is refused one line earlier: "dimension:<bytes>" is no field.)
   expect_one_line_error(run({"info", repro("nrrd_dimension_without_space.nrrd")}),
-                        {"field 'kinds' comes before 'dimension'"});
+                        {"header line 4 is neither a NRRD field (\"name: value\"), a key/value pair"});
+  // A long line Teem cannot parse overflowed Teem's 1 KiB error buffer (its
+  // vsprintf: "buffer overflow detected", an abort; found by fuzz_kretz,
+  // whose NRRD-looking inputs reach the NRRD reader): refused before Teem,
+  // and a field line Teem could quote back is at most 800 characters.
+  expect_one_line_error(run({"info", repro("nrrd_long_unparsable_line.nrrd")}),
+                        {"header line 2 is neither a NRRD field (\"name: value\"), a key/value pair (\"key:=value\") nor a comment"});
+  expect_one_line_error(run({"info", write("long.nrrd", "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2" +
+                                                            std::string(900, ' ') + "x\nencoding: raw\n\n" + std::string(8, 'a'))}),
+                        {"header line 4 (field 'sizes') is longer than 800 characters"});
+  expect_one_line_error(run({"info", write("unknown.nrrd", "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nbogus field: 1\n\n" +
+                                                               std::string(8, 'a'))}),
+                        {"header line 5 is neither a NRRD field"});
+  // Free text (content), comments and key/value pairs may be long.
+  const RunResult ok = run({"info", write("longok.nrrd", "NRRD0004\n# " + std::string(3000, 'c') + "\ntype: uchar\ndimension: 3\n"
+                                                         "content: " + std::string(3000, 'd') + "\nsizes: 2 2 2\nencoding: raw\n"
+                                                         "axis 0 index values:=" + std::string(3000, '1') + "\n\n" + std::string(8, 'a'))});
+  EXPECT_EQ(ok.status, 0) << ok.err;
   // A carriage return inside the quotes ends the line for Teem (lines end at \n, \r\n or \r).
   expect_one_line_error(run({"info", repro("nrrd_space_units_cr_in_quote.nrrd")}),
                         {"space units: expected one quoted unit per world axis (3)"});
@@ -340,7 +358,7 @@ TEST(RobustRepro, EveryReproFileIsCovered) {
       "classify_converged_nan.bin",  // fuzz inputs: FuzzRegression.ReproInputsGetDocumentedAnswers
       "classify_iso_field_inf_1.bin", "classify_iso_field_inf_2.bin",
       "nrrd_space_units_open_quote.nrrd", "nrrd_space_units_too_many.nrrd",  // Robust.ReproTeemErrorPaths
-      "nrrd_space_units_cr_in_quote.nrrd", "nrrd_dimension_without_space.nrrd",
+      "nrrd_space_units_cr_in_quote.nrrd", "nrrd_dimension_without_space.nrrd", "nrrd_long_unparsable_line.nrrd",
       "vti_zlib_last_block_4g.vti"};  // tests/test_vti.cpp: Vti.ReproHugeBlockIsRefusedAtOnce
   for (const auto& e : fs::directory_iterator(repro(""))) {
     const std::string name = e.path().filename().string();
