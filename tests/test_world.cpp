@@ -505,6 +505,85 @@ TEST_F(WorldIo, SequenceFramesAreReadOneAtATime) {
                         {"--init: not with a sequence"});
 }
 
+TEST_F(WorldIo, SequenceGivenAsFilesIsClassifiedLikeTheFourDimensionalFile) {
+  // The same three frames as a 4-D NRRD and as 3-D files named so that plain
+  // sorting would misorder them (f9, f10, f11): a quoted pattern takes them in
+  // natural order, a list in the order given; every frame equals the 4-D
+  // file's (cold starts), and --per-frame-files writes each frame once more.
+  const Dims3 d{16, 16, 16};
+  const Vec3d sp{0.5, 0.6, 0.7}, org{-20.5, 14.25, -3};
+  const Mat3 axes = oblique_axes();
+  std::string head3 = nrrd_header(d, sp, axes, org, "left-posterior-superior"), head4 = head3;
+  auto replace = [&](const std::string& a, const std::string& b) { head4.replace(head4.find(a), a.size(), b); };
+  replace("dimension: 3", "dimension: 4");
+  replace("sizes: 16 16 16", "sizes: 16 16 16 3");
+  replace("kinds: domain domain domain", "kinds: domain domain domain list");
+  head4.insert(head4.find('\n', head4.find("space directions:")), " none");
+  std::vector<std::string> frames;
+  for (int k = 0; k < 3; ++k) frames.push_back(ball_samples(d, sp, 2.0 + 0.7 * k));
+  write("seq.nrrd", head4 + frames[0] + frames[1] + frames[2]);
+  fs::create_directories(file("fr"));
+  for (int k = 0; k < 3; ++k) write("fr/f" + std::to_string(9 + k) + ".nrrd", head3 + frames[k]);
+  const std::vector<std::string> common{"--iso", "110", "--mask", "none", "--warm-start", "off"};
+  auto classify = [&](std::vector<std::string> args) {
+    std::vector<std::string> a{"classify"};
+    a.insert(a.end(), args.begin(), args.end());
+    a.insert(a.end(), common.begin(), common.end());
+    return run(a);
+  };
+  RunResult r = classify({file("seq.nrrd"), "-o", file("u4.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  r = classify({file("fr/f*.nrrd"), "-o", file("ug.nrrd"), "--per-frame-files", file("out/u-##.nrrd")});
+  // The per-frame files' folder must exist: checked before any work.
+  expect_one_line_error(r, {"--per-frame-files", "u-00.nrrd", "cannot create"});
+  EXPECT_FALSE(fs::exists(file("ug.nrrd")));
+  fs::create_directories(file("out"));
+  r = classify({file("fr/f*.nrrd"), "-o", file("ug.nrrd"), "--per-frame-files", file("out/u-##.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("sequence 3 frames of 16x16x16"), std::string::npos) << r.out;
+  r = classify({file("fr/f9.nrrd"), file("fr/f10.nrrd"), file("fr/f11.nrrd"), "-o", file("ul.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const std::vector<Volume> u4 = read_frames(file("u4.nrrd")), ug = read_frames(file("ug.nrrd")),
+                            ul = read_frames(file("ul.nrrd"));
+  ASSERT_EQ(ug.size(), 3u);
+  ASSERT_EQ(ul.size(), 3u);
+  for (int k = 0; k < 3; ++k) {
+    SCOPED_TRACE(k);
+    EXPECT_EQ(ug[k].data, u4[k].data);
+    EXPECT_EQ(ul[k].data, u4[k].data);
+    const Volume one = read_volume(file("out/u-0" + std::to_string(k) + ".nrrd"));
+    EXPECT_EQ(one.data, u4[k].data);
+    EXPECT_EQ(one.origin, org);
+  }
+  EXPECT_NE(u4[0].data, u4[2].data);  // the frames differ: order matters
+  // A list in another order is taken in that order.
+  r = classify({file("fr/f11.nrrd"), file("fr/f9.nrrd"), file("fr/f10.nrrd"), "-o", file("ur.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(read_frames(file("ur.nrrd"))[0].data, u4[2].data);
+  // --frame K picks one file of the list.
+  r = classify({file("fr/f*.nrrd"), "--frame", "1", "-o", file("u1.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(read_volume(file("u1.nrrd")).data, u4[1].data);
+  // Refusals, before any work and writing nothing.
+  expect_one_line_error(classify({file("fr/g*.nrrd"), "-o", file("x.nrrd")}), {"g*.nrrd: no file matches this pattern"});
+  expect_one_line_error(classify({file("fr/f*.nrrd"), "--frame", "3", "-o", file("x.nrrd")}),
+                        {"--frame 3: the sequence has 3 frames (0 to 2)"});
+  expect_one_line_error(classify({file("fr/f9.nrrd"), file("seq.nrrd"), "-o", file("x.nrrd")}),
+                        {"seq.nrrd: a sequence of 3 frames itself"});
+  write("fr/odd.nrrd", nrrd_header(d, {0.5, 0.6, 0.9}, axes, org, "left-posterior-superior") + frames[0]);
+  expect_one_line_error(classify({file("fr/f9.nrrd"), file("fr/odd.nrrd"), "-o", file("x.nrrd")}),
+                        {"odd.nrrd: spacing", "the frames of a sequence share one grid"});
+  expect_one_line_error(classify({file("fr/f*.nrrd"), "-o", file("x.nrrd"), "--per-frame-files", file("u-#-#.nrrd")}),
+                        {"--per-frame-files", "expected one run of '#'"});
+  expect_one_line_error(classify({file("fr/f*.nrrd"), "-o", file("x.nrrd"), "--per-frame-files", file("u-#.png")}),
+                        {"--per-frame-files", "unknown extension"});
+  expect_one_line_error(classify({file("fr/f9.nrrd"), "-o", file("x.nrrd"), "--per-frame-files", file("u-#.nrrd")}),
+                        {"--per-frame-files", "is one 3-D volume, not a sequence"});
+  expect_one_line_error(classify({file("fr/f*.nrrd"), "-o", file("fr/f10.nrrd")}), {"f10.nrrd"});
+  EXPECT_FALSE(fs::exists(file("x.nrrd")));
+  EXPECT_EQ(read_volume(file("fr/f10.nrrd")).data.size(), d[0] * d[1] * d[2]);
+}
+
 TEST_F(WorldIo, MovingPhantomSequenceIsClassifiedWithAndWithoutWarmStart) {
   // softshell phantom --frames: the scene drifts 12 mm along x over 4 frames
   // (no turn): the sphere's centroid moves by that, frame to frame.

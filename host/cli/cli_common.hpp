@@ -13,6 +13,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "io.hpp"
 
@@ -61,6 +62,18 @@ int run_raycast_render(const RaycastRenderOptions& o, const RaycastRenderRequest
 int run_mesh_render(double level, const RaycastRenderRequest& request);
 int run_shearwarp_render(const RaycastRenderRequest& request);
 #endif
+
+// A sequence given as files (docs/formats.md, "3D+t sequences"): the
+// command line's inputs, each a file or a quoted glob pattern (* ? [..]:
+// expanded here, in natural order, so frame2 comes before frame10), in the
+// order given. Throws InputError for a pattern that matches nothing.
+std::vector<std::string> expand_input_files(const std::vector<std::string>& args);
+// The per-frame output path of PATTERN for frame k of n: its one run of '#'
+// replaced by k, zero-padded to the run's length (or to n - 1's digits).
+std::string frame_path(const std::string& pattern, std::size_t k, std::size_t n);
+// Checks a --per-frame-files pattern (exactly one run of '#', a volume
+// output extension); throws InputError naming `option`.
+void check_frame_pattern(const std::string& pattern, const std::string& option);
 
 // --raw / --type / --spacing / --big-endian for headerless input.
 struct RawOptions {

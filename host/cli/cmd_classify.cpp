@@ -35,6 +35,9 @@ struct ClassifyOptions {
   std::string in, out, device, method = "variational", iso, init, cycle = "pcg", smoother = "gs", mask = "auto";
   std::string near_field = "remove", reverb = "remove", depth_clip;
   std::string params;  // --params FILE
+  std::vector<std::string> inputs;  // IN...: one volume, or a sequence's 3-D files (names or quoted patterns)
+  std::vector<std::string> files;   // a sequence given as files (expand_input_files); empty otherwise
+  std::string per_frame;            // --per-frame-files PATTERN
   std::string bone_cue = "off";  // docs/parameters.md: off by default (it lost bone on a real sweep)
   double thickness = 1.0;
   double iso_fraction = AutoIsoParams().local_fraction, iso_field_sigma = AutoIsoParams().field_sigma_mm;
@@ -332,7 +335,7 @@ int run_classify(const ClassifyOptions& given_options);
 // the previous frame's (--warm-start on); the frames written as one 4-D NRRD
 // at the end (atomically: an interrupted run leaves no output).
 int run_sequence(const ClassifyOptions& o, const VolumeHeader& head, Clock::time_point t0) {
-  const std::size_t n = head.frames;
+  const std::size_t n = o.files.empty() ? head.frames : o.files.size();
   std::string ext = o.out.size() >= 5 ? o.out.substr(o.out.size() - 5) : o.out;
   for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
   if (ext != ".nrrd")
@@ -352,7 +355,12 @@ int run_sequence(const ClassifyOptions& o, const VolumeHeader& head, Clock::time
     const auto tk = Clock::now();
     const progress::Stage frame("frame " + std::to_string(k + 1) + "/" + std::to_string(n));
     ClassifyOptions f = o;
-    f.raw.frame = k;
+    if (o.files.empty()) {
+      f.raw.frame = k;
+    } else {
+      f.in = o.files[k];
+      f.files.clear();
+    }
     f.quiet = true;
     ClassifyOptions::FrameHooks h;
     SolveReport report;
@@ -379,13 +387,18 @@ int run_sequence(const ClassifyOptions& o, const VolumeHeader& head, Clock::time
     w.type = ScalarType::Float32;
     w.compress = o.compress;
     write_frames(o.out, us, w);
+    if (!o.per_frame.empty())
+      for (std::size_t k = 0; k < n; ++k) write_volume(frame_path(o.per_frame, k, n), us[k], w);
   }
   if (!o.quiet) {
     double total = 0;
     for (double t : secs) total += t;
     const auto [lo, hi] = std::minmax_element(isos.begin(), isos.end());
-    std::cout << std::fixed << std::setprecision(3) << "classify (" << o.method << ") " << o.in << " -> " << o.out
-              << '\n'
+    std::cout << std::fixed << std::setprecision(3) << "classify (" << o.method << ") "
+              << (o.files.empty() ? o.in : o.files.front() + " ... " + o.files.back()) << " -> " << o.out;
+    if (!o.per_frame.empty())
+      std::cout << " and " << frame_path(o.per_frame, 0, n) << " ... " << frame_path(o.per_frame, n - 1, n);
+    std::cout << '\n'
               << "  sequence " << n << " frames of " << dims_text(head.dims) << ", warm start "
               << (warm ? "on" : "off") << ", iso " << std::setprecision(2) << *lo << " to " << *hi << '\n'
               << std::setprecision(3) << "  time     " << total / double(n) << " s per frame (" << std::setprecision(2)
@@ -431,14 +444,80 @@ int run_classify(const ClassifyOptions& given_options) {
   if (variational) solver_params(o);
   if (!variational && (!(o.thickness > 0) || o.thickness > 100)) throw InputError("--thickness must be in (0, 100] voxels");
   const std::string mask_file = o.mask != "auto" && o.mask != "none" ? o.mask : "";
-  ensure_distinct_outputs({o.in, mask_file, o.init, o.params}, {o.out});
-  check_output(o.out, OutputKind::Volume);  // before any work: a typo costs nothing
   const auto raw = o.raw.spec();
-  // A 3D+t sequence without --frame: every frame (run_sequence).
-  if (!o.hooks && !raw && !o.raw.frame) {
-    const VolumeHeader any = read_any_header(o.in);
-    if (any.frames > 1) return run_sequence(o, any, t0);
+  // A sequence given as 3-D files (a list, or a quoted pattern): checked
+  // whole before any work; --frame K picks one of them.
+  bool frame_picked = o.raw.frame.has_value();
+  if (!o.hooks && !o.inputs.empty()) {
+    std::vector<std::string> files = expand_input_files(o.inputs);
+    if (files.size() > 1) {
+      if (o.raw.frame) {
+        if (*o.raw.frame >= files.size())
+          throw InputError("--frame " + std::to_string(*o.raw.frame) + ": the sequence has " +
+                           std::to_string(files.size()) + " frames (0 to " + std::to_string(files.size() - 1) + ")");
+        o.in = files[*o.raw.frame];
+        o.raw.frame.reset();
+      } else {
+        o.files = std::move(files);
+        o.in = o.files.front();
+      }
+    } else {
+      o.in = files.front();
+    }
   }
+  std::vector<std::string> outputs{o.out};
+  if (!o.per_frame.empty()) check_frame_pattern(o.per_frame, "--per-frame-files");
+  {
+    std::vector<std::string> inputs{o.in, mask_file, o.init, o.params};
+    inputs.insert(inputs.end(), o.files.begin(), o.files.end());
+    ensure_distinct_outputs(inputs, outputs);
+  }
+  check_output(o.out, OutputKind::Volume);  // before any work: a typo costs nothing
+  if (!o.files.empty()) {
+    // Every file one 3-D frame of one grid, before any work.
+    const VolumeHeader first = read_volume_header(o.files.front(), raw);
+    for (const std::string& file : o.files) {
+      const VolumeHeader h = raw ? read_volume_header(file, raw) : read_any_header(file);
+      if (h.frames > 1)
+        throw InputError(file + ": a sequence of " + std::to_string(h.frames) +
+                         " frames itself; a sequence given as files takes 3-D files");
+      Volume a({1, 1, 1}, first.spacing), b({1, 1, 1}, h.spacing);
+      a.origin = first.origin;
+      a.frame = first.frame;
+      b.origin = h.origin;
+      b.frame = h.frame;
+      const std::string differs = grid_mismatch(a, b);
+      if (h.dims != first.dims || !differs.empty())
+        throw InputError(file + ": " + (h.dims != first.dims ? dims_text(h.dims) + " voxels" : differs) +
+                         ", unlike " + o.files.front() + " (" + dims_text(first.dims) +
+                         "): the frames of a sequence share one grid");
+    }
+  }
+  // A 3D+t sequence without --frame: every frame (run_sequence).
+  if (!o.hooks && (!o.files.empty() || (!raw && !o.raw.frame))) {
+    const VolumeHeader any = o.files.empty() ? read_any_header(o.in) : read_volume_header(o.files.front(), raw);
+    if (any.frames > 1 || !o.files.empty()) {
+      if (!o.per_frame.empty()) {
+        const std::size_t n = o.files.empty() ? any.frames : o.files.size();
+        std::vector<std::string> frame_outputs;
+        for (std::size_t k = 0; k < n; ++k) frame_outputs.push_back(frame_path(o.per_frame, k, n));
+        std::vector<std::string> inputs{o.in, mask_file, o.params};
+        inputs.insert(inputs.end(), o.files.begin(), o.files.end());
+        frame_outputs.push_back(o.out);
+        ensure_distinct_outputs(inputs, frame_outputs);
+        for (std::size_t k = 0; k < n; ++k) {
+          if (frame_outputs[k] == o.out)
+            throw InputError("--per-frame-files " + o.per_frame + ": frame " + std::to_string(k) + " would be -o " + o.out);
+          check_output(frame_outputs[k], OutputKind::Volume, "--per-frame-files");
+        }
+      }
+      return run_sequence(o, any, t0);
+    }
+  }
+  if (!o.per_frame.empty() && !o.hooks)
+    throw InputError(frame_picked
+                         ? "--per-frame-files: not with --frame K (-o writes the one frame)"
+                         : "--per-frame-files: " + o.in + " is one 3-D volume, not a sequence (a 4-D NRRD, or several 3-D files)");
   // The header first: sizes, data files, the lowpasses' widths and the
   // memory the classifier needs are all checked before a sample is read.
   const VolumeHeader head = read_volume_header(o.in, raw, o.raw.frame);
@@ -603,7 +682,11 @@ int run_classify(const ClassifyOptions& given_options) {
 void add_classify_command(CLI::App& app, Action& action) {
   auto o = std::make_shared<ClassifyOptions>();
   auto* sub = app.add_subcommand("classify", "Opacity classification of a volume (float opacity in [0, 1])");
-  sub->add_option("IN", o->in, "Input volume")->required();
+  sub->add_option("IN", o->inputs,
+                  "Input volume; or a 3D+t sequence: a 4-D NRRD, or several 3-D files of one grid (names, or a quoted "
+                  "pattern such as 'frames/f*.nrrd', taken in natural order), every frame classified unless --frame K")
+      ->required()
+      ->type_name("IN...");
   sub->add_option("-o,--output", o->out, "Output opacity volume (.nrrd, .mha, .mhd, .nii, .nii.gz, .vti), float")->required();
   sub->add_option("--iso", o->iso,
                   "Isovalue, in the input's own intensity units (e.g. 0-255 for 8-bit data), or auto: for the "
@@ -760,6 +843,10 @@ void add_classify_command(CLI::App& app, Action& action) {
                 "frame, docs/formats.md); off, every frame exactly as --frame K classifies it")
       ->capture_default_str()
       ->check(one_of({"on", "off"}));
+  g->add_option("--per-frame-files", o->per_frame,
+                "A 3D+t sequence: also write each frame's opacity to its own 3-D file, the one run of '#' in "
+                "PATTERN replaced by the zero-padded frame number (e.g. u-###.nrrd)")
+      ->type_name("PATTERN");
   g->add_flag("--stats", o->stats, "Print the residual history");
   auto* lg = sub->add_option_group("levoy", "Levoy's classifier");
   lg->add_option("--thickness", o->thickness, "Transition thickness r in voxels")
