@@ -17,6 +17,7 @@
 #include <limits>
 #include <memory>
 #include <optional>
+#include <set>
 #include <sstream>
 
 #include "auto_iso.hpp"
@@ -241,6 +242,11 @@ bool run_nifti(const std::uint8_t* data, std::size_t size) {
 bool run_vti(const std::uint8_t* data, std::size_t size) {
   current_input(data, size);
   return run_reader(place(data, size, "v.vti", "v.vti"));
+}
+
+bool run_dicom(const std::uint8_t* data, std::size_t size) {
+  current_input(data, size);
+  return run_reader(place(data, size, "v.dcm", "v.dcm"));
 }
 
 bool run_kretz(const std::uint8_t* data, std::size_t size) {
@@ -534,6 +540,91 @@ std::string nifti_header(const NiftiSpec& n) {
   return h;
 }
 
+
+// ---- DICOM files, element by element ---------------------------------------------
+
+namespace {
+
+std::string dicom_element_bytes(const DicomElement& e) {
+  static const std::set<std::string> long_vr{"OB", "OW", "OF", "OD", "SQ", "UT", "UN", "UC", "UR"};
+  std::string value = e.value;
+  if (value.size() % 2 == 1) value += (e.vr == "UI" || e.vr == "OB" || e.vr == "UN") ? '\0' : ' ';
+  std::string t;
+  for (unsigned v : {unsigned(e.group & 0xFF), unsigned(e.group >> 8), unsigned(e.element & 0xFF), unsigned(e.element >> 8)})
+    t += char(v);
+  t += e.vr.substr(0, 2);
+  const std::size_t n = value.size();
+  if (long_vr.count(e.vr)) {
+    t += std::string(2, '\0');
+    for (int i = 0; i < 4; ++i) t += char((n >> (8 * i)) & 0xFF);
+  } else {
+    t += char(n & 0xFF);
+    t += char((n >> 8) & 0xFF);
+  }
+  return t + value;
+}
+
+std::string sorted_elements(std::vector<DicomElement> elements) {
+  std::stable_sort(elements.begin(), elements.end(), [](const DicomElement& a, const DicomElement& b) {
+    return std::make_pair(a.group, a.element) < std::make_pair(b.group, b.element);
+  });
+  std::string t;
+  for (const DicomElement& e : elements) t += dicom_element_bytes(e);
+  return t;
+}
+
+}  // namespace
+
+std::string dicom_u16(std::uint16_t v) { return std::string{char(v & 0xFF), char(v >> 8)}; }
+
+std::string dicom_f64(const std::vector<double>& v) {
+  std::string t(8 * v.size(), '\0');
+  if (!v.empty()) std::memcpy(t.data(), v.data(), t.size());
+  return t;
+}
+
+std::string dicom_f32(const std::vector<float>& v) {
+  std::string t(4 * v.size(), '\0');
+  if (!v.empty()) std::memcpy(t.data(), v.data(), t.size());
+  return t;
+}
+
+std::string dicom_ds(const std::vector<double>& v) {
+  std::string t;
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.10g", v[i]);
+    t += (i ? "\\" : "") + std::string(b);
+  }
+  return t;
+}
+
+std::string dicom_items(const std::vector<std::vector<DicomElement>>& items) {
+  std::string t;
+  for (const auto& item : items) {
+    const std::string body = sorted_elements(item);
+    t += std::string("\xfe\xff\x00\xe0", 4);  // (FFFE,E000) item, explicit length
+    for (int i = 0; i < 4; ++i) t += char((body.size() >> (8 * i)) & 0xFF);
+    t += body;
+  }
+  return t;
+}
+
+std::string dicom_file(const std::string& sop_class, std::vector<DicomElement> elements) {
+  const std::string instance = "1.2.826.0.1.3680043.2.1125.1";
+  std::vector<DicomElement> meta{{0x0002, 0x0001, "OB", std::string("\x00\x01", 2)},
+                                 {0x0002, 0x0002, "UI", sop_class},
+                                 {0x0002, 0x0003, "UI", instance},
+                                 {0x0002, 0x0010, "UI", "1.2.840.10008.1.2.1"}};
+  const std::string body = sorted_elements(meta);
+  std::string length;
+  for (int i = 0; i < 4; ++i) length += char((body.size() >> (8 * i)) & 0xFF);
+  elements.push_back({0x0008, 0x0016, "UI", sop_class});
+  elements.push_back({0x0008, 0x0018, "UI", instance});
+  return std::string(128, '\0') + "DICM" + dicom_element_bytes({0x0002, 0x0000, "UL", length}) + body +
+         sorted_elements(std::move(elements));
+}
+
 std::vector<Seed> seeds(const std::string& harness) {
   std::vector<Seed> s;
   const Dims3 d{5, 4, 3};
@@ -605,6 +696,48 @@ std::vector<Seed> seeds(const std::string& harness) {
     NiftiSpec p;
     p.pair = true;
     s.push_back({"pair.hdr", nifti_header(p) + std::string(kDataSeparator, 4) + std::string(8, '\x11')});
+  } else if (harness == "dicom") {
+    // A 4x3x2 multi-frame volume (secondary capture with a patient-space
+    // geometry), 8 and 16 bits, and Philips' Cartesian 3D+t layout.
+    const auto image = [](unsigned bits, const std::string& samples) {
+      return std::vector<DicomElement>{
+          {0x0020, 0x0032, "DS", dicom_ds({-10, 5, 2.5})},
+          {0x0020, 0x0037, "DS", dicom_ds({0.6, 0.8, 0, -0.8, 0.6, 0})},
+          {0x0018, 0x0088, "DS", dicom_ds({1.5})},
+          {0x0028, 0x0002, "US", dicom_u16(1)},
+          {0x0028, 0x0004, "CS", "MONOCHROME2"},
+          {0x0028, 0x0008, "IS", "2"},
+          {0x0028, 0x0010, "US", dicom_u16(3)},
+          {0x0028, 0x0011, "US", dicom_u16(4)},
+          {0x0028, 0x0030, "DS", dicom_ds({0.5, 0.7})},
+          {0x0028, 0x0100, "US", dicom_u16(std::uint16_t(bits))},
+          {0x0028, 0x0101, "US", dicom_u16(std::uint16_t(bits))},
+          {0x0028, 0x0102, "US", dicom_u16(std::uint16_t(bits - 1))},
+          {0x0028, 0x0103, "US", dicom_u16(0)},
+          {0x7fe0, 0x0010, bits == 8 ? "OB" : "OW", samples}};
+    };
+    std::string b8, b16;
+    for (int i = 0; i < 24; ++i) {
+      b8 += char(i * 10);
+      b16 += dicom_u16(std::uint16_t(i * 1000));
+    }
+    s.push_back({"multiframe8.dcm", dicom_file("1.2.840.10008.5.1.4.1.1.7.2", image(8, b8))});
+    s.push_back({"multiframe16.dcm", dicom_file("1.2.840.10008.5.1.4.1.1.7.3", image(16, b16))});
+    std::vector<DicomElement> philips{{0x0018, 0x602c, "FD", dicom_f64({0.05})},
+                                      {0x0018, 0x602e, "FD", dicom_f64({0.06})},
+                                      {0x0028, 0x0002, "US", dicom_u16(1)},
+                                      {0x0028, 0x0004, "CS", "MONOCHROME2"},
+                                      {0x0028, 0x0008, "IS", "2"},
+                                      {0x0028, 0x0010, "US", dicom_u16(3)},
+                                      {0x0028, 0x0011, "US", dicom_u16(4)},
+                                      {0x0028, 0x0100, "US", dicom_u16(8)},
+                                      {0x3001, 0x1001, "UL", std::string("\x02\0\0\0", 4)},
+                                      {0x3001, 0x1003, "FD", dicom_f64({0.07})},
+                                      {0x7fe0, 0x0010, "OB", b8 + b8}};
+    s.push_back({"philips-cartesian.dcm", dicom_file("1.2.840.113543.6.6.1.3.10002", philips)});
+    std::vector<DicomElement> gray = image(8, b8);
+    gray[4].value = "MONOCHROME1";
+    s.push_back({"monochrome1.dcm", dicom_file("1.2.840.10008.5.1.4.1.1.7.2", gray)});
   } else if (harness == "kretz") {
     // Items: little-endian uint16 group, uint16 element, uint32 length.
     const auto item = [](unsigned g, unsigned e, const std::string& d) {

@@ -42,6 +42,10 @@ bool run_nifti(const std::uint8_t* data, std::size_t size);
 bool run_vti(const std::uint8_t* data, std::size_t size);
 // GE Kretz .vol: "v.vol"; the same checks (the scan conversion included).
 bool run_kretz(const std::uint8_t* data, std::size_t size);
+// DICOM: "v.dcm" through GDCM (a multi-frame volume, or Philips' Cartesian
+// 3D+t file); the same checks. Without DICOM in the build every input is
+// refused (returns false).
+bool run_dicom(const std::uint8_t* data, std::size_t size);
 // The classify pipeline on a tiny volume (dims 3..8 per axis): the first
 // kClassifyHeader bytes choose dims, spacing, sample type, the method, the
 // mask rule, the near-field removal, the isovalue (a value, or auto by the
@@ -74,6 +78,23 @@ struct NiftiSpec {
 // The header (and, for a single file, the 4 bytes to vox_offset), without samples.
 std::string nifti_header(const NiftiSpec& spec);
 
+// A DICOM Part 10 file's bytes, written element by element (explicit VR
+// little endian; no GDCM here): what the seeds and the tests
+// (tests/test_dicom.cpp) feed the reader. An element's value is given
+// encoded (dicom_text, dicom_u16, dicom_f64, a sequence's items, ...);
+// odd lengths are padded as the VR requires and elements sorted by tag.
+struct DicomElement {
+  std::uint16_t group = 0, element = 0;
+  std::string vr;     // "UI", "US", "DS", "SQ", "OB", ...
+  std::string value;  // encoded bytes; for SQ, dicom_items(...)
+};
+std::string dicom_file(const std::string& sop_class, std::vector<DicomElement> elements);
+std::string dicom_items(const std::vector<std::vector<DicomElement>>& items);  // an SQ's value
+std::string dicom_u16(std::uint16_t v);
+std::string dicom_f64(const std::vector<double>& v);
+std::string dicom_f32(const std::vector<float>& v);
+std::string dicom_ds(const std::vector<double>& v);  // decimal strings joined by '\'
+
 // Seed inputs per harness, as files: name -> bytes. Valid files of every
 // kind each reader takes (every NRRD encoding, attached and detached,
 // MetaImage plain and compressed, each raw type) and a few classify setups.
@@ -81,6 +102,6 @@ struct Seed {
   std::string name;
   std::string bytes;
 };
-std::vector<Seed> seeds(const std::string& harness);  // "nrrd", "metaimage", "raw", "nifti", "vti", "kretz", "classify"
+std::vector<Seed> seeds(const std::string& harness);  // "nrrd", "metaimage", "raw", "nifti", "vti", "kretz", "dicom", "classify"
 
 }  // namespace softshell::fuzz

@@ -687,8 +687,15 @@ Volume read_raw(const std::string& path, const RawSpec& spec) {
 }
 
 // NRRD by content (its magic) or extension, MetaImage, NIfTI and VTK ImageData by extension.
-enum class Format { Nrrd, MetaImage, Nifti, Vti, Kretz };
+enum class Format { Nrrd, MetaImage, Nifti, Vti, Kretz, Dicom };
 Format format_of(const std::string& path) {
+  // A folder is a DICOM series; a file with DICOM's "DICM" at byte 128 is DICOM.
+  const std::string ext0 = extension_of(path);
+  if (fs::is_directory(path) || io_detail::is_dicom(path) || ext0 == ".dcm" || ext0 == ".dicom") {
+    if (!dicom_supported())
+      throw input_error(path, "DICOM input is not part of this build (install libgdcm-dev and rebuild softshell)");
+    return Format::Dicom;
+  }
   char magic[8] = {};
   {
     io_detail::FilePtr f = io_detail::open_for_reading(path);
@@ -708,7 +715,7 @@ Format format_of(const std::string& path) {
     return Format::Nifti;
   }
   throw input_error(path,
-                    "unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, .vol (Kretz), or --raw X,Y,Z --type T)");
+                    "unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, .vol (Kretz), DICOM (.dcm or a series folder), or --raw X,Y,Z --type T)");
 }
 
 }  // namespace
@@ -807,8 +814,9 @@ Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw, s
     return read_raw(path, *raw);
   }
   const Format f = format_of(path);
-  if (f != Format::Nrrd) check_single_frame(path, frame);
+  if (f != Format::Nrrd && f != Format::Dicom) check_single_frame(path, frame);
   switch (f) {
+    case Format::Dicom: return io_detail::read_dicom(path, frame);
     case Format::Nrrd: return io_detail::read_nrrd(path, frame);
     case Format::MetaImage: return io_detail::read_metaimage(path);
     case Format::Nifti: return io_detail::read_nifti(path);
@@ -817,6 +825,21 @@ Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw, s
   }
   return {};
 }
+
+#ifndef SOFTSHELL_HAVE_DICOM
+bool dicom_supported() { return false; }
+namespace io_detail {
+bool is_dicom(const std::string&) { return false; }
+Volume read_dicom(const std::string& path, std::optional<std::size_t>) {
+  throw input_error(path, "DICOM input is not part of this build");
+}
+VolumeHeader read_dicom_header(const std::string& path, std::optional<std::size_t>, bool) {
+  throw input_error(path, "DICOM input is not part of this build");
+}
+}  // namespace io_detail
+#else
+bool dicom_supported() { return true; }
+#endif
 
 #ifndef SOFTSHELL_HAVE_NIFTI
 bool nifti_supported() { return false; }
@@ -846,8 +869,9 @@ VolumeHeader read_volume_header(const std::string& path, const std::optional<Raw
     return h;
   }
   const Format f = format_of(path);
-  if (f != Format::Nrrd) check_single_frame(path, frame);
+  if (f != Format::Nrrd && f != Format::Dicom) check_single_frame(path, frame);
   switch (f) {
+    case Format::Dicom: return io_detail::read_dicom_header(path, frame, false);
     case Format::Nrrd: return io_detail::read_nrrd_header(path, frame, false);
     case Format::MetaImage: return io_detail::read_metaimage_header(path);
     case Format::Nifti: return io_detail::read_nifti_header(path);
@@ -897,7 +921,14 @@ void write_volume(const std::string& path, const Volume& v, const WriteOptions& 
 }
 
 std::vector<Volume> read_frames(const std::string& path) {
-  if (format_of(path) == Format::Nrrd) return io_detail::read_nrrd_frames(path);
+  const Format f = format_of(path);
+  if (f == Format::Nrrd) return io_detail::read_nrrd_frames(path);
+  if (f == Format::Dicom) {
+    const std::size_t n = io_detail::read_dicom_header(path, std::nullopt, true).frames;
+    std::vector<Volume> frames;
+    for (std::size_t k = 0; k < n; ++k) frames.push_back(io_detail::read_dicom(path, n > 1 ? std::optional<std::size_t>(k) : std::nullopt));
+    return frames;
+  }
   std::vector<Volume> one;
   one.push_back(read_volume(path));
   return one;
@@ -984,6 +1015,7 @@ void ensure_distinct_output(const std::string& input, const std::string& output)
 
 VolumeHeader read_any_header(const std::string& path, const std::optional<RawSpec>& raw) {
   if (!raw && format_of(path) == Format::Nrrd) return io_detail::read_nrrd_header(path, std::nullopt, true);
+  if (!raw && format_of(path) == Format::Dicom) return io_detail::read_dicom_header(path, std::nullopt, true);
   return read_volume_header(path, raw);
 }
 

@@ -57,6 +57,9 @@ Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw = 
 // once. Throws InputError like read_volume.
 std::vector<Volume> read_frames(const std::string& path);
 
+// True when this build reads DICOM (.dcm files and series folders; GDCM was found).
+bool dicom_supported();
+
 // True when this build reads NIfTI (.nii, .nii.gz, .hdr/.img; niftilib was found).
 bool nifti_supported();
 
@@ -266,6 +269,12 @@ VolumeHeader read_nifti_header(const std::string& path);
 std::vector<unsigned char> deflate_all(const std::string& path, const std::vector<unsigned char>& in, bool gzip = false);
 // `gzipped`: .nii.gz. NIfTI-1, sform and qform in RAS (host/io_nifti.cpp).
 void write_nifti(const std::string& path, const Volume& v, const WriteOptions& opt, bool gzipped);
+// DICOM (host/io_dicom.cpp, through GDCM): a multi-frame 3-D file, a folder
+// holding one series of slices, or Philips' Cartesian 3D+t file (frames as
+// a sequence: `frame` as for NRRD). is_dicom: a folder, or "DICM" at byte 128.
+bool is_dicom(const std::string& path);
+Volume read_dicom(const std::string& path, std::optional<std::size_t> frame);
+VolumeHeader read_dicom_header(const std::string& path, std::optional<std::size_t> frame, bool any_frame);
 // GE Kretz .vol (host/io_kretz.cpp): scan-converted to a Cartesian grid.
 Volume read_kretz(const std::string& path);
 VolumeHeader read_kretz_header(const std::string& path);

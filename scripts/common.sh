@@ -16,7 +16,7 @@ ASAN_BUILD_DIR="${SOFTSHELL_ASAN_BUILD_DIR:-$ROOT/build-asan}"
 SOFTSHELL_PACKAGES=(
   pkg-config
   ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers pocl-opencl-icd clinfo
-  libteem-dev zlib1g-dev libbz2-dev libpng-dev libnifti2-dev
+  libteem-dev zlib1g-dev libbz2-dev libpng-dev libnifti2-dev libgdcm-dev
   libcli11-dev libgtest-dev libeigen3-dev
   libglfw3-dev libglm-dev libgl-dev
   libepoxy-dev libimgui-dev libstb-dev

@@ -4,7 +4,7 @@
 #
 #   scripts/fuzz.sh [SECONDS] [HARNESS ...]
 #
-# SECONDS (default 60) per harness; harnesses: nrrd metaimage raw nifti vti kretz classify
+# SECONDS (default 60) per harness; harnesses: nrrd metaimage raw nifti vti kretz dicom classify
 # (default all). In the checking build (scripts/common.sh build_sanitized:
 # clang, ASan + UBSan): the test suite writes the seed corpora
 # (tests/test_fuzz_inputs.cpp), every file of tests/data/repro is run once
@@ -20,7 +20,7 @@ source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 seconds="${1:-60}"
 shift || true
 harnesses=("$@")
-[ ${#harnesses[@]} -eq 0 ] && harnesses=(nrrd metaimage raw nifti vti kretz classify)
+[ ${#harnesses[@]} -eq 0 ] && harnesses=(nrrd metaimage raw nifti vti kretz dicom classify)
 case "$seconds" in '' | *[!0-9]*) log "usage: scripts/fuzz.sh [SECONDS] [HARNESS ...]"; exit 2 ;; esac
 
 install_deps

@@ -18,7 +18,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-const char* const kHarnesses[] = {"nrrd", "metaimage", "raw", "nifti", "vti", "kretz", "classify"};
+const char* const kHarnesses[] = {"nrrd", "metaimage", "raw", "nifti", "vti", "kretz", "dicom", "classify"};
 
 bool run(const std::string& harness, const std::string& bytes) {
   const auto* p = reinterpret_cast<const std::uint8_t*>(bytes.data());
@@ -28,6 +28,7 @@ bool run(const std::string& harness, const std::string& bytes) {
   if (harness == "nifti") return fuzz::run_nifti(p, bytes.size());
   if (harness == "vti") return fuzz::run_vti(p, bytes.size());
   if (harness == "kretz") return fuzz::run_kretz(p, bytes.size());
+  if (harness == "dicom") return fuzz::run_dicom(p, bytes.size());
   return fuzz::run_classify(p, bytes.size());
 }
 
@@ -36,6 +37,7 @@ TEST(FuzzSeeds, EverySeedIsAcceptedAndWritten) {
   const fs::path root = env && *env ? fs::path(env) : fs::path(::testing::TempDir()) / "softshell-fuzz-seeds";
   for (const char* harness : kHarnesses) {
     if (std::string(harness) == "nifti" && !nifti_supported()) continue;  // a build without niftilib
+    if (std::string(harness) == "dicom" && !dicom_supported()) continue;  // a build without GDCM
     const auto seeds = fuzz::seeds(harness);
     EXPECT_GE(seeds.size(), 4u) << harness;
     fs::create_directories(root / harness);
