@@ -689,21 +689,30 @@ Volume read_raw(const std::string& path, const RawSpec& spec) {
 // NRRD by content (its magic) or extension, MetaImage, NIfTI and VTK ImageData by extension.
 enum class Format { Nrrd, MetaImage, Nifti, Vti, Kretz, Dicom };
 Format format_of(const std::string& path) {
-  // A folder is a DICOM series; a file with DICOM's "DICM" at byte 128 is DICOM.
-  const std::string ext0 = extension_of(path);
-  if (fs::is_directory(path) || io_detail::is_dicom(path) || ext0 == ".dcm" || ext0 == ".dicom") {
+  const auto dicom = [&] {
     if (!dicom_supported())
       throw input_error(path, "DICOM input is not part of this build (install libgdcm-dev and rebuild softshell)");
     return Format::Dicom;
-  }
-  char magic[8] = {};
-  {
-    io_detail::FilePtr f = io_detail::open_for_reading(path);
-    io_detail::read_up_to(f.get(), magic, sizeof magic, path);
-  }
+  };
+  // A folder is a DICOM series, unless its name says it is meant as another
+  // format's file (then, as in a build without DICOM, "Is a directory").
   const std::string ext = extension_of(path);
-  // Content first: a NRRD file is a NRRD file whatever it is called.
-  if (std::memcmp(magic, "NRRD000", 7) == 0 || ext == ".nrrd" || ext == ".nhdr") return Format::Nrrd;
+  const bool other_name = ext == ".nrrd" || ext == ".nhdr" || ext == ".mha" || ext == ".mhd" || ext == ".nii" ||
+                          ext == ".gz" || ext == ".hdr" || ext == ".vti" || ext == ".vol" || ext == ".raw";
+  std::error_code ec;
+  if (dicom_supported() && !other_name && fs::is_directory(path, ec)) return Format::Dicom;
+  char magic[132] = {};
+  std::size_t got = 0;
+  {
+    io_detail::FilePtr f = io_detail::open_for_reading(path);  // regular files only
+    got = io_detail::read_up_to(f.get(), magic, sizeof magic, path);
+  }
+  // Content first: a NRRD file is a NRRD file whatever it is called; "DICM"
+  // at byte 128 is DICOM's Part 10 file.
+  if (std::memcmp(magic, "NRRD000", 7) == 0) return Format::Nrrd;
+  if (got == sizeof magic && std::memcmp(magic + 128, "DICM", 4) == 0) return dicom();
+  if (ext == ".nrrd" || ext == ".nhdr") return Format::Nrrd;
+  if (ext == ".dcm" || ext == ".dicom") return dicom();
   if (ext == ".mha" || ext == ".mhd") return Format::MetaImage;
   if (ext == ".vti") return Format::Vti;
   if (std::memcmp(magic, "KRETZFIL", 8) == 0 || ext == ".vol") return Format::Kretz;
@@ -829,7 +838,6 @@ Volume read_volume(const std::string& path, const std::optional<RawSpec>& raw, s
 #ifndef SOFTSHELL_HAVE_DICOM
 bool dicom_supported() { return false; }
 namespace io_detail {
-bool is_dicom(const std::string&) { return false; }
 Volume read_dicom(const std::string& path, std::optional<std::size_t>) {
   throw input_error(path, "DICOM input is not part of this build");
 }

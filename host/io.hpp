@@ -271,8 +271,8 @@ std::vector<unsigned char> deflate_all(const std::string& path, const std::vecto
 void write_nifti(const std::string& path, const Volume& v, const WriteOptions& opt, bool gzipped);
 // DICOM (host/io_dicom.cpp, through GDCM): a multi-frame 3-D file, a folder
 // holding one series of slices, or Philips' Cartesian 3D+t file (frames as
-// a sequence: `frame` as for NRRD). is_dicom: a folder, or "DICM" at byte 128.
-bool is_dicom(const std::string& path);
+// a sequence: `frame` as for NRRD). Chosen for a folder, a file with "DICM"
+// at byte 128, or a .dcm / .dicom name.
 Volume read_dicom(const std::string& path, std::optional<std::size_t> frame);
 VolumeHeader read_dicom_header(const std::string& path, std::optional<std::size_t> frame, bool any_frame);
 // GE Kretz .vol (host/io_kretz.cpp): scan-converted to a Cartesian grid.

@@ -456,7 +456,8 @@ DicomLayout series_layout(const std::string& dir) {
     slices.push_back({name, 0, {o[0], o[1], o[2]}});
   }
   if (slices.size() < 2)
-    throw input_error(dir, slices.empty() ? "no DICOM image in this folder"
+    throw input_error(dir, slices.empty() ? "a folder with no DICOM image in it (expected a volume file, or a folder "
+                                            "holding one DICOM series)"
                                           : "one DICOM slice in this folder: a volume needs at least two");
   const Vec3d row{orient[0], orient[1], orient[2]}, col{orient[3], orient[4], orient[5]};
   const Vec3d n = cross(row, col);
@@ -765,17 +766,6 @@ Payload isolated(const std::string& path, Fn&& work) {
 }
 
 }  // namespace
-
-bool is_dicom(const std::string& path) {
-  std::error_code ec;
-  if (fs::is_directory(path, ec)) return true;
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return false;
-  char magic[132] = {};
-  const bool dicm = std::fread(magic, 1, sizeof magic, f) == sizeof magic && std::memcmp(magic + 128, "DICM", 4) == 0;
-  std::fclose(f);
-  return dicm;
-}
 
 Volume read_dicom(const std::string& path, std::optional<std::size_t> frame) {
   const std::lock_guard<std::mutex> lock(gdcm_mutex());

@@ -120,7 +120,8 @@ TEST_F(CliTest, UnreadablePath) {
   info_fails(file("missing.nrrd"), {file("missing.nrrd") + ": cannot open: No such file or directory"});
   fs::create_directory(file("adir.nrrd"));
   info_fails(file("adir.nrrd"), {file("adir.nrrd") + ": cannot open: Is a directory"});
-  info_fails(dir_, {dir_ + ": cannot open: Is a directory"});
+  // A folder without a volume file's name is read as a DICOM series (when the build has DICOM).
+  info_fails(dir_, {dir_ + (dicom_supported() ? ": a folder with no DICOM image in it" : ": cannot open: Is a directory")});
   if (::geteuid() != 0) {  // root reads anything
     const std::string p = write("secret.nrrd", kNrrd3 + "sizes: 1 1 1\n\nab");
     fs::permissions(p, fs::perms::none);
@@ -136,7 +137,7 @@ TEST_F(CliTest, UnreadablePath) {
 
 TEST_F(CliTest, UnknownExtension) {
   const std::string p = write("volume.xyz", "hello world");
-  info_fails(p, {p + ": unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, .vol (Kretz), or --raw X,Y,Z --type T)"});
+  info_fails(p, {p + ": unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, .vol (Kretz), DICOM (.dcm or a series folder), or --raw X,Y,Z --type T)"});
 }
 
 TEST_F(CliTest, GarbledHeaders) {

@@ -735,13 +735,14 @@ TEST(IoDispatch, UnreadablePathsAndUnknownFormats) {
   ScratchDir dir;
   test::expect_input_error([&] { read_volume(dir.file("nope.nrrd")); },
                      {dir.file("nope.nrrd") + ": cannot open: No such file or directory"});
-  test::expect_input_error([&] { read_volume(dir.path()); }, {dir.path() + ": cannot open: Is a directory"});
+  test::expect_input_error([&] { read_volume(dir.path()); },
+                           {dir.path() + (dicom_supported() ? ": a folder with no DICOM image in it" : ": cannot open: Is a directory")});
   RawSpec spec{{1, 1, 1}, ScalarType::UInt8, {1, 1, 1}, false};
   test::expect_input_error([&] { read_volume(dir.file("nope.raw"), spec); }, {"nope.raw: cannot open: No such file"});
   write_bytes(dir.file("v.xyz"), "hello");
   test::expect_input_error([&] { read_volume(dir.file("v.xyz")); },
                      {dir.file("v.xyz") +
-                      ": unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, .vol (Kretz), or --raw X,Y,Z --type T)"});
+                      ": unrecognised format (expected .nrrd, .nhdr, .mha, .mhd, .nii, .nii.gz, .hdr, .vti, .vol (Kretz), DICOM (.dcm or a series folder), or --raw X,Y,Z --type T)"});
   write_bytes(dir.file("empty.mha"), "");
   test::expect_input_error([&] { read_volume(dir.file("empty.mha")); }, {"empty.mha: "});
   // Extensions are matched case-insensitively.
