@@ -638,7 +638,9 @@ struct Payload {
   std::vector<float> data;  // empty for a header read
 };
 
-void put(std::string& b, const void* p, std::size_t n) { b.append(static_cast<const char*>(p), n); }
+void put(std::string& b, const void* p, std::size_t n) {
+  if (n > 0) b.append(static_cast<const char*>(p), n);
+}
 template <class T>
 void put(std::string& b, const T& v) { put(b, &v, sizeof v); }
 void put_text(std::string& b, const std::string& t) {
@@ -651,6 +653,7 @@ struct Cursor {
   std::size_t at = 0;
   void get(void* p, std::size_t n) {
     if (at + n > b.size()) throw std::runtime_error("DICOM child: short message");
+    if (n == 0) return;  // p may be null (an empty sample vector)
     std::memcpy(p, b.data() + at, n);
     at += n;
   }
