@@ -22,11 +22,15 @@
 #include <gdcmTrace.h>
 
 #include <fcntl.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
+#include <csignal>
+#include <cstdlib>
+#include <new>
 #include <cstdio>
 #include <stdexcept>
 #include <cmath>
@@ -718,6 +722,33 @@ bool write_all(int fd, const std::string& b) {
   return true;
 }
 
+// The child's data-segment limit (RLIMIT_DATA, which counts malloc's
+// mappings too): its current size plus a budget from the input's size.
+void limit_child_memory(const std::string& path) {
+  std::uint64_t input = 0;
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) {
+    for (fs::directory_iterator it(path, ec), end; !ec && it != end; it.increment(ec)) {
+      std::error_code e2;
+      if (it->is_regular_file(e2)) input += it->file_size(e2);
+    }
+  } else {
+    input = fs::file_size(path, ec);
+  }
+  std::uint64_t current_kb = 0;
+  if (std::FILE* f = std::fopen("/proc/self/status", "r")) {
+    char line[256];
+    while (std::fgets(line, sizeof line, f))
+      if (std::strncmp(line, "VmData:", 7) == 0) current_kb = std::strtoull(line + 7, nullptr, 10);
+    std::fclose(f);
+  }
+  if (current_kb == 0) return;  // unknown: no limit rather than a wrong one
+  const std::uint64_t budget = (std::uint64_t(1) << 30) + 32 * input;
+  struct rlimit r {};
+  r.rlim_cur = r.rlim_max = rlim_t(current_kb * 1024 + budget);
+  ::setrlimit(RLIMIT_DATA, &r);
+}
+
 template <class Fn>
 Payload isolated(const std::string& path, Fn&& work) {
   int fds[2];
@@ -734,11 +765,21 @@ Payload isolated(const std::string& path, Fn&& work) {
     // GDCM's assertion messages are not ours to print: the parent says what happened.
     const int null = ::open("/dev/null", O_WRONLY);
     if (null >= 0) ::dup2(null, 2);
+    // A fatal signal ends the child quietly (a fuzzer's or a sanitizer's
+    // handlers would otherwise report the child's abort as their own).
+    for (const int sig : {SIGABRT, SIGSEGV, SIGBUS, SIGFPE, SIGILL}) std::signal(sig, SIG_DFL);
+    // GDCM allocates what an element's length declares before reading it: a
+    // damaged length of gigabytes in a small file cost 30 s of zeroed pages.
+    // The child may allocate what the input's bytes can describe: 1 GiB plus
+    // 32 bytes per byte of input (float samples of compressed pixel data).
+    limit_child_memory(path);
     std::string message;
     try {
       message = encode(work());
     } catch (const InputError& e) {
       message = std::string("E") + e.what();
+    } catch (const std::bad_alloc&) {
+      message = "E" + path + ": a damaged DICOM file: reading it needs more memory than its size allows (a wrong element length?)";
     } catch (const std::exception& e) {
       message = std::string("X") + e.what();
     } catch (...) {

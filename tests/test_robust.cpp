@@ -280,6 +280,19 @@ TEST_F(Robust, ReproFifoAsDataFile) {
 
 // Teem's own error paths leak and over-read (under AddressSanitizer): these
 // headers no longer reach Teem.
+// Found by fuzz_dicom (issue 16): a cut file meta group makes GDCM fail an
+// assertion (abort); a pixel-data length of 2.5 GB in a 564-byte file made
+// GDCM allocate and zero it (30 s). GDCM runs in a child process with a
+// memory budget from the file's size (host/io_dicom.cpp).
+TEST_F(Robust, ReproDicomDamage) {
+  if (!dicom_supported()) GTEST_SKIP() << "no DICOM in this build";
+  expect_one_line_error(run({"info", repro("dicom_gdcm_assert.dcm")}),
+                        {"a damaged DICOM file: the DICOM library (GDCM) stopped on it"});
+  const RunResult r = run({"info", repro("dicom_huge_element_length.dcm")});
+  expect_one_line_error(r, {"dicom_huge_element_length.dcm"});
+  EXPECT_LT(r.max_rss_kb, 1024 * 1024) << "the declared 2.5 GB were allocated";
+}
+
 TEST_F(Robust, ReproTeemErrorPaths) {
   expect_one_line_error(run({"info", repro("teem_leak.nhdr")}),
                         {repro("teem_leak.nhdr") + ": not a NRRD file (the first line is not NRRD0001 to NRRD0006)"});
@@ -359,7 +372,8 @@ TEST(RobustRepro, EveryReproFileIsCovered) {
       "classify_iso_field_inf_1.bin", "classify_iso_field_inf_2.bin",
       "nrrd_space_units_open_quote.nrrd", "nrrd_space_units_too_many.nrrd",  // Robust.ReproTeemErrorPaths
       "nrrd_space_units_cr_in_quote.nrrd", "nrrd_dimension_without_space.nrrd", "nrrd_long_unparsable_line.nrrd",
-      "vti_zlib_last_block_4g.vti"};  // tests/test_vti.cpp: Vti.ReproHugeBlockIsRefusedAtOnce
+      "vti_zlib_last_block_4g.vti",  // tests/test_vti.cpp: Vti.ReproHugeBlockIsRefusedAtOnce
+      "dicom_huge_element_length.dcm", "dicom_gdcm_assert.dcm"};  // Robust.ReproDicomDamage
   for (const auto& e : fs::directory_iterator(repro(""))) {
     const std::string name = e.path().filename().string();
     EXPECT_NE(std::find(covered.begin(), covered.end(), name), covered.end()) << name << " has no regression test";
