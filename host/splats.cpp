@@ -29,6 +29,15 @@ bool parse_splat_normals(const std::string& name, SplatNormals& out) {
   return true;
 }
 
+const char* splat_centres_name(SplatCentres c) { return c == SplatCentres::Voxel ? "voxel" : "shell"; }
+
+bool parse_splat_centres(const std::string& name, SplatCentres& out) {
+  if (name == "shell") out = SplatCentres::Shell;
+  else if (name == "voxel") out = SplatCentres::Voxel;
+  else return false;
+  return true;
+}
+
 const char* splat_gaussian_name(SplatGaussian g) { return g == SplatGaussian::Rim ? "rim" : "paper"; }
 
 double splat_lambda(double epsilon, SplatGaussian g) {
@@ -61,7 +70,8 @@ SplatGenerator::SplatGenerator(Runtime& rt, const GridDesc& grid, const SplatPar
   splat_lambda(params.threshold, params.gaussian);  // validates the threshold
   if (params.normals == SplatNormals::Tensor && !(params.tensor_sigma > 0 && params.tensor_sigma <= 8))
     throw InputError("tensor sigma must be in (0, 8] voxels");
-  std::string options = "-D SPLAT_NORMALS=" + std::to_string(static_cast<int>(params.normals));
+  std::string options = "-D SPLAT_NORMALS=" + std::to_string(static_cast<int>(params.normals)) +
+                        " -D SPLAT_CENTRES=" + std::to_string(static_cast<int>(params.centres));
   if (params.normals == SplatNormals::Tensor) {
     char sigma[64];
     std::snprintf(sigma, sizeof sigma, " -D TENSOR_SIGMA=%.9gf", params.tensor_sigma);

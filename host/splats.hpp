@@ -37,6 +37,13 @@ enum class SplatGaussian : int {
 };
 const char* splat_gaussian_name(SplatGaussian g);  // "paper", "rim"
 
+enum class SplatCentres : int {
+  Voxel = 0,  // the voxel's centre (the paper)
+  Shell = 1,  // moved along the normal to the centroid of u across the shell (the default; kernels/splat.cl)
+};
+const char* splat_centres_name(SplatCentres c);  // "voxel", "shell"
+bool parse_splat_centres(const std::string& name, SplatCentres& out);
+
 struct SplatParams {
   // epsilon: voxels with u > epsilon get a splat, and the Gaussian texture
   // falls to epsilon at the inscribed circle (paper: 0.2).
@@ -44,6 +51,7 @@ struct SplatParams {
   SplatNormals normals = SplatNormals::Tensor;
   double tensor_sigma = 1.5;  // voxels, for SplatNormals::Tensor (host/orientation.hpp), in (0, 8]
   SplatGaussian gaussian = SplatGaussian::Paper;
+  SplatCentres centres = SplatCentres::Shell;
 };
 
 // The Gaussian's lambda (see SplatGaussian) and the triangle size

@@ -28,8 +28,29 @@
  *      tensor of u with Gaussian sigma -D TENSOR_SIGMA (voxels), evaluated at
  *      the point itself (orientation.h, which says why: on the middle sheet
  *      of a shell grad u has no reliable direction).
+ *
+ * The splat centre, chosen by -D SPLAT_CENTRES:
+ *   0  voxel: the voxel's centre (the paper).
+ *   1  shell (the default): the voxel's centre moved along the splat normal
+ *      n (unit, voxel coordinates) to u's local mass centre: the offset
+ *      sum w (d . n) / sum w over the voxels within 3 of it, d their offset,
+ *      w = u exp(-|d|^2 / (2 CENTRE_SIGMA^2)); at most one voxel. A sharpened
+ *      u is a slab a few voxels thick whose faces are voxel staircases;
+ *      splats on the voxel centres draw the staircase as bands on a tilted
+ *      surface (docs/rendering.md, "Banding"). The neighbourhood spans a
+ *      step of the staircase, so the mass centre lies on the slab's
+ *      mid-surface whatever the step's phase; one column alone would not.
  */
 #include "grid.h"
+
+#define SPLAT_CENTRES_VOXEL 0
+#define SPLAT_CENTRES_SHELL 1
+#ifndef SPLAT_CENTRES
+#define SPLAT_CENTRES SPLAT_CENTRES_SHELL
+#endif
+#ifndef CENTRE_SIGMA
+#define CENTRE_SIGMA 1.5f
+#endif
 
 #define SPLAT_NORMALS_GRADIENT 0
 #define SPLAT_NORMALS_TENSOR 1
@@ -108,12 +129,46 @@ __kernel void splat_emit(__global const float* restrict u, __global const uint* 
   for (int x = 0; x < g.nx; ++x) {
     const float alpha = r[x];
     if (!(alpha > threshold)) continue;
-    const float3 p = (float3)((float)x, (float)y, (float)z);
-    const float3 grad = splat_normal(u, g, p);
+    float3 p = (float3)((float)x, (float)y, (float)z);
+    float3 grad = splat_normal(u, g, p);
     /* A flat spot has no orientation; face the transducer (-z). */
-    const float3 n = splat_unit(grad, (float3)(0.0f, 0.0f, -1.0f));
+    float3 n = splat_unit(grad, (float3)(0.0f, 0.0f, -1.0f));
     /* Plane basis in voxel coordinates, perpendicular to the covector n h. */
-    const float3 nv = splat_unit(n * h, n);
+    float3 nv = splat_unit(n * h, n);
+#if SPLAT_CENTRES == SPLAT_CENTRES_SHELL
+    {
+      /* The offset along nv of u's mass centre in a Gaussian neighbourhood
+       * (sigma CENTRE_SIGMA voxels, radius 3): the local mid-surface. */
+      float mass = 0.0f, moment = 0.0f;
+      const float inv2s2 = 0.5f / (CENTRE_SIGMA * CENTRE_SIGMA);
+      for (int dz = -3; dz <= 3; ++dz) {
+        const int zz = z + dz;
+        if (zz < 0 || zz >= g.nz) continue;
+        for (int dy = -3; dy <= 3; ++dy) {
+          const int yy = y + dy;
+          if (yy < 0 || yy >= g.ny) continue;
+          for (int dx = -3; dx <= 3; ++dx) {
+            const int xx = x + dx;
+            if (xx < 0 || xx >= g.nx) continue;
+            const float v = u[grid_index(g, xx, yy, zz)];
+            if (v <= 0.0f) continue;
+            const float3 d = (float3)((float)dx, (float)dy, (float)dz);
+            const float w = v * exp(-dot(d, d) * inv2s2);
+            mass += w;
+            moment += w * dot(d, nv);
+          }
+        }
+      }
+      const float c = clamp(mass > 0.0f ? moment / mass : 0.0f, -1.0f, 1.0f);
+      if (c != 0.0f) {
+        p += c * nv;
+        grad = splat_normal(u, g, p);
+        const float3 n2 = splat_unit(grad, n);
+        n = dot(n2, n) < 0.0f ? -n2 : n2;
+        nv = splat_unit(n * h, n);
+      }
+    }
+#endif
     const float3 helper = fabs(nv.x) < 0.9f ? (float3)(1.0f, 0.0f, 0.0f) : (float3)(0.0f, 1.0f, 0.0f);
     const float3 s = normalize(cross(nv, helper));
     const float3 t = cross(nv, s);

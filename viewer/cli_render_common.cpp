@@ -62,6 +62,11 @@ void SplatViewOptions::add_to(CLI::App* sub, const std::vector<std::string>& met
                   "the middle of a shell, where grad u vanishes) or gradient (grad u, the paper); docs/rendering.md")
       ->capture_default_str()
       ->check(one_of({"tensor", "gradient"}));
+  sub->add_option("--centres", centres,
+                  "Splat centres: shell (each moved along its normal to the centroid of u across the shell: no bands "
+                  "on tilted surfaces) or voxel (the voxel's centre, the paper); docs/rendering.md, \"Banding\"")
+      ->capture_default_str()
+      ->check(one_of({"shell", "voxel"}));
   sub->add_option("--tensor-sigma", tensor_sigma, "Gaussian sigma of the structure tensor in voxels")
       ->capture_default_str()
       ->check(real_range(0, 8, "voxels", Ends::OpenLow));
@@ -106,6 +111,7 @@ SplatParams SplatViewOptions::params() const {
   if (!parse_splat_normals(orientation, p.normals))
     throw InputError("--orientation " + orientation + ": expected tensor or gradient");
   if (!(tensor_sigma > 0 && tensor_sigma <= 8)) throw InputError("--tensor-sigma must be in (0, 8] voxels");
+  if (!parse_splat_centres(centres, p.centres)) throw InputError("--centres " + centres + ": expected shell or voxel");
   p.tensor_sigma = tensor_sigma;
   return p;
 }

@@ -31,7 +31,8 @@ const std::vector<std::string>& render_methods();
 const std::vector<std::string>& view_methods();
 
 struct SplatViewOptions {
-  std::string method = "splat", normals = "three", order = "lists", gaussian = "paper", orientation = "tensor";
+  std::string method = "splat", normals = "three", order = "lists", gaussian = "paper", orientation = "tensor",
+              centres = "shell";
   float threshold = 0.2f;
   double tensor_sigma = 1.5;
   bool opacity = false, classify = false;
