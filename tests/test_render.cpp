@@ -13,7 +13,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <chrono>
 #include <memory>
+#include <thread>
 
 #include "headless.hpp"
 #include "image.hpp"
@@ -351,6 +353,43 @@ TEST(Render, ShellCentresRemoveTheBandsOfATiltedSlab) {
             << rough[0] << " px, shell " << rough[1] << " px\n";
   EXPECT_GT(band[0], 1.3 * band[1]);
   EXPECT_GT(rough[0], 2.0 * rough[1]);
+}
+
+TEST(Render, AsyncSortDrawsTheExactOrderWithoutWaitingForIt) {
+  // DrawOrder::Sort with async_sort (the viewer): the first draw sorts at
+  // once; after the camera moves, draws go on with the old order (reported
+  // stale) while a worker sorts, and once it is done the picture equals a
+  // synchronous exact-order draw from the new eye.
+  const int size = 101;
+  HeadlessRenderer& r = renderer(size, size);
+  const double a = splat_size(0.2);
+  std::vector<Splat> splats;
+  for (int layer = 0; layer < 2; ++layer)
+    for (int y = -4; y <= 4; ++y)
+      for (int x = -4; x <= 4; ++x) splats.push_back(flat_splat({float(x), float(y), 4.0f * layer}, a, float(layer)));
+  r.upload(hand_set(splats, {9, 9, 5}, {-4, -4, 0}));
+  RenderSettings s = unlit();
+  s.colour = {1, 0, 0};
+  s.colour2 = {0, 0, 1};
+  s.order = viewer::DrawOrder::Sort;
+  OrbitCamera cam = looking_down_z({0, 0, 2}, 40.0f);
+  cam.azimuth = 170.0f;
+  const RgbaImage want = (r.render(cam, s), r.read());  // synchronous, from the far side
+  r.upload(hand_set(splats, {9, 9, 5}, {-4, -4, 0}));   // forget that order
+  s.async_sort = true;
+  cam.azimuth = 10.0f;
+  EXPECT_FALSE(r.render(cam, s).stale_order);  // the first order is sorted at once
+  cam.azimuth = 170.0f;
+  EXPECT_TRUE(r.render(cam, s).stale_order);   // the sort for the new eye has just started
+  bool stale = true;
+  for (int i = 0; i < 500 && stale; ++i) {
+    stale = r.render(cam, s).stale_order;
+    if (stale) std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  ASSERT_FALSE(stale) << "the worker's order never arrived";
+  const RgbaImage got = r.read();
+  EXPECT_EQ(got.rgba, want.rgba);
+  EXPECT_GT(got.pixel(50, 50)[2], 230);  // blue, the near layer from this side, covers red
 }
 
 TEST(Render, CropBoxDropsSplats) {

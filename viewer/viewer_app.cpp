@@ -126,6 +126,7 @@ class ViewerApp {
       settings_.background = {float((*o.background)[0]), float((*o.background)[1]), float((*o.background)[2])};
     std::snprintf(save_prefix_, sizeof save_prefix_, "%s", "softshell-view");
     preset_ = o.preset;
+    settings_.async_sort = true;  // the exact order is sorted off the render thread
     if (o.play_fps > 0) playing_ = true, play_fps_ = float(o.play_fps);
   }
 
