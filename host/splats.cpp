@@ -71,7 +71,8 @@ SplatGenerator::SplatGenerator(Runtime& rt, const GridDesc& grid, const SplatPar
   if (params.normals == SplatNormals::Tensor && !(params.tensor_sigma > 0 && params.tensor_sigma <= 8))
     throw InputError("tensor sigma must be in (0, 8] voxels");
   std::string options = "-D SPLAT_NORMALS=" + std::to_string(static_cast<int>(params.normals)) +
-                        " -D SPLAT_CENTRES=" + std::to_string(static_cast<int>(params.centres));
+                        " -D SPLAT_CENTRES=" + std::to_string(static_cast<int>(params.centres)) +
+                        " -D SPLAT_OCCLUSION=" + std::string(params.occlusion ? "1" : "0");
   if (params.normals == SplatNormals::Tensor) {
     char sigma[64];
     std::snprintf(sigma, sizeof sigma, " -D TENSOR_SIGMA=%.9gf", params.tensor_sigma);

@@ -52,6 +52,9 @@ struct SplatParams {
   double tensor_sigma = 1.5;  // voxels, for SplatNormals::Tensor (host/orientation.hpp), in (0, 8]
   SplatGaussian gaussian = SplatGaussian::Paper;
   SplatCentres centres = SplatCentres::Shell;
+  // Ambient occlusion from u (kernels/splat.cl, splat_occlusion) on both
+  // sides of each splat, darkening the creases and hollows the renderer lights.
+  bool occlusion = false;
 };
 
 // The Gaussian's lambda (see SplatGaussian) and the triangle size
@@ -67,7 +70,10 @@ struct Splat {
   float strength;           // |normal field| before normalising (|grad u| per mm)
   float s[4];               // half-axis S (mm), w unused
   float t[4];               // half-axis T (mm), w: colour ramp value for the renderer (0 here)
-  float vertex_normal[3][4];  // unit normals midway to vertex 0, 1, 2 (w unused)
+  // Unit normals midway to vertex 0, 1, 2; w of [0] and [1]: the ambient
+  // occlusion (0 open .. 1 enclosed) on the side `normal` points to and on
+  // the other (0 unless SplatParams::occlusion); [2].w unused.
+  float vertex_normal[3][4];
 };
 static_assert(sizeof(Splat) == 7 * 16, "Splat must match kernels/splat.cl's 7 float4");
 

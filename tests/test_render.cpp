@@ -392,6 +392,55 @@ TEST(Render, AsyncSortDrawsTheExactOrderWithoutWaitingForIt) {
   EXPECT_GT(got.pixel(50, 50)[2], 230);  // blue, the near layer from this side, covers red
 }
 
+TEST(Render, AmbientOcclusionDarkensTheInsideOfACreaseOnly) {
+  // Two perpendicular plates of u = 1 (an open book); seen into the
+  // crease, the lit colour near it is darker with the occlusion on, and far
+  // from it the same.
+  const int size = 300, n = 48;
+  HeadlessRenderer& r = renderer(size, size);
+  Volume u({std::size_t(n), std::size_t(n), std::size_t(n)});
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x)
+        u.at(x, y, z) = (std::abs(z - 10) <= 1 && x >= 10) || (std::abs(x - 10) <= 1 && z >= 10) ? 1.0f : 0.0f;
+  std::vector<double> column[2];
+  for (const bool on : {false, true}) {
+    SplatParams p;
+    p.occlusion = on;
+    const SplatSet set = generate_splats(runtime(), u, p);
+    r.upload(set);
+    OrbitCamera cam;
+    cam.fit(set.box_lo(), set.box_hi());
+    cam.azimuth = 135.0f;
+    cam.elevation = -30.0f;
+    RenderSettings s;
+    r.render(cam, s);
+    const RgbaImage img = r.read();
+    if (const char* dir = std::getenv("SOFTSHELL_TEST_IMAGES"))
+      write_png(std::string(dir) + "/occlusion-" + (on ? "on" : "off") + ".png", img.rgb());
+    for (int x = 0; x < size; ++x) {
+      double sum = 0;
+      for (int y = size * 2 / 5; y < size * 3 / 5; ++y) {
+        const std::uint8_t* px = img.pixel(x, y);
+        sum += 0.299 * px[0] + 0.587 * px[1] + 0.114 * px[2];
+      }
+      column[on].push_back(sum);
+    }
+  }
+  // The crease is the image's middle column; the plates reach a third of the width either side.
+  double darkest = 1.0;
+  for (int x = size / 2 - 20; x <= size / 2 + 20; ++x)
+    if (column[0][x] > 0) darkest = std::min(darkest, column[1][x] / column[0][x]);
+  std::cout << "[ result   ] lit colour with / without the occlusion: " << darkest << " at its darkest near the crease";
+  EXPECT_LT(darkest, 0.85);
+  for (const int x : {size / 2 - 90, size / 2 - 80, size / 2 + 80, size / 2 + 90}) {
+    ASSERT_GT(column[0][x], 0) << x;
+    std::cout << ", " << column[1][x] / column[0][x] << " at column " << x;
+    EXPECT_NEAR(column[1][x] / column[0][x], 1.0, 0.03) << x;
+  }
+  std::cout << '\n';
+}
+
 TEST(Render, CropBoxDropsSplats) {
   const int size = 101;
   HeadlessRenderer& r = renderer(size, size);

@@ -67,6 +67,11 @@ void SplatViewOptions::add_to(CLI::App* sub, const std::vector<std::string>& met
                   "on tilted surfaces) or voxel (the voxel's centre, the paper); docs/rendering.md, \"Banding\"")
       ->capture_default_str()
       ->check(one_of({"shell", "voxel"}));
+  sub->add_option("--occlusion", occlusion,
+                  "Ambient occlusion from the opacity (soft shadows in creases and hollows: on each side of a splat, "
+                  "rays through u absorb light as compositing does; docs/rendering.md)")
+      ->capture_default_str()
+      ->check(one_of({"on", "off"}));
   sub->add_option("--tensor-sigma", tensor_sigma, "Gaussian sigma of the structure tensor in voxels")
       ->capture_default_str()
       ->check(real_range(0, 8, "voxels", Ends::OpenLow));
@@ -121,6 +126,8 @@ SplatParams SplatViewOptions::params() const {
     throw InputError("--orientation " + orientation + ": expected tensor or gradient");
   if (!(tensor_sigma > 0 && tensor_sigma <= 8)) throw InputError("--tensor-sigma must be in (0, 8] voxels");
   if (!parse_splat_centres(centres, p.centres)) throw InputError("--centres " + centres + ": expected shell or voxel");
+  if (occlusion != "on" && occlusion != "off") throw InputError("--occlusion " + occlusion + ": expected on or off");
+  p.occlusion = occlusion == "on";
   p.tensor_sigma = tensor_sigma;
   return p;
 }

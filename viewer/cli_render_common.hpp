@@ -34,7 +34,7 @@ const std::vector<std::string>& view_methods();
 
 struct SplatViewOptions {
   std::string method = "splat", normals = "three", order = "lists", gaussian = "paper", orientation = "tensor",
-              centres = "shell", preset;
+              centres = "shell", preset, occlusion = "off";
   float threshold = 0.2f;
   double tensor_sigma = 1.5;
   bool opacity = false, classify = false;

@@ -47,6 +47,9 @@ struct RenderSettings {
   // finished (the interactive viewer; one sorted for a nearby eye while the
   // camera moves); false: sort for this eye before drawing (`render`).
   bool async_sort = false;
+  // Strength of the splats' ambient occlusion (SplatParams::occlusion):
+  // lit colour x (1 - strength x occlusion).
+  float occlusion = 0.7f;
 };
 
 // What the last draw did.

@@ -1085,6 +1085,8 @@ class ViewerApp {
       params_.centres = shell ? SplatCentres::Shell : SplatCentres::Voxel;
       regenerate();
     }
+    if (ImGui::Checkbox("ambient occlusion (soft shadows)", &params_.occlusion) && !solving_.valid()) regenerate();
+    if (params_.occlusion) ImGui::SliderFloat("occlusion strength", &settings_.occlusion, 0.0f, 1.0f, "%.2f");
     ImGui::SliderFloat("threshold (u)", &params_.threshold, 0.02f, 0.9f, "%.2f");
     if (ImGui::IsItemDeactivatedAfterEdit() && !solving_.valid()) regenerate(), slices_dirty_ = true;
     // Splat orientation: the structure tensor of u (default) or grad u (the paper).
