@@ -149,7 +149,7 @@ DrawStats SplatRenderer::draw(const OrbitCamera& camera, const RenderSettings& s
   glUniform3fv(loc("u_colour2"), 1, glm::value_ptr(s.colour2));
   glUniform3f(loc("u_depth"), s.depth_colour ? 1.0f : 0.0f, s.depth_lo, s.depth_hi);
   glUniform4f(loc("u_material"), s.ambient, s.diffuse, s.specular, s.shininess);
-  glUniform1f(loc("u_occlusion"), s.occlusion);
+  glUniform1f(loc("u_occlusion"), set_.params.occlusion ? s.occlusion : 0.0f);
   // Crop box from volume fractions to mm (half a voxel of slack each way).
   glm::vec3 lo, hi;
   for (int a = 0; a < 3; ++a) {
