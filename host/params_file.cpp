@@ -26,6 +26,7 @@ struct KeySpec {
 
 const std::vector<std::pair<std::string, KeySpec>>& specs() {
   static const std::vector<std::pair<std::string, KeySpec>> s = {
+      {"preset", {Kind::Word, 1, 0, 0, false, "default|face|bone|vessels"}},
       {"iso", {Kind::Iso}},
       {"sigma", {Kind::Numbers, 1, 0, 1e3}},
       {"alpha", {Kind::Numbers, 1, 0, 1e6}},

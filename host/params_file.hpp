@@ -14,6 +14,7 @@
 namespace softshell {
 
 // The keys, in the order they are written.
+//   preset     default | face | bone | vessels (host/presets.hpp): its settings, under the file's own keys
 //   iso        number (the input's intensity units) or auto
 //   sigma alpha beta gamma omega delta epsilon kappa   classification weights (classify's options)
 //   renderer   splat | isosplat | mc | raycast

@@ -29,6 +29,15 @@ bool parse_splat_normals(const std::string& name, SplatNormals& out) {
   return true;
 }
 
+const char* splat_centres_name(SplatCentres c) { return c == SplatCentres::Voxel ? "voxel" : "shell"; }
+
+bool parse_splat_centres(const std::string& name, SplatCentres& out) {
+  if (name == "shell") out = SplatCentres::Shell;
+  else if (name == "voxel") out = SplatCentres::Voxel;
+  else return false;
+  return true;
+}
+
 const char* splat_gaussian_name(SplatGaussian g) { return g == SplatGaussian::Rim ? "rim" : "paper"; }
 
 double splat_lambda(double epsilon, SplatGaussian g) {
@@ -61,7 +70,9 @@ SplatGenerator::SplatGenerator(Runtime& rt, const GridDesc& grid, const SplatPar
   splat_lambda(params.threshold, params.gaussian);  // validates the threshold
   if (params.normals == SplatNormals::Tensor && !(params.tensor_sigma > 0 && params.tensor_sigma <= 8))
     throw InputError("tensor sigma must be in (0, 8] voxels");
-  std::string options = "-D SPLAT_NORMALS=" + std::to_string(static_cast<int>(params.normals));
+  std::string options = "-D SPLAT_NORMALS=" + std::to_string(static_cast<int>(params.normals)) +
+                        " -D SPLAT_CENTRES=" + std::to_string(static_cast<int>(params.centres)) +
+                        " -D SPLAT_OCCLUSION=" + std::string(params.occlusion ? "1" : "0");
   if (params.normals == SplatNormals::Tensor) {
     char sigma[64];
     std::snprintf(sigma, sizeof sigma, " -D TENSOR_SIGMA=%.9gf", params.tensor_sigma);
@@ -131,13 +142,19 @@ std::vector<std::uint32_t> axis_order(const SplatSet& set, int axis, bool descen
   std::vector<std::uint32_t> order(set.splats.size());
   std::iota(order.begin(), order.end(), 0u);
   const auto& s = set.splats;
-  // Stable, so splats of one slab keep voxel order: the lists are reproducible.
+  // By voxel slab (the centre's nearest grid plane along the axis), as the
+  // paper's lists of voxel slices: shell centres (SplatCentres::Shell) move
+  // up to a voxel off their voxel, and sorting by the exact coordinate
+  // scattered each slab's splats through memory (draws 1.2-2x slower under
+  // llvmpipe, which fetches the records in list order). Stable, so splats of
+  // one slab keep voxel order: the lists are reproducible.
+  const double o = set.origin[axis], h = set.spacing[axis] > 0 ? set.spacing[axis] : 1.0;
+  std::vector<std::int32_t> slab(s.size());
+  for (std::size_t i = 0; i < s.size(); ++i) slab[i] = std::int32_t(std::lround((double(s[i].centre[axis]) - o) / h));
   if (descending)
-    std::stable_sort(order.begin(), order.end(),
-                     [&](std::uint32_t i, std::uint32_t j) { return s[i].centre[axis] > s[j].centre[axis]; });
+    std::stable_sort(order.begin(), order.end(), [&](std::uint32_t i, std::uint32_t j) { return slab[i] > slab[j]; });
   else
-    std::stable_sort(order.begin(), order.end(),
-                     [&](std::uint32_t i, std::uint32_t j) { return s[i].centre[axis] < s[j].centre[axis]; });
+    std::stable_sort(order.begin(), order.end(), [&](std::uint32_t i, std::uint32_t j) { return slab[i] < slab[j]; });
   return order;
 }
 

@@ -37,6 +37,13 @@ enum class SplatGaussian : int {
 };
 const char* splat_gaussian_name(SplatGaussian g);  // "paper", "rim"
 
+enum class SplatCentres : int {
+  Voxel = 0,  // the voxel's centre (the paper)
+  Shell = 1,  // moved along the normal to the centroid of u across the shell (the default; kernels/splat.cl)
+};
+const char* splat_centres_name(SplatCentres c);  // "voxel", "shell"
+bool parse_splat_centres(const std::string& name, SplatCentres& out);
+
 struct SplatParams {
   // epsilon: voxels with u > epsilon get a splat, and the Gaussian texture
   // falls to epsilon at the inscribed circle (paper: 0.2).
@@ -44,6 +51,10 @@ struct SplatParams {
   SplatNormals normals = SplatNormals::Tensor;
   double tensor_sigma = 1.5;  // voxels, for SplatNormals::Tensor (host/orientation.hpp), in (0, 8]
   SplatGaussian gaussian = SplatGaussian::Paper;
+  SplatCentres centres = SplatCentres::Shell;
+  // Ambient occlusion from u (kernels/splat.cl, splat_occlusion) on both
+  // sides of each splat, darkening the creases and hollows the renderer lights.
+  bool occlusion = false;
 };
 
 // The Gaussian's lambda (see SplatGaussian) and the triangle size
@@ -59,7 +70,10 @@ struct Splat {
   float strength;           // |normal field| before normalising (|grad u| per mm)
   float s[4];               // half-axis S (mm), w unused
   float t[4];               // half-axis T (mm), w: colour ramp value for the renderer (0 here)
-  float vertex_normal[3][4];  // unit normals midway to vertex 0, 1, 2 (w unused)
+  // Unit normals midway to vertex 0, 1, 2; w of [0] and [1]: the ambient
+  // occlusion (0 open .. 1 enclosed) on the side `normal` points to and on
+  // the other (0 unless SplatParams::occlusion); [2].w unused.
+  float vertex_normal[3][4];
 };
 static_assert(sizeof(Splat) == 7 * 16, "Splat must match kernels/splat.cl's 7 float4");
 

@@ -14,7 +14,9 @@
  *   [2] S, [3] T: the triangle's half-axes in mm; the vertices are
  *       centre + S, centre - (S + sqrt3 T) / 2, centre - (S - sqrt3 T) / 2
  *   [4..6] unit normals midway between the centre and vertex 0, 1, 2 (the
- *       paper's "three normals" shading), sign-aligned with [1]
+ *       paper's "three normals" shading), sign-aligned with [1]; [4].w and
+ *       [5].w the ambient occlusion on the side n points to and the other
+ *       (0 without -D SPLAT_OCCLUSION=1)
  *
  * S and T are a * h * s and a * h * t (componentwise h) for an orthonormal
  * pair s, t perpendicular to the normal field in voxel coordinates: the
@@ -28,8 +30,32 @@
  *      tensor of u with Gaussian sigma -D TENSOR_SIGMA (voxels), evaluated at
  *      the point itself (orientation.h, which says why: on the middle sheet
  *      of a shell grad u has no reliable direction).
+ *
+ * The splat centre, chosen by -D SPLAT_CENTRES:
+ *   0  voxel: the voxel's centre (the paper).
+ *   1  shell (the default): the voxel's centre moved along the splat normal
+ *      n (unit, voxel coordinates) to u's local mass centre: the offset
+ *      sum w (d . n) / sum w over the voxels within 3 of it, d their offset,
+ *      w = u exp(-|d|^2 / (2 CENTRE_SIGMA^2)); at most one voxel. A sharpened
+ *      u is a slab a few voxels thick whose faces are voxel staircases;
+ *      splats on the voxel centres draw the staircase as bands on a tilted
+ *      surface (docs/rendering.md, "Banding"). The neighbourhood spans a
+ *      step of the staircase, so the mass centre lies on the slab's
+ *      mid-surface whatever the step's phase; one column alone would not.
  */
 #include "grid.h"
+
+#define SPLAT_CENTRES_VOXEL 0
+#define SPLAT_CENTRES_SHELL 1
+#ifndef SPLAT_CENTRES
+#define SPLAT_CENTRES SPLAT_CENTRES_SHELL
+#endif
+#ifndef SPLAT_OCCLUSION
+#define SPLAT_OCCLUSION 0
+#endif
+#ifndef CENTRE_SIGMA
+#define CENTRE_SIGMA 1.5f
+#endif
 
 #define SPLAT_NORMALS_GRADIENT 0
 #define SPLAT_NORMALS_TENSOR 1
@@ -73,6 +99,47 @@ inline float3 splat_normal(__global const float* restrict u, const GridDesc g, f
 #endif
 }
 
+/* u at a point in voxel coordinates, trilinear; 0 outside the grid. */
+inline float splat_u_at(__global const float* restrict u, const GridDesc g, const float3 p) {
+  if (p.x < 0.0f || p.y < 0.0f || p.z < 0.0f || p.x > (float)(g.nx - 1) || p.y > (float)(g.ny - 1) ||
+      p.z > (float)(g.nz - 1))
+    return 0.0f;
+  const float3 f0 = floor(p);
+  const float3 w = p - f0;
+  const int x0 = (int)f0.x, y0 = (int)f0.y, z0 = (int)f0.z;
+  const int x1 = min(x0 + 1, g.nx - 1), y1 = min(y0 + 1, g.ny - 1), z1 = min(z0 + 1, g.nz - 1);
+  const float c00 = mix(u[grid_index(g, x0, y0, z0)], u[grid_index(g, x1, y0, z0)], w.x);
+  const float c10 = mix(u[grid_index(g, x0, y1, z0)], u[grid_index(g, x1, y1, z0)], w.x);
+  const float c01 = mix(u[grid_index(g, x0, y0, z1)], u[grid_index(g, x1, y0, z1)], w.x);
+  const float c11 = mix(u[grid_index(g, x0, y1, z1)], u[grid_index(g, x1, y1, z1)], w.x);
+  return mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
+}
+
+/* Ambient occlusion from the opacity (-D SPLAT_OCCLUSION=1) on the side
+ * `side` (+1: along nv, -1: against it) of a splat: nine rays in a cone of
+ * 45 degrees about side * nv (voxel coordinates, s and t the plane's
+ * basis), each sampling u at 3, 5, 8 and 12 voxels (clear of the splat's
+ * own shell) and absorbing as alpha compositing does; the rays' mean
+ * absorbed share. 0: open, 1: enclosed. The renderer uses the side that
+ * faces the viewer. */
+inline float splat_occlusion(__global const float* restrict u, const GridDesc g, const float3 p, const float3 nv,
+                             const float3 s, const float3 t, const int side) {
+  const float3 axis = (float)side * nv;
+  const float steps[4] = {3.0f, 5.0f, 8.0f, 12.0f};
+  float sum = 0.0f;
+  for (int r = 0; r < 9; ++r) {
+    float3 d = axis;
+    if (r > 0) {
+      const float phi = 0.785398163f * (float)(r - 1);
+      d = normalize(0.70710678f * axis + 0.70710678f * (cos(phi) * s + sin(phi) * t));
+    }
+    float through = 1.0f;
+    for (int k = 0; k < 4; ++k) through *= 1.0f - clamp(splat_u_at(u, g, p + steps[k] * d), 0.0f, 1.0f);
+    sum += 1.0f - through;
+  }
+  return sum / 9.0f;
+}
+
 /* Unit vector of v, or `fallback` where v vanishes (a flat spot of u). */
 inline float3 splat_unit(const float3 v, const float3 fallback) {
   const float n = length(v);
@@ -108,12 +175,46 @@ __kernel void splat_emit(__global const float* restrict u, __global const uint* 
   for (int x = 0; x < g.nx; ++x) {
     const float alpha = r[x];
     if (!(alpha > threshold)) continue;
-    const float3 p = (float3)((float)x, (float)y, (float)z);
-    const float3 grad = splat_normal(u, g, p);
+    float3 p = (float3)((float)x, (float)y, (float)z);
+    float3 grad = splat_normal(u, g, p);
     /* A flat spot has no orientation; face the transducer (-z). */
-    const float3 n = splat_unit(grad, (float3)(0.0f, 0.0f, -1.0f));
+    float3 n = splat_unit(grad, (float3)(0.0f, 0.0f, -1.0f));
     /* Plane basis in voxel coordinates, perpendicular to the covector n h. */
-    const float3 nv = splat_unit(n * h, n);
+    float3 nv = splat_unit(n * h, n);
+#if SPLAT_CENTRES == SPLAT_CENTRES_SHELL
+    {
+      /* The offset along nv of u's mass centre in a Gaussian neighbourhood
+       * (sigma CENTRE_SIGMA voxels, radius 3): the local mid-surface. */
+      float mass = 0.0f, moment = 0.0f;
+      const float inv2s2 = 0.5f / (CENTRE_SIGMA * CENTRE_SIGMA);
+      for (int dz = -3; dz <= 3; ++dz) {
+        const int zz = z + dz;
+        if (zz < 0 || zz >= g.nz) continue;
+        for (int dy = -3; dy <= 3; ++dy) {
+          const int yy = y + dy;
+          if (yy < 0 || yy >= g.ny) continue;
+          for (int dx = -3; dx <= 3; ++dx) {
+            const int xx = x + dx;
+            if (xx < 0 || xx >= g.nx) continue;
+            const float v = u[grid_index(g, xx, yy, zz)];
+            if (v <= 0.0f) continue;
+            const float3 d = (float3)((float)dx, (float)dy, (float)dz);
+            const float w = v * exp(-dot(d, d) * inv2s2);
+            mass += w;
+            moment += w * dot(d, nv);
+          }
+        }
+      }
+      const float c = clamp(mass > 0.0f ? moment / mass : 0.0f, -1.0f, 1.0f);
+      if (c != 0.0f) {
+        p += c * nv;
+        grad = splat_normal(u, g, p);
+        const float3 n2 = splat_unit(grad, n);
+        n = dot(n2, n) < 0.0f ? -n2 : n2;
+        nv = splat_unit(n * h, n);
+      }
+    }
+#endif
     const float3 helper = fabs(nv.x) < 0.9f ? (float3)(1.0f, 0.0f, 0.0f) : (float3)(0.0f, 1.0f, 0.0f);
     const float3 s = normalize(cross(nv, helper));
     const float3 t = cross(nv, s);
@@ -128,7 +229,11 @@ __kernel void splat_emit(__global const float* restrict u, __global const uint* 
       const float3 q = p + 0.5f * a * (corner[c].x * s + corner[c].y * t);
       float3 m = splat_unit(splat_normal(u, g, q), n);
       if (dot(m, n) < 0.0f) m = -m;
-      o[4 + c] = (float4)(m, 0.0f);
+      float w = 0.0f;  /* [4].w, [5].w: the occlusion along and against n; [6].w unused */
+#if SPLAT_OCCLUSION
+      if (c < 2) w = splat_occlusion(u, g, p, nv, s, t, c == 0 ? 1 : -1);
+#endif
+      o[4 + c] = (float4)(m, w);
     }
     ++k;
   }

@@ -10,10 +10,15 @@
 //    the presorted lists and the exact sort, from both sides.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <chrono>
 #include <memory>
+#include <thread>
 
 #include "headless.hpp"
+#include "image.hpp"
 #include "splats.hpp"
 #include "test_support.hpp"
 
@@ -239,6 +244,201 @@ TEST(Render, BackToFrontNearRedOverFarBlue) {
         EXPECT_LT(p[0], 25);
       }
     }
+}
+
+// A slab of u = 1, 2.4 voxels thick, tilted by atan(1/4) about y: its faces
+// are voxel staircases with a step every 4 voxels along x.
+Volume tilted_slab(int nx, int ny, int nz) {
+  Volume u({std::size_t(nx), std::size_t(ny), std::size_t(nz)});
+  for (int z = 0; z < nz; ++z)
+    for (int y = 0; y < ny; ++y)
+      for (int x = 0; x < nx; ++x) u.at(x, y, z) = std::fabs(z - (6.0 + 0.25 * x)) <= 1.2 ? 1.0f : 0.0f;
+  return u;
+}
+
+// Banding of an image across x: the luminance of the central rows averaged
+// per column over the middle of the slab, its residual from a straight-line
+// fit over a window of +-`half` columns (a local trend), and the amplitude
+// of its strongest periodic component (periods 8-40 px) over the mean.
+double banding(const RgbaImage& img, int x0, int x1, int y0, int y1, int half) {
+  std::vector<double> profile;
+  for (int x = x0; x < x1; ++x) {
+    double sum = 0;
+    for (int y = y0; y < y1; ++y) {
+      const std::uint8_t* p = img.pixel(x, y);
+      sum += 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2];
+    }
+    profile.push_back(sum / (y1 - y0));
+  }
+  std::vector<double> residual;
+  double mean = 0;
+  for (int i = half; i + half < int(profile.size()); ++i) {
+    double sx = 0, sy = 0, sxx = 0, sxy = 0;
+    for (int k = -half; k <= half; ++k) {
+      sx += k, sy += profile[i + k], sxx += double(k) * k, sxy += k * profile[i + k];
+    }
+    const int m = 2 * half + 1;
+    const double slope = (m * sxy - sx * sy) / (m * sxx - sx * sx);
+    residual.push_back(profile[i] - (sy - slope * sx) / m);  // about the local line at k = 0
+    mean += profile[i];
+  }
+  if (residual.empty() || mean <= 0) return 0.0;
+  mean /= double(residual.size());
+  // The strongest periodic component with a period of 8 to 40 px (the
+  // staircase's step), as an amplitude over the mean.
+  double best = 0;
+  const double pi = std::acos(-1.0);
+  for (double period = 8; period <= 40; period += 0.25) {
+    double re = 0, im = 0;
+    for (std::size_t i = 0; i < residual.size(); ++i) {
+      re += residual[i] * std::cos(2 * pi * double(i) / period);
+      im += residual[i] * std::sin(2 * pi * double(i) / period);
+    }
+    best = std::max(best, 2.0 * std::hypot(re, im) / double(residual.size()));
+  }
+  return best / mean;
+}
+
+// Roughness of the slab's lower silhouette: per column, the lowest row
+// whose opacity exceeds 0.5; RMS residual (px) about a straight-line fit.
+double edge_roughness(const RgbaImage& img, int x0, int x1) {
+  std::vector<double> xs, ys;
+  for (int x = x0; x < x1; ++x)
+    for (int y = img.height - 1; y >= 0; --y)
+      if (img.pixel(x, y)[3] > 127) {
+        xs.push_back(x);
+        ys.push_back(y);
+        break;
+      }
+  const double n = double(xs.size());
+  if (n < 3) return 0.0;
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  for (std::size_t i = 0; i < xs.size(); ++i) sx += xs[i], sy += ys[i], sxx += xs[i] * xs[i], sxy += xs[i] * ys[i];
+  const double slope = (n * sxy - sx * sy) / (n * sxx - sx * sx), icpt = (sy - slope * sx) / n;
+  double r = 0;
+  for (std::size_t i = 0; i < xs.size(); ++i) r += (ys[i] - slope * xs[i] - icpt) * (ys[i] - slope * xs[i] - icpt);
+  return std::sqrt(r / n);
+}
+
+TEST(Render, ShellCentresRemoveTheBandsOfATiltedSlab) {
+  // docs/rendering.md, "Banding": splats on voxel centres draw the slab's
+  // staircase as bands across the tilt; moved to the slab's mid-surface
+  // (SplatCentres::Shell) they do not.
+  const int size = 320;
+  HeadlessRenderer& r = renderer(size, size);
+  const Volume u = tilted_slab(64, 32, 26);
+  double band[2] = {0, 0}, rough[2] = {0, 0};
+  for (const SplatCentres c : {SplatCentres::Voxel, SplatCentres::Shell}) {
+    SplatParams p;
+    p.centres = c;
+    const SplatSet set = generate_splats(runtime(), u, p);
+    r.upload(set);
+    OrbitCamera cam;
+    cam.fit(set.box_lo(), set.box_hi());
+    cam.azimuth = 0.0f;
+    cam.elevation = -60.0f;  // the slab at a grazing angle, where the bands show
+    RenderSettings s;
+    s.background = glm::vec3(0.0f);
+    r.render(cam, s);
+    const RgbaImage img = r.read();
+    if (const char* dir = std::getenv("SOFTSHELL_TEST_IMAGES"))
+      write_png(std::string(dir) + "/banding-" + splat_centres_name(c) + ".png", img.rgb());
+    // The slab fills the middle of the image; the step period is about
+    // 4 voxels = size / 64 * 4 px (fit frames the whole box).
+    band[c == SplatCentres::Shell] = banding(img, size / 5, size * 4 / 5, size * 2 / 5, size * 3 / 5, 20);
+    rough[c == SplatCentres::Shell] = edge_roughness(img, size / 5, size * 4 / 5);
+  }
+  std::cout << "[ result   ] banding across the tilt (the strongest periodic component of the luminance / its mean): voxel "
+            << "centres " << band[0] << ", shell centres " << band[1] << "; lower silhouette's roughness: voxel "
+            << rough[0] << " px, shell " << rough[1] << " px\n";
+  EXPECT_GT(band[0], 1.3 * band[1]);
+  EXPECT_GT(rough[0], 2.0 * rough[1]);
+}
+
+TEST(Render, AsyncSortDrawsTheExactOrderWithoutWaitingForIt) {
+  // DrawOrder::Sort with async_sort (the viewer): the first draw sorts at
+  // once; after the camera moves, draws go on with the old order (reported
+  // stale) while a worker sorts, and once it is done the picture equals a
+  // synchronous exact-order draw from the new eye.
+  const int size = 101;
+  HeadlessRenderer& r = renderer(size, size);
+  const double a = splat_size(0.2);
+  std::vector<Splat> splats;
+  for (int layer = 0; layer < 2; ++layer)
+    for (int y = -4; y <= 4; ++y)
+      for (int x = -4; x <= 4; ++x) splats.push_back(flat_splat({float(x), float(y), 4.0f * layer}, a, float(layer)));
+  r.upload(hand_set(splats, {9, 9, 5}, {-4, -4, 0}));
+  RenderSettings s = unlit();
+  s.colour = {1, 0, 0};
+  s.colour2 = {0, 0, 1};
+  s.order = viewer::DrawOrder::Sort;
+  OrbitCamera cam = looking_down_z({0, 0, 2}, 40.0f);
+  cam.azimuth = 170.0f;
+  const RgbaImage want = (r.render(cam, s), r.read());  // synchronous, from the far side
+  r.upload(hand_set(splats, {9, 9, 5}, {-4, -4, 0}));   // forget that order
+  s.async_sort = true;
+  cam.azimuth = 10.0f;
+  EXPECT_FALSE(r.render(cam, s).stale_order);  // the first order is sorted at once
+  cam.azimuth = 170.0f;
+  EXPECT_TRUE(r.render(cam, s).stale_order);   // the sort for the new eye has just started
+  bool stale = true;
+  for (int i = 0; i < 500 && stale; ++i) {
+    stale = r.render(cam, s).stale_order;
+    if (stale) std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  ASSERT_FALSE(stale) << "the worker's order never arrived";
+  const RgbaImage got = r.read();
+  EXPECT_EQ(got.rgba, want.rgba);
+  EXPECT_GT(got.pixel(50, 50)[2], 230);  // blue, the near layer from this side, covers red
+}
+
+TEST(Render, AmbientOcclusionDarkensTheInsideOfACreaseOnly) {
+  // Two perpendicular plates of u = 1 (an open book); seen into the
+  // crease, the lit colour near it is darker with the occlusion on, and far
+  // from it the same.
+  const int size = 300, n = 48;
+  HeadlessRenderer& r = renderer(size, size);
+  Volume u({std::size_t(n), std::size_t(n), std::size_t(n)});
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x)
+        u.at(x, y, z) = (std::abs(z - 10) <= 1 && x >= 10) || (std::abs(x - 10) <= 1 && z >= 10) ? 1.0f : 0.0f;
+  std::vector<double> column[2];
+  for (const bool on : {false, true}) {
+    SplatParams p;
+    p.occlusion = on;
+    const SplatSet set = generate_splats(runtime(), u, p);
+    r.upload(set);
+    OrbitCamera cam;
+    cam.fit(set.box_lo(), set.box_hi());
+    cam.azimuth = 135.0f;
+    cam.elevation = -30.0f;
+    RenderSettings s;
+    r.render(cam, s);
+    const RgbaImage img = r.read();
+    if (const char* dir = std::getenv("SOFTSHELL_TEST_IMAGES"))
+      write_png(std::string(dir) + "/occlusion-" + (on ? "on" : "off") + ".png", img.rgb());
+    for (int x = 0; x < size; ++x) {
+      double sum = 0;
+      for (int y = size * 2 / 5; y < size * 3 / 5; ++y) {
+        const std::uint8_t* px = img.pixel(x, y);
+        sum += 0.299 * px[0] + 0.587 * px[1] + 0.114 * px[2];
+      }
+      column[on].push_back(sum);
+    }
+  }
+  // The crease is the image's middle column; the plates reach a third of the width either side.
+  double darkest = 1.0;
+  for (int x = size / 2 - 20; x <= size / 2 + 20; ++x)
+    if (column[0][x] > 0) darkest = std::min(darkest, column[1][x] / column[0][x]);
+  std::cout << "[ result   ] lit colour with / without the occlusion: " << darkest << " at its darkest near the crease";
+  EXPECT_LT(darkest, 0.85);
+  for (const int x : {size / 2 - 90, size / 2 - 80, size / 2 + 80, size / 2 + 90}) {
+    ASSERT_GT(column[0][x], 0) << x;
+    std::cout << ", " << column[1][x] / column[0][x] << " at column " << x;
+    EXPECT_NEAR(column[1][x] / column[0][x], 1.0, 0.03) << x;
+  }
+  std::cout << '\n';
 }
 
 TEST(Render, CropBoxDropsSplats) {

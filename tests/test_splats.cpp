@@ -131,6 +131,7 @@ TEST(Splats, MatchCpuReferenceOnOddAnisotropicVolumes) {
       SplatParams p;
       p.threshold = threshold;
       p.normals = SplatNormals::Gradient;
+      p.centres = SplatCentres::Voxel;  // the paper's placement; shell centres: ShellCentresMatchTheReference
       const SplatSet set = generate_splats(rt, u, p);
       const std::size_t want = std::count_if(u.data.begin(), u.data.end(), [&](float v) { return v > threshold; });
       ASSERT_EQ(set.splats.size(), want);
@@ -148,6 +149,7 @@ TEST(Splats, TensorOrientationMatchesTheReference) {
   u.origin = {1.0, -2.0, 0.5};
   SplatParams p;
   ASSERT_EQ(p.normals, SplatNormals::Tensor) << "the tensor is the default";
+  p.centres = SplatCentres::Voxel;  // normals at the voxel centres the reference evaluates
   p.tensor_sigma = 1.2;
   const SplatSet set = generate_splats(rt, u, p);
   ASSERT_GT(set.splats.size(), 100u);
@@ -262,6 +264,56 @@ TEST(Splats, GaussianParametersFollowThePaper) {
   EXPECT_THROW(splat_lambda(1.0), std::invalid_argument);
 }
 
+TEST(Splats, ShellCentresMatchTheReference) {
+  // SplatCentres::Shell (kernels/splat.cl): each centre moved along its unit
+  // normal in voxel coordinates (here grad u, central differences per mm,
+  // scaled by the spacing) to u's Gaussian-weighted mass centre within 3
+  // voxels (sigma 1.5), at most one voxel; recomputed here in float64.
+  Runtime& rt = runtime();
+  Volume u = random_volume({13, 11, 9}, {0.7, 1.3, 1.1}, seed() + 11);
+  u.origin = {2.5, -1.0, 4.0};
+  SplatParams p;
+  p.normals = SplatNormals::Gradient;
+  ASSERT_EQ(p.centres, SplatCentres::Shell) << "shell centres are the default";
+  const SplatSet set = generate_splats(rt, u, p);
+  std::size_t k = 0, moved = 0;
+  for (std::size_t z = 0; z < u.dims[2]; ++z)
+    for (std::size_t y = 0; y < u.dims[1]; ++y)
+      for (std::size_t x = 0; x < u.dims[0]; ++x) {
+        if (!(u.at(x, y, z) > p.threshold)) continue;
+        ASSERT_LT(k, set.splats.size());
+        const Splat& s = set.splats[k++];
+        const V3 g = ref_gradient(u, long(x), long(y), long(z));
+        V3 nv{g[0] * u.spacing[0], g[1] * u.spacing[1], g[2] * u.spacing[2]};
+        const double len = norm(nv);
+        if (len < 1e-6) continue;  // a flat spot: the kernel's fallback direction
+        for (double& c : nv) c /= len;
+        double mass = 0, moment = 0;
+        for (long dz = -3; dz <= 3; ++dz)
+          for (long dy = -3; dy <= 3; ++dy)
+            for (long dx = -3; dx <= 3; ++dx) {
+              const long xx = long(x) + dx, yy = long(y) + dy, zz = long(z) + dz;
+              if (xx < 0 || yy < 0 || zz < 0 || xx >= long(u.dims[0]) || yy >= long(u.dims[1]) || zz >= long(u.dims[2]))
+                continue;
+              const double v = u.at(std::size_t(xx), std::size_t(yy), std::size_t(zz));
+              if (v <= 0) continue;
+              const double w = v * std::exp(-double(dx * dx + dy * dy + dz * dz) / (2 * 1.5 * 1.5));
+              mass += w;
+              moment += w * (dx * nv[0] + dy * nv[1] + dz * nv[2]);
+            }
+        const double c = std::clamp(mass > 0 ? moment / mass : 0.0, -1.0, 1.0);
+        moved += std::abs(c) > 0.05;
+        const V3 want{u.origin[0] + u.spacing[0] * (double(x) + c * nv[0]),
+                      u.origin[1] + u.spacing[1] * (double(y) + c * nv[1]),
+                      u.origin[2] + u.spacing[2] * (double(z) + c * nv[2])};
+        for (int a = 0; a < 3; ++a)
+          ASSERT_NEAR(s.centre[a], want[a], 2e-4 * (1 + std::abs(want[a])))
+              << "voxel (" << x << ", " << y << ", " << z << "), axis " << a << ", shift " << c;
+      }
+  EXPECT_EQ(k, set.splats.size());
+  EXPECT_GT(moved, k / 4) << "too few centres moved for the test to mean anything";
+}
+
 TEST(Splats, BackToFrontOrders) {
   Runtime& rt = runtime();
   Volume u = random_volume({11, 10, 9}, {0.9, 1.1, 1.3}, seed() + 3);
@@ -273,9 +325,14 @@ TEST(Splats, BackToFrontOrders) {
       std::vector<std::uint32_t> sorted = order;
       std::sort(sorted.begin(), sorted.end());
       for (std::size_t i = 0; i < sorted.size(); ++i) ASSERT_EQ(sorted[i], i) << "not a permutation";
+      // Monotone by voxel slab (the centre's nearest grid plane), voxel order within one.
+      const auto slab = [&](std::uint32_t k) {
+        return std::lround((set.splats[k].centre[axis] - set.origin[axis]) / set.spacing[axis]);
+      };
       for (std::size_t i = 1; i < order.size(); ++i) {
-        const float p = set.splats[order[i - 1]].centre[axis], q = set.splats[order[i]].centre[axis];
+        const long p = slab(order[i - 1]), q = slab(order[i]);
         ASSERT_TRUE(desc ? p >= q : p <= q) << "axis " << axis << " position " << i;
+        if (p == q) ASSERT_LT(order[i - 1], order[i]) << "voxel order within a slab";
       }
     }
   EXPECT_EQ(axis_list_for_view({0.1, -0.2, 0.9}), 5);   // looking along +z: descending z

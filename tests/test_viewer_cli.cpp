@@ -319,6 +319,69 @@ TEST_F(ViewerCli, SavedParametersReproduceTheClassification) {
   EXPECT_NE(uc.data, ua.data);
 }
 
+TEST_F(ViewerCli, PresetsSetClassificationAndRenderingAndGiveWayToOptions) {
+  // host/presets.hpp. A raw volume viewed with --preset bone: the saved
+  // parameters name the preset and hold its rendering (threshold 0.3, light
+  // 0,50, ivory), and `classify --params` of that file classifies with the
+  // bone cue on, as `classify --bone-cue on` does; an option on the command
+  // line wins over the preset; render --preset vessels draws red where the
+  // default draws skin tones; an unknown preset is a one-line error listing
+  // the presets as --help does.
+  const std::string in = file("raw.nrrd");
+  ASSERT_EQ(run({"synthetic", "--size", "32", "-o", in, "-q"}).status, 0);
+  const std::string saved = file("bone.txt");
+  RunResult r = run({"view", in, "--preset", "bone", "--frames", "2", "--size", "320x240", "--save-params", saved});
+  ASSERT_EQ(r.status, 0) << r.err;
+  std::string text = slurp(saved);
+  for (const char* line : {"preset = bone\n", "threshold = 0.300000012\n", "light = 0,50\n", "colour = 0.949999988,0.920000017,0.819999993\n"})
+    EXPECT_NE(text.find(line), std::string::npos) << line << " not in:\n" << text;
+  EXPECT_NE(r.out.find("bone cue on"), std::string::npos) << r.out;
+  const std::string a = file("a.nrrd"), b = file("b.nrrd"), c = file("c.nrrd");
+  ASSERT_EQ(run({"classify", in, "--params", saved, "-o", a, "-q"}).status, 0);
+  ASSERT_EQ(run({"classify", in, "--iso", "auto", "--bone-cue", "on", "-o", b, "-q"}).status, 0);
+  ASSERT_EQ(run({"classify", in, "--iso", "auto", "-o", c, "-q"}).status, 0);
+  EXPECT_EQ(read_volume(a).data, read_volume(b).data) << "the bone preset's classification differs from --bone-cue on";
+  EXPECT_NE(read_volume(a).data, read_volume(c).data) << "the bone cue changed nothing";
+  // The command line wins: threshold and light given, the rest from the preset.
+  r = run({"view", in, "--preset", "bone", "--threshold", "0.25", "--light", "10,20", "--frames", "2", "--size",
+           "320x240", "--save-params", saved});
+  ASSERT_EQ(r.status, 0) << r.err;
+  text = slurp(saved);
+  for (const char* line : {"preset = bone\n", "threshold = 0.25\n", "light = 10,20\n"})
+    EXPECT_NE(text.find(line), std::string::npos) << line << " not in:\n" << text;
+  // A parameters file's preset key is a preset: the face preset's depth colour comes back.
+  const std::string face = write("face.txt", "preset = face\n");
+  ASSERT_EQ(run({"view", in, "--params", face, "--frames", "2", "--size", "320x240", "--save-params", saved}).status, 0);
+  text = slurp(saved);
+  EXPECT_NE(text.find("colour_map = depth\n"), std::string::npos) << text;
+  // Pixels: the vessels preset is red, the default skin-toned.
+  const auto mean_rg = [&](const std::vector<std::string>& extra) {
+    std::vector<std::string> args{"render", in, "-o", file("r.png"), "--size", "160x160", "-q"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    const RunResult rr = run(args);
+    EXPECT_EQ(rr.status, 0) << rr.err;
+    const Image img = read_png(file("r.png"));
+    double red = 0, green = 0;
+    for (int y = 0; y < img.height; ++y)
+      for (int x = 0; x < img.width; ++x)
+        red += img.pixel(x, y)[0], green += img.pixel(x, y)[1];
+    return std::make_pair(red, green);
+  };
+  const auto [r0, g0] = mean_rg({});
+  const auto [r1, g1] = mean_rg({"--preset", "vessels"});
+  EXPECT_LT(r0, 1.6 * g0) << "the default is not red";
+  EXPECT_GT(r1, 3.0 * g1) << "the vessels preset is red";
+  // Unknown names: one line, the list as --help gives it.
+  expect_one_line_error(run({"render", in, "-o", file("x.png"), "--preset", "heart"}),
+                        {"--preset", "default, face, bone or vessels"});
+  expect_one_line_error(run({"view", in, "--frames", "1", "--preset", "heart"}), {"--preset"});
+  one_line_error(run({"view", in, "--frames", "1", "--params", write("bad.txt", "preset = heart\n")}),
+                 {"preset", "heart"});
+  const RunResult help = run({"render", "--help"});
+  EXPECT_NE(help.out.find("default, face, bone, vessels"), std::string::npos);
+  EXPECT_FALSE(fs::exists(file("x.png")));
+}
+
 TEST_F(ViewerCli, BadParametersFilesAreOneLineErrors) {
   const std::string in = file("raw.nrrd");
   ASSERT_EQ(run({"synthetic", "--size", "16", "-o", in, "-q"}).status, 0);

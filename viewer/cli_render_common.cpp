@@ -62,6 +62,16 @@ void SplatViewOptions::add_to(CLI::App* sub, const std::vector<std::string>& met
                   "the middle of a shell, where grad u vanishes) or gradient (grad u, the paper); docs/rendering.md")
       ->capture_default_str()
       ->check(one_of({"tensor", "gradient"}));
+  sub->add_option("--centres", centres,
+                  "Splat centres: shell (each moved along its normal to the centroid of u across the shell: no bands "
+                  "on tilted surfaces) or voxel (the voxel's centre, the paper); docs/rendering.md, \"Banding\"")
+      ->capture_default_str()
+      ->check(one_of({"shell", "voxel"}));
+  sub->add_option("--occlusion", occlusion,
+                  "Ambient occlusion from the opacity (soft shadows in creases and hollows: on each side of a splat, "
+                  "rays through u absorb light as compositing does; docs/rendering.md)")
+      ->capture_default_str()
+      ->check(one_of({"on", "off"}));
   sub->add_option("--tensor-sigma", tensor_sigma, "Gaussian sigma of the structure tensor in voxels")
       ->capture_default_str()
       ->check(real_range(0, 8, "voxels", Ends::OpenLow));
@@ -75,6 +85,15 @@ void SplatViewOptions::add_to(CLI::App* sub, const std::vector<std::string>& met
                   "the splat's rim as the paper intends; larger, smoother splats); docs/rendering.md")
       ->capture_default_str()
       ->check(one_of({"paper", "rim"}));
+  sub->add_option("--preset", preset,
+                  "Settings for a kind of scan, classification and rendering together (docs/rendering.md, "
+                  "\"Presets\"): " + preset_names() + "; what the command line gives wins")
+      ->type_name("NAME")
+      ->check(one_of([] {
+        std::vector<std::string> names;
+        for (const Preset& p : presets()) names.push_back(p.name);
+        return names;
+      }()));
   sub->add_flag("--opacity", opacity, "Treat IN as an opacity volume (float in [0, 1]) even if unsure");
   sub->add_flag("--classify", classify, "Classify IN first (with the defaults) even if it looks like an opacity volume");
 }
@@ -106,6 +125,9 @@ SplatParams SplatViewOptions::params() const {
   if (!parse_splat_normals(orientation, p.normals))
     throw InputError("--orientation " + orientation + ": expected tensor or gradient");
   if (!(tensor_sigma > 0 && tensor_sigma <= 8)) throw InputError("--tensor-sigma must be in (0, 8] voxels");
+  if (!parse_splat_centres(centres, p.centres)) throw InputError("--centres " + centres + ": expected shell or voxel");
+  if (occlusion != "on" && occlusion != "off") throw InputError("--occlusion " + occlusion + ": expected on or off");
+  p.occlusion = occlusion == "on";
   p.tensor_sigma = tensor_sigma;
   return p;
 }
@@ -113,6 +135,27 @@ SplatParams SplatViewOptions::params() const {
 viewer::InputKind SplatViewOptions::input_kind() const {
   if (opacity && classify) throw InputError("--opacity and --classify exclude each other");
   return opacity ? viewer::InputKind::Opacity : classify ? viewer::InputKind::Raw : viewer::InputKind::Auto;
+}
+
+const Preset& preset_or_throw(const std::string& name) {
+  const Preset* p = find_preset(name);
+  if (!p) throw InputError("--preset " + name + ": unknown (presets: " + preset_names() + ")");
+  return *p;
+}
+
+void apply_preset(const Preset& p, viewer::RenderSettings& s, SplatParams& params, const std::set<std::string>& given) {
+  s.colour = glm::vec3(p.colour[0], p.colour[1], p.colour[2]);
+  s.specular = p.specular;
+  if (!given.count("--light")) s.light_azimuth = p.light_azimuth, s.light_elevation = p.light_elevation;
+  if (!given.count("--colour-map")) s.depth_colour = p.depth_colour;
+  if (!given.count("--threshold")) params.threshold = p.threshold;
+  if (!given.count("--gaussian")) params.gaussian = p.rim_gaussian ? SplatGaussian::Rim : SplatGaussian::Paper;
+}
+
+std::pair<float, float> parse_light(const std::string& text, const std::string& what) {
+  const std::vector<double> v = parse_numbers(text, ',', 2, what, "AZIMUTH,ELEVATION in degrees from the view direction (e.g. -30,30)");
+  if (std::abs(v[0]) > 90 || std::abs(v[1]) > 90) throw InputError(what + ": azimuth and elevation must be in [-90, 90]");
+  return {float(v[0]), float(v[1])};
 }
 
 std::pair<int, int> parse_size(const std::string& text, const std::string& what) {

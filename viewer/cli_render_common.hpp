@@ -5,6 +5,7 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -12,6 +13,7 @@
 #include "opacity_input.hpp"
 #include "raycast.hpp"
 #include "splat_renderer.hpp"
+#include "presets.hpp"
 #include "splats.hpp"
 
 namespace softshell::cli {
@@ -31,7 +33,8 @@ const std::vector<std::string>& render_methods();
 const std::vector<std::string>& view_methods();
 
 struct SplatViewOptions {
-  std::string method = "splat", normals = "three", order = "lists", gaussian = "paper", orientation = "tensor";
+  std::string method = "splat", normals = "three", order = "lists", gaussian = "paper", orientation = "tensor",
+              centres = "shell", preset, occlusion = "off";
   float threshold = 0.2f;
   double tensor_sigma = 1.5;
   bool opacity = false, classify = false;
@@ -43,6 +46,15 @@ struct SplatViewOptions {
   SplatParams params() const;               // validates the threshold
   viewer::InputKind input_kind() const;
 };
+
+// A preset's rendering part (host/presets.hpp) onto the settings and the
+// splat parameters, except what `given` (long option names the command
+// line or a parameters file set: --threshold, --gaussian, --colour-map,
+// --light) holds. Throws InputError naming --preset for an unknown name.
+const Preset& preset_or_throw(const std::string& name);
+void apply_preset(const Preset& p, viewer::RenderSettings& s, SplatParams& params, const std::set<std::string>& given);
+// "AZ,EL" light direction in degrees, each in [-90, 90].
+std::pair<float, float> parse_light(const std::string& text, const std::string& what);
 
 // "WxH" -> (W, H), each in [1, 8192].
 std::pair<int, int> parse_size(const std::string& text, const std::string& what);

@@ -24,7 +24,7 @@ bool looks_like_opacity(const Volume& v) {
 }
 
 OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, const std::string& iso_text,
-                          const VariationalParams* weights, std::optional<std::size_t> frame) {
+                          const VariationalParams* weights, std::optional<std::size_t> frame, BoneCueMode bone_cue) {
   OpacityInput in;
   Volume v;
   if (const std::size_t frames = read_any_header(path).frames; frames > 1) {
@@ -105,11 +105,13 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   }
   in.params = defaults;
   in.params.v_iso = in.data.intensity_map().to_unit(in.iso);
-  // The bone cue as classify's default (--bone-cue off; docs/parameters.md says why).
+  // The bone cue: classify's default is off (docs/parameters.md says why); a preset may set it.
+  in.beam_axis = nf.axis;
+  in.bone_cue = bone_cue;
   BoneCueParams bp;
   bp.axis = nf.axis;
   BoneCueReport br;
-  in.params.edge_weight = bone_cue_weights(in.data, mask, BoneCueMode::Off, bp, &br);
+  in.params.edge_weight = bone_cue_weights(in.data, mask, bone_cue, bp, &br);
   in.u = reclassify(rt, in, in.params, nullptr, &in.report);  // keeps in.classifier
   in.classified = true;
   std::ostringstream note;
@@ -120,6 +122,16 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
        << (in.report.converged ? "" : " (NOT converged)") << ", bone cue " << (br.on ? "on" : "off");
   in.note = note.str();
   return in;
+}
+
+bool set_bone_cue(OpacityInput& in, BoneCueMode mode) {
+  if (!in.classified) return false;
+  BoneCueParams bp;
+  bp.axis = in.beam_axis;
+  BoneCueReport br;
+  in.params.edge_weight = bone_cue_weights(in.data, in.mask.empty() ? nullptr : &in.mask, mode, bp, &br);
+  in.bone_cue = mode;
+  return br.on;
 }
 
 Volume reclassify(Runtime& rt, OpacityInput& in, const VariationalParams& p, const Volume* init,

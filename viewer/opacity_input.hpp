@@ -5,6 +5,8 @@
 // parameters). The raw data is kept so the viewer can re-solve.
 #pragma once
 
+#include "bone_cue.hpp"
+
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -45,6 +47,8 @@ struct OpacityInput {
   std::vector<Volume> sequence;
   std::vector<Volume> bmode_sequence;  // the B-mode frames behind it (`view --volume`), or empty
   std::size_t frame = 0;
+  int beam_axis = 2;                 // when classified: the beam axis the near-field step found
+  BoneCueMode bone_cue = BoneCueMode::Off;
 };
 
 // Reads `path` and returns its opacity (see above). `iso` is "auto" or a
@@ -58,7 +62,12 @@ struct OpacityInput {
 // which is then classified alone.
 OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, const std::string& iso = "auto",
                           const VariationalParams* weights = nullptr,
-                          std::optional<std::size_t> frame = std::nullopt);
+                          std::optional<std::size_t> frame = std::nullopt, BoneCueMode bone_cue = BoneCueMode::Off);
+
+// The bone cue's edge weights of a classified input for `mode` (classify's
+// --bone-cue), into in.params.edge_weight; true when the cue is on. For a
+// preset chosen in the panel: the next re-solve uses them.
+bool set_bone_cue(OpacityInput& in, BoneCueMode mode);
 
 // Re-solves with new parameters (normalised v_iso), warm-starting from
 // `init` when given. Re-uses in.classifier when only pointwise parameters

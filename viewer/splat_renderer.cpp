@@ -22,7 +22,14 @@ SplatRenderer::SplatRenderer() {
   glGenTextures(1, &order_texture_);
 }
 
+void SplatRenderer::wait_for_sort() {
+  if (sorting_.valid()) sorting_.wait();
+  sorting_ = {};
+  have_sorted_ = false;
+}
+
 SplatRenderer::~SplatRenderer() {
+  wait_for_sort();
   for (GLuint& b : lists_)
     if (b) glDeleteBuffers(1, &b);
   glDeleteBuffers(1, &splat_buffer_);
@@ -39,6 +46,7 @@ void SplatRenderer::upload(const SplatSet& set) {
   if (set.splats.size() * 7 > std::size_t(max_texels))
     throw InputError(std::to_string(set.splats.size()) + " splats exceed this OpenGL's texture buffer limit of " +
                      std::to_string(max_texels / 7) + "; raise --threshold");
+  wait_for_sort();  // the worker reads set_
   set_ = set;
   glBindBuffer(GL_TEXTURE_BUFFER, splat_buffer_);
   glBufferData(GL_TEXTURE_BUFFER, GLsizeiptr(set.splats.size() * sizeof(Splat)), set.splats.data(), GL_STATIC_DRAW);
@@ -82,10 +90,35 @@ DrawStats SplatRenderer::draw(const OrbitCamera& camera, const RenderSettings& s
   const glm::vec3 eye = camera.eye();
   if (s.order == DrawOrder::Sort) {
     const auto t0 = std::chrono::steady_clock::now();
-    depth_order(set_, {eye.x, eye.y, eye.z}, order_);
-    glBindBuffer(GL_TEXTURE_BUFFER, sort_buffer_);
-    glBufferData(GL_TEXTURE_BUFFER, GLsizeiptr(order_.size() * 4), order_.data(), GL_STREAM_DRAW);
-    bound_order_ = 0;  // re-specified storage: attach again
+    const auto send = [&] {
+      glBindBuffer(GL_TEXTURE_BUFFER, sort_buffer_);
+      glBufferData(GL_TEXTURE_BUFFER, GLsizeiptr(order_.size() * 4), order_.data(), GL_STREAM_DRAW);
+      bound_order_ = 0;  // re-specified storage: attach again
+    };
+    if (!s.async_sort || !have_sorted_) {
+      if (sorting_.valid()) sorting_.wait(), sorting_ = {};
+      depth_order(set_, {eye.x, eye.y, eye.z}, order_);
+      send();
+      have_sorted_ = true;
+      sorted_eye_ = eye;
+    } else {
+      // The newest finished order goes up; a new sort starts when the eye
+      // has moved since the order drawn. Drawing never waits for a sort.
+      if (sorting_.valid() && sorting_.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
+        order_ = sorting_.get();
+        sorted_eye_ = sorting_eye_;
+        send();
+      }
+      if (!sorting_.valid() && eye != sorted_eye_) {
+        sorting_eye_ = eye;
+        sorting_ = std::async(std::launch::async, [this, e = eye] {
+          std::vector<std::uint32_t> order;
+          depth_order(set_, {e.x, e.y, e.z}, order);
+          return order;
+        });
+      }
+      stats.stale_order = eye != sorted_eye_;
+    }
     bind_order(sort_buffer_);
     stats.sort_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   } else {
@@ -116,6 +149,7 @@ DrawStats SplatRenderer::draw(const OrbitCamera& camera, const RenderSettings& s
   glUniform3fv(loc("u_colour2"), 1, glm::value_ptr(s.colour2));
   glUniform3f(loc("u_depth"), s.depth_colour ? 1.0f : 0.0f, s.depth_lo, s.depth_hi);
   glUniform4f(loc("u_material"), s.ambient, s.diffuse, s.specular, s.shininess);
+  glUniform1f(loc("u_occlusion"), set_.params.occlusion ? s.occlusion : 0.0f);
   // Crop box from volume fractions to mm (half a voxel of slack each way).
   glm::vec3 lo, hi;
   for (int a = 0; a < 3; ++a) {

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <array>
+#include <future>
 #include <cstdint>
 #include <vector>
 
@@ -42,13 +43,21 @@ struct RenderSettings {
   // mm) from light near depth_lo to dark red-brown at depth_hi, instead of colour.
   bool depth_colour = false;
   float depth_lo = 0.0f, depth_hi = 1.0f;
+  // DrawOrder::Sort: sort on a worker thread and draw with the newest order
+  // finished (the interactive viewer; one sorted for a nearby eye while the
+  // camera moves); false: sort for this eye before drawing (`render`).
+  bool async_sort = false;
+  // Strength of the splats' ambient occlusion (SplatParams::occlusion):
+  // lit colour x (1 - strength x occlusion).
+  float occlusion = 0.7f;
 };
 
 // What the last draw did.
 struct DrawStats {
   std::size_t splats = 0;
   int list = -1;           // presorted list used (2 * axis + descending), -1 with Sort
-  double sort_ms = 0;      // CPU depth sort + upload (Sort only)
+  double sort_ms = 0;      // CPU depth sort + upload (Sort only); with async_sort the upload alone
+  bool stale_order = false;  // async_sort: drawn with an order sorted for an earlier eye
 };
 
 class SplatRenderer {
@@ -79,6 +88,11 @@ class SplatRenderer {
   GLuint sort_buffer_ = 0;
   GLuint bound_order_ = 0;
   std::vector<std::uint32_t> order_;
+  // async_sort: the sort in flight and the eye of the order in sort_buffer_.
+  std::future<std::vector<std::uint32_t>> sorting_;
+  glm::vec3 sorting_eye_{0.0f}, sorted_eye_{0.0f};
+  bool have_sorted_ = false;
+  void wait_for_sort();
   SplatSet set_;
   std::size_t list_bytes_ = 0;
 };

@@ -24,6 +24,7 @@
 #include "image.hpp"
 #include "io.hpp"
 #include "params_file.hpp"
+#include "presets.hpp"
 #include "mesh.hpp"
 #include "mesh_renderer.hpp"
 #include "raycast.hpp"
@@ -124,6 +125,8 @@ class ViewerApp {
     if (o.background)
       settings_.background = {float((*o.background)[0]), float((*o.background)[1]), float((*o.background)[2])};
     std::snprintf(save_prefix_, sizeof save_prefix_, "%s", "softshell-view");
+    preset_ = o.preset;
+    settings_.async_sort = true;  // the exact order is sorted off the render thread
     if (o.play_fps > 0) playing_ = true, play_fps_ = float(o.play_fps);
   }
 
@@ -227,6 +230,11 @@ class ViewerApp {
     SplatTiming t;
     const SplatSet set = SplatGenerator(rt_, grid_, params_).generate(u_buffer_, input_.u.origin, &t);
     renderer_->upload(set);
+    // The depth colour map spans what is drawn (near its top light, at its bottom dark).
+    if (!set.splats.empty()) {
+      const auto box = set.splat_box();
+      if (box[1][2] > box[0][2]) settings_.depth_lo = float(box[0][2]), settings_.depth_hi = float(box[1][2]);
+    }
     generate_ms_ = 1000.0 * t.total;
     if (!o_.quiet) std::cout << "view: " << set.splats.size() << " splats in " << generate_ms_ << " ms\n";
   }
@@ -656,6 +664,7 @@ class ViewerApp {
                      : mode_ == ViewRenderer::Raycast ? 3
                      : settings_.method == SplatMethod::Isotropic ? 1
                                                                   : 0;
+      preset_menu();
       if (ImGui::Combo("renderer", &renderer, renderers, 4)) {
         mode_ = renderer == 2 ? ViewRenderer::Mesh : renderer == 3 ? ViewRenderer::Raycast : ViewRenderer::Splats;
         if (renderer < 2) settings_.method = renderer == 1 ? SplatMethod::Isotropic : SplatMethod::Oriented;
@@ -972,6 +981,7 @@ class ViewerApp {
   // The parameters of what is shown (host/params_file.hpp).
   ParamsFile current_params() const {
     ParamsFile f;
+    if (!preset_.empty()) f.set("preset", preset_);
     if (input_.classified) {
       const VariationalParams& p = input_.params;  // of the u shown
       if (o_.iso_text == "auto" && p.v_iso == initial_v_iso_) f.set("iso", std::string("auto"));
@@ -1023,6 +1033,42 @@ class ViewerApp {
   }
 
   // The splat-only controls of the Rendering section.
+  // Presets (host/presets.hpp): the rendering at once; the bone cue (the
+  // classification part) re-solves when the viewer classified the data.
+  void preset_menu() {
+    const std::vector<Preset>& all = presets();
+    int current = -1;
+    for (std::size_t i = 0; i < all.size(); ++i)
+      if (all[i].name == preset_) current = int(i);
+    std::string items;
+    for (const Preset& p : all) items += p.name + '\0';
+    items += '\0';
+    if (ImGui::Combo("preset", &current, items.c_str()) && current >= 0) apply_panel_preset(all[std::size_t(current)]);
+    if (current >= 0 && ImGui::IsItemHovered()) ImGui::SetTooltip("%s", all[std::size_t(current)].what.c_str());
+  }
+
+  void apply_panel_preset(const Preset& p) {
+    if (solving_.valid()) {
+      status_ = "preset: wait for the re-solve to end";
+      return;
+    }
+    preset_ = p.name;
+    const SplatGaussian gaussian = params_.gaussian;
+    const float threshold = params_.threshold;
+    cli::apply_preset(p, settings_, params_, {});
+    if (params_.gaussian != gaussian || params_.threshold != threshold) regenerate(), slices_dirty_ = true;
+    BoneCueMode mode = BoneCueMode::Off;
+    parse_bone_cue_mode(p.bone_cue, mode);
+    if (input_.classified && mode != input_.bone_cue) {
+      const bool on = set_bone_cue(input_, mode);
+      VariationalParams q = edit_ ? *edit_ : input_.params;
+      q.edge_weight = input_.params.edge_weight;
+      if (edit_) edit_->edge_weight = q.edge_weight;
+      status_ = std::string("preset ") + p.name + ": bone cue " + (on ? "on" : "off") + ", re-solving";
+      start_solve(q);
+    }
+  }
+
   void splat_controls() {
     int normals = settings_.three_normals;
     ImGui::RadioButton("one normal", &normals, 0);
@@ -1034,6 +1080,13 @@ class ViewerApp {
     ImGui::SameLine();
     ImGui::RadioButton("exact order (sorted)", &order, 1);
     settings_.order = order ? DrawOrder::Sort : DrawOrder::Lists;
+    bool shell = params_.centres == SplatCentres::Shell;
+    if (ImGui::Checkbox("splats on the shell (no bands)", &shell) && !solving_.valid()) {
+      params_.centres = shell ? SplatCentres::Shell : SplatCentres::Voxel;
+      regenerate();
+    }
+    if (ImGui::Checkbox("ambient occlusion (soft shadows)", &params_.occlusion) && !solving_.valid()) regenerate();
+    if (params_.occlusion) ImGui::SliderFloat("occlusion strength", &settings_.occlusion, 0.0f, 1.0f, "%.2f");
     ImGui::SliderFloat("threshold (u)", &params_.threshold, 0.02f, 0.9f, "%.2f");
     if (ImGui::IsItemDeactivatedAfterEdit() && !solving_.valid()) regenerate(), slices_dirty_ = true;
     // Splat orientation: the structure tensor of u (default) or grad u (the paper).
@@ -1113,6 +1166,7 @@ class ViewerApp {
   float clip_offset_ = 0.0f;
   bool clip_flip_ = false;
   std::optional<VariationalParams> edit_;
+  std::string preset_;
   double initial_v_iso_ = 0;
   long drawn_ = 0;
   bool resolve_pending_ = false;

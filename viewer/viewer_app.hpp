@@ -46,6 +46,9 @@ struct ViewerOptions {
   // the start (0: paused; the panel's frame slider and play button);
   // with `frames` (scripted), one sequence frame per drawn frame.
   double play_fps = 0;
+  // The preset the settings came from (host/presets.hpp; empty: none): the
+  // panel's preset menu starts on it and the parameters file names it.
+  std::string preset;
 };
 
 // Runs until the window closes, Esc, or `frames` frames. Returns 0.

@@ -27,6 +27,7 @@
 #include "variational.hpp"
 #include "text.hpp"
 #include "params_file.hpp"
+#include "presets.hpp"
 
 namespace softshell::cli {
 namespace {
@@ -317,6 +318,8 @@ ClassifyOptions with_params_file(ClassifyOptions o) {
     return true;
   };
   if (take("iso", "--iso")) o.iso = *f.find("iso");
+  // A preset's classification part (host/presets.hpp): the bone cue.
+  if (take("preset", "--bone-cue")) o.bone_cue = find_preset(*f.find("preset"))->bone_cue;
   if (take("sigma", "--sigma")) o.sigma = *f.number("sigma");
   const std::pair<const char*, double*> weights[] = {{"alpha", &o.vp.alpha}, {"beta", &o.vp.beta},
                                                      {"gamma", &o.vp.gamma}, {"omega", &o.vp.omega},

@@ -10,6 +10,8 @@
 #include <iostream>
 #include <memory>
 #include <optional>
+#include <set>
+#include <tuple>
 #include <sstream>
 #include <vector>
 
@@ -21,12 +23,15 @@
 #include "headless.hpp"
 #include "image.hpp"
 #include "text.hpp"
+#include "presets.hpp"
+#include "bone_cue.hpp"
 
 namespace softshell::cli {
 namespace {
 
 struct RenderOptions {
-  std::string in, out, device, size = "400x400", view = "0,0", crop, iso = "auto";
+  std::string in, out, device, size = "400x400", view = "0,0", crop, iso = "auto", colour_map, light;
+  std::set<std::string> given;  // long option names given on the command line
   int turntable = 0, benchmark = 0;
   std::optional<std::size_t> frame;  // 3D+t: one frame; default every frame (splats)
   bool quiet = false;
@@ -128,6 +133,15 @@ int run_render(const RenderOptions& o) {
   if (o.out.find('%') != std::string::npos && o.turntable == 0 && !every_frame)
     throw InputError("-o " + o.out + ": a %d pattern needs --turntable (or a sequence)");
   viewer::RenderSettings settings = o.splat.settings();
+  SplatParams splat_params = o.splat.params();
+  BoneCueMode bone_cue = BoneCueMode::Off;
+  if (!o.splat.preset.empty()) {  // what the command line gives wins
+    const Preset& p = preset_or_throw(o.splat.preset);
+    apply_preset(p, settings, splat_params, o.given);
+    parse_bone_cue_mode(p.bone_cue, bone_cue);
+  }
+  if (!o.colour_map.empty()) settings.depth_colour = o.colour_map == "depth";
+  if (!o.light.empty()) std::tie(settings.light_azimuth, settings.light_elevation) = parse_light(o.light, "--light");
   if (!o.crop.empty()) parse_crop(o.crop, settings);
   // Every file this run writes, checked against the input before anything
   // is drawn (a turntable frame may be named like the input).
@@ -140,13 +154,14 @@ int run_render(const RenderOptions& o) {
   const progress::Stage command("render");
   std::optional<progress::Stage> step(std::in_place, "input");
   Runtime rt(o.device);
-  const viewer::OpacityInput input = viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, nullptr, o.frame);
+  const viewer::OpacityInput input =
+      viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, nullptr, o.frame, bone_cue);
   SplatTiming st;
   step.emplace("splats");
-  const SplatSet set = generate_splats(rt, input.u, o.splat.params(), &st);
+  const SplatSet set = generate_splats(rt, input.u, splat_params, &st);
   step.emplace(every_frame ? "sequence, " + std::to_string(frames) + " frames" : frames_label(o.turntable));
   if (set.splats.empty())
-    throw input_error(o.in, "no voxel has opacity above the threshold " + format_number(o.splat.threshold) +
+    throw input_error(o.in, "no voxel has opacity above the threshold " + format_number(splat_params.threshold) +
                                 " (all-zero opacity?); nothing to render");
 
   viewer::HeadlessRenderer r(width, height);
@@ -154,6 +169,8 @@ int run_render(const RenderOptions& o) {
   viewer::OrbitCamera cam;
   const auto box = kept_box(set, settings);
   cam.fit(box[0], box[1]);
+  // The depth colour map spans what is drawn, as in the viewer.
+  if (box[1][2] > box[0][2]) settings.depth_lo = float(box[0][2]), settings.depth_hi = float(box[1][2]);
   cam.azimuth = az;
   cam.elevation = el;
 
@@ -161,7 +178,7 @@ int run_render(const RenderOptions& o) {
   for (int i = 0; i < frames; ++i) {
     if (every_frame) {
       // Each frame's splats, the camera fitted on frame 0 (the scene's motion shows).
-      if (i > 0) r.upload(generate_splats(rt, input.sequence[std::size_t(i)], o.splat.params(), nullptr));
+      if (i > 0) r.upload(generate_splats(rt, input.sequence[std::size_t(i)], splat_params, nullptr));
     } else {
       cam.azimuth = az + 360.0f * float(i) / float(frames);
     }
@@ -188,7 +205,7 @@ int run_render(const RenderOptions& o) {
     std::cout << std::fixed << std::setprecision(3) << "render (" << method_name(settings) << ") " << o.in << " -> "
               << (o.turntable || every_frame ? frame_path(o.out, 0) + " ... (" + std::to_string(frames) + " frames)" : o.out) << '\n'
               << "  input    " << input.note << '\n'
-              << "  splats   " << set.splats.size() << " (u > " << format_number(o.splat.threshold) << ", a = "
+              << "  splats   " << set.splats.size() << " (u > " << format_number(splat_params.threshold) << ", a = "
               << set.a << " voxels, lambda " << set.lambda << " (" << splat_gaussian_name(set.params.gaussian) << "), normals " << splat_normals_name(set.params.normals)
               << "), generated in " << st.total << " s on " << rt.info().label() << '\n'
               << "  image    " << width << "x" << height << ", view " << format_number(az) << ","
@@ -231,6 +248,15 @@ void add_render_command(CLI::App& app, Action& action) {
                   "Keep splats inside this box, fractions of the volume's extent per axis (e.g. 0,1,0,1,0,0.6)")
       ->type_name("X0,X1,Y0,Y1,Z0,Z1");
   sub->add_option("--iso", o->iso, "Isovalue for classifying a raw volume (its units, or auto)")->capture_default_str();
+  sub->add_option("--colour-map", o->colour_map,
+                  "solid: one colour (the default); depth: colour by depth along the beam, light near the transducer "
+                  "to dark red-brown deep (splats)")
+      ->type_name("solid|depth")
+      ->check(one_of({"solid", "depth"}));
+  sub->add_option("--light", o->light,
+                  "Light direction from the view direction in degrees, azimuth (right +) and elevation (up +), each in "
+                  "[-90, 90] (default -30,30)")
+      ->type_name("AZ,EL");
   sub->add_option("--benchmark", o->benchmark, "Also time N frames and report frames per second")
       ->check(int_range(0, 100000));
   o->splat.add_to(sub, render_methods());
@@ -240,7 +266,11 @@ void add_render_command(CLI::App& app, Action& action) {
       ->check(real_range(-INFINITY, INFINITY));
   sub->add_flag("-q,--quiet", o->quiet, "Print nothing on success");
   add_device_option(sub, o->device);
-  sub->callback([&action, o] { action = [o] { return run_render(*o); }; });
+  sub->callback([&action, o, sub] {
+    for (const CLI::Option* opt : sub->get_options())
+      if (opt->count() > 0) o->given.insert("--" + opt->get_single_name());
+    action = [o] { return run_render(*o); };
+  });
 }
 
 }  // namespace softshell::cli

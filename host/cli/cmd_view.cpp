@@ -14,6 +14,8 @@
 #include "error.hpp"
 #include "io.hpp"
 #include "params_file.hpp"
+#include "presets.hpp"
+#include "bone_cue.hpp"
 #include "progress.hpp"
 #include "text.hpp"
 #include "viewer_app.hpp"
@@ -23,7 +25,8 @@ namespace {
 
 struct ViewOptions {
   std::string in, device, size = "1200x800", view = "0,0", crop, iso = "auto", screenshot, renderer;
-  std::string colour_map = "solid";
+  std::string colour_map;  // solid | depth; empty: the preset's (default solid)
+  std::string light;       // AZ,EL; empty: the preset's
   std::string params, volume, save_params, save_u, save_mesh, cursor;
   float overlay = 0.5f;
   std::set<std::string> given;  // long option names given on the command line
@@ -47,6 +50,11 @@ ViewOptions with_params_file(ViewOptions o, viewer::ViewerOptions& v, Variationa
     return t;
   };
   if (free("iso", "--iso")) o.iso = *f.find("iso");
+  if (free("preset", "--preset")) o.splat.preset = *f.find("preset");
+  // What the file sets counts as given: a preset does not override it.
+  for (const auto& [key, option] : {std::pair<const char*, const char*>{"threshold", "--threshold"},
+                                    {"colour_map", "--colour-map"}, {"light", "--light"}})
+    if (f.find(key)) o.given.insert(option);
   // --method on the command line picks the renderer too: the file's does not override it.
   if (free("renderer", "--renderer") && !o.given.count("--method")) o.renderer = *f.find("renderer");
   if (free("colour_map", "--colour-map")) o.colour_map = *f.find("colour_map");
@@ -77,6 +85,15 @@ int run_view(const ViewOptions& given_options) {
   std::tie(v.azimuth, v.elevation) = parse_view(o.view, "--view");
   v.settings = o.splat.settings();
   v.params = o.splat.params();
+  // A preset first (what the command line or the parameters file gives wins).
+  BoneCueMode bone_cue = BoneCueMode::Off;
+  if (!o.splat.preset.empty()) {
+    const Preset& p = preset_or_throw(o.splat.preset);
+    apply_preset(p, v.settings, v.params, o.given);
+    parse_bone_cue_mode(p.bone_cue, bone_cue);
+    v.preset = p.name;
+  }
+  if (!o.light.empty()) std::tie(v.settings.light_azimuth, v.settings.light_elevation) = parse_light(o.light, "--light");
   if (!o.crop.empty()) parse_crop(o.crop, v.settings);
   // --method mc / raycast start with that renderer; --renderer (initial;
   // the panel switches) overrides --method.
@@ -118,8 +135,10 @@ int run_view(const ViewOptions& given_options) {
     v.cursor = {x, y, z};
   }
   v.overlay = o.overlay;
-  if (o.colour_map != "solid" && o.colour_map != "depth") throw InputError("--colour-map: expected solid or depth");
-  v.settings.depth_colour = o.colour_map == "depth";
+  if (!o.colour_map.empty()) {
+    if (o.colour_map != "solid" && o.colour_map != "depth") throw InputError("--colour-map: expected solid or depth");
+    v.settings.depth_colour = o.colour_map == "depth";
+  }
   v.iso_text = o.iso;
   v.save_params = o.save_params, v.save_u = o.save_u, v.save_mesh = o.save_mesh;
   v.frames = o.frames;
@@ -130,7 +149,7 @@ int run_view(const ViewOptions& given_options) {
   std::optional<progress::Stage> stage(std::in_place, "view: load");
   Runtime rt(o.device);
   viewer::OpacityInput input =
-      viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, have_weights ? &weights : nullptr, o.frame);
+      viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, have_weights ? &weights : nullptr, o.frame, bone_cue);
   if (!o.volume.empty()) {
     // The B-mode data behind an opacity volume, for the slice views.
     // A B-mode sequence behind an opacity sequence: frame by frame.
@@ -205,11 +224,14 @@ void add_view_command(CLI::App& app, Action& action) {
   sub->add_option("--cursor", o->cursor, "Initial 3-D cursor (voxel indices): the slices shown; default the centre")
       ->type_name("X,Y,Z");
   sub->add_option("--colour-map", o->colour_map,
-                  "solid: one colour; depth: colour by depth along the beam (z), light near the transducer to dark "
-                  "red-brown deep (splats and mesh; the ray caster draws one colour)")
-      ->capture_default_str()
+                  "solid: one colour (the default); depth: colour by depth along the beam (z), light near the "
+                  "transducer to dark red-brown deep (splats and mesh; the ray caster draws one colour)")
       ->type_name("solid|depth")
       ->check(one_of({"solid", "depth"}));
+  sub->add_option("--light", o->light,
+                  "Light direction from the view direction in degrees, azimuth (right +) and elevation (up +), each "
+                  "in [-90, 90] (default -30,30; the panel moves it)")
+      ->type_name("AZ,EL");
   sub->add_option("--overlay", o->overlay, "Initial opacity of the u overlay on the B-mode slices")
       ->capture_default_str()
       ->check(real_range(0, 1));

@@ -19,6 +19,7 @@ uniform vec4 u_material;         // ambient, diffuse, specular, shininess
 uniform vec3 u_crop_lo, u_crop_hi;  // splats with centres outside the box are dropped
 uniform vec4 u_clip;             // and those with dot(xyz, centre) + w > 0
 uniform vec3 u_depth;            // x = 1: colour by depth z in [y, z] mm instead of u_colour
+uniform float u_occlusion;       // strength of the splats' ambient occlusion (records 4.w, 5.w), 0: ignored
 
 out vec2 v_tex;
 out vec4 v_colour;
@@ -57,8 +58,15 @@ void main() {
 
   vec3 n = texelFetch(u_splats, base + (u_three_normals != 0 ? 4 + corner : 1)).xyz;
   vec3 v = normalize(u_eye - p);
+  // Ambient occlusion of the side the viewer sees (records 4.w and 5.w).
+  float open = 1.0;
+  if (u_occlusion > 0.0) {  // 0 when the splats carry no occlusion: no extra fetches
+    float occluded = dot(texelFetch(u_splats, base + 1).xyz, u_eye - c.xyz) >= 0.0 ? texelFetch(u_splats, base + 4).w
+                                                                                 : texelFetch(u_splats, base + 5).w;
+    open = 1.0 - u_occlusion * clamp(occluded, 0.0, 1.0);
+  }
   if (dot(n, v) < 0.0) n = -n;  // two-sided: grad u points into the shell from both faces
   float diffuse = max(dot(n, u_light), 0.0);
   float specular = diffuse > 0.0 ? pow(max(dot(n, normalize(u_light + v)), 0.0), u_material.w) : 0.0;
-  v_colour = vec4(colour * (u_material.x + u_material.y * diffuse) + vec3(u_material.z * specular), c.w);
+  v_colour = vec4(open * (colour * (u_material.x + u_material.y * diffuse) + vec3(u_material.z * specular)), c.w);
 }
