@@ -7,7 +7,8 @@ const std::vector<Preset>& presets() {
     std::vector<Preset> v;
     Preset d;
     d.name = "default";
-    d.what = "softshell's defaults: one skin-tone colour, light up-left, the paper's Gaussian";
+    d.what = "softshell's defaults: one skin-tone colour, light up-left, rim splats (no screen-door dots)";
+    d.rim_gaussian = true;
     v.push_back(d);
     // Fetal face: obstetric surface rendering. Depth colour (near skin tones
     // to dark red-brown deep, as SlicerHeart's and the scanners' "sepia"
@@ -30,6 +31,7 @@ const std::vector<Preset>& presets() {
     b.name = "bone";
     b.what = "bone: the bone cue on (bright echo over an acoustic shadow), ivory, crisp splats, light from above";
     b.bone_cue = "on";
+    b.rim_gaussian = false;  // the paper's smaller splats: crisper edges on thin laminae
     b.colour = {0.95f, 0.92f, 0.82f};
     b.specular = 0.30f;
     b.threshold = 0.3f;

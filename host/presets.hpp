@@ -23,7 +23,7 @@ struct Preset {
   float light_azimuth = -30.0f, light_elevation = 30.0f;  // degrees from the view direction
   float specular = 0.18f;
   float threshold = 0.2f;             // splat epsilon
-  bool rim_gaussian = false;          // --gaussian rim
+  bool rim_gaussian = true;           // --gaussian rim (false: paper)
 };
 
 const std::vector<Preset>& presets();

@@ -33,7 +33,7 @@ const std::vector<std::string>& render_methods();
 const std::vector<std::string>& view_methods();
 
 struct SplatViewOptions {
-  std::string method = "splat", normals = "three", order = "lists", gaussian = "paper", orientation = "tensor",
+  std::string method = "splat", normals = "three", order = "lists", gaussian = "rim", orientation = "tensor",
               centres = "shell", preset, occlusion = "off";
   float threshold = 0.2f;
   double tensor_sigma = 1.5;
