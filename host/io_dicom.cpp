@@ -749,6 +749,9 @@ void limit_child_memory(const std::string& path) {
   ::setrlimit(RLIMIT_DATA, &r);
 }
 
+// Present only in sanitizer builds (weak: null otherwise).
+extern "C" __attribute__((weak)) void __sanitizer_set_death_callback(void (*)(void));
+
 template <class Fn>
 Payload isolated(const std::string& path, Fn&& work) {
   int fds[2];
@@ -768,6 +771,10 @@ Payload isolated(const std::string& path, Fn&& work) {
     // A fatal signal ends the child quietly (a fuzzer's or a sanitizer's
     // handlers would otherwise report the child's abort as their own).
     for (const int sig : {SIGABRT, SIGSEGV, SIGBUS, SIGFPE, SIGILL}) std::signal(sig, SIG_DFL);
+    // Under a fuzzer, a sanitizer's report in the child would also run
+    // libFuzzer's death callback, which saves the input as a crash- file:
+    // the child's failure is the parent's answer, not a finding.
+    if (&__sanitizer_set_death_callback != nullptr) __sanitizer_set_death_callback(nullptr);
     // GDCM allocates what an element's length declares before reading it: a
     // damaged length of gigabytes in a small file cost 30 s of zeroed pages.
     // The child may allocate what the input's bytes can describe: 1 GiB plus

@@ -49,7 +49,7 @@ for h in "${harnesses[@]}"; do
   [ "$h" = classify ] && max_len=2096 timeout=60
   mkdir -p "$corpus/$h"
   log "$h: the regression inputs of tests/data/repro"
-  nice -n 10 "$exe" -timeout="$timeout" -rss_limit_mb=2560 "$ROOT"/tests/data/repro/* \
+  nice -n 10 "$exe" -timeout="$timeout" -rss_limit_mb=2560 -artifact_prefix="$artifacts/$h-regression-" "$ROOT"/tests/data/repro/* \
     >"$ASAN_BUILD_DIR/fuzz-$h-regression.log" 2>&1 || {
     tail -n 40 "$ASAN_BUILD_DIR/fuzz-$h-regression.log" >&2
     log "$h: a regression input failed"
