@@ -636,6 +636,23 @@ double bench_peers(Runtime& rt, DeviceBench& db, const Phantom& ph, double beta,
 
 // ---- warm start
 
+// Largest and mean |a - b| and the share of voxels differing by more than
+// 5e-3 (1.3 grey levels of an 8-bit display).
+struct Deviation {
+  double max = 0, mean = 0, share = 0;
+};
+Deviation deviation(const Volume& a, const Volume& b) {
+  Deviation d;
+  std::size_t beyond = 0;
+  for (std::size_t i = 0; i < a.data.size(); ++i) {
+    const double e = std::abs(double(a.data[i]) - double(b.data[i]));
+    d.max = std::max(d.max, e), d.mean += e, beyond += e > 5e-3;
+  }
+  const double n = double(std::max<std::size_t>(1, a.data.size()));
+  d.mean /= n, d.share = double(beyond) / n;
+  return d;
+}
+
 void bench_warm(Runtime& rt, DeviceBench& db, int size, int reps) {
   const Phantom ph = phantom_of(rt, PhantomShape::Face, {size, size, size}, nullptr, nullptr);
   VariationalParams p0;
@@ -645,11 +662,22 @@ void bench_warm(Runtime& rt, DeviceBench& db, int size, int reps) {
   SolverParams sp;
   sp.tol = db.tol;
   SolveReport rep;
-  // The viewer's path: one classifier, set up and solved at v_iso.
+  // The reference at v_iso': sharpening from converged solves (every stage
+  // to the solver's tol). A cold classification stops its linear solve and
+  // first sharpening step at SolverParams::sharpen_tol, and its result
+  // depends on where: the re-solve must come as close to the reference.
+  SolverParams sp_ref = sp;
+  sp_ref.sharpen_tol = 0;
+  const Volume ref = classify_variational(rt, ph.volume, p1, sp_ref, &rep);
+  check(db, rep.converged, "warm start: the reference classification did not converge");
+  // The viewer's path: one classifier, set up and solved at v_iso, keeping
+  // its linear solution for the re-solve.
   VariationalClassifier c(rt, ph.volume, p0, sp);
-  const Volume u0 = c.solve(&rep);
+  c.keep_resolve_start(true);
+  c.solve(&rep);
   check(db, rep.converged, "warm start: the first solve did not converge");
   std::vector<double> cold, warm, cold_total, warm_total, update;
+  Deviation dev_cold, dev_warm;
   for (int r = 0; r < reps; ++r) {
     ClassifyTiming t;
     const Volume uc = classify_variational(rt, ph.volume, p1, sp, &rep, nullptr, nullptr, &t);
@@ -662,12 +690,21 @@ void bench_warm(Runtime& rt, DeviceBench& db, int size, int reps) {
     const double tw = since(t0);
     check(db, rep.converged, "warm start: the re-solve did not converge");
     update.push_back(tu), warm.push_back(tw - tu), warm_total.push_back(tw), db.warm_warm_iterations = rep.cycles;
-    double worst = 0;
-    for (std::size_t i = 0; i < uw.data.size(); ++i) worst = std::max(worst, double(std::abs(uw.data[i] - uc.data[i])));
-    check(db, worst < 5e-3, "warm start: the re-solve differs from the cold classification by " + std::to_string(worst));
-    c.update(p0);  // back to v_iso and its solution for the next repeat (untimed)
-    c.solve(&rep, &u0);
+    const Deviation dc = deviation(uc, ref), dw = deviation(uw, ref);
+    if (r == 0 || dw.mean > dev_warm.mean) dev_warm = dw;  // the worst repeat
+    dev_cold = dc;
+    c.update(p0);  // back to v_iso for the next repeat (untimed)
+    c.solve(&rep, nullptr, true);
   }
+  db.warm_ref_cold_mean = dev_cold.mean, db.warm_ref_cold_max = dev_cold.max, db.warm_ref_cold_share = dev_cold.share;
+  db.warm_ref_warm_mean = dev_warm.mean, db.warm_ref_warm_max = dev_warm.max, db.warm_ref_warm_share = dev_warm.share;
+  // About as close to the reference as the cold classification: mean |du|
+  // within a factor of 2, voxels beyond 5e-3 within 4 (measured on the
+  // 105^3 face: 1.1-1.7 and 1.2-3.0, docs/numerics.md "Re-solving"); a
+  // broken start lands far outside.
+  check(db, dev_warm.mean <= 2 * dev_cold.mean + 1e-6 && dev_warm.share <= 4 * dev_cold.share + 1e-3,
+        "warm start: the re-solve is further from the reference than the cold classification (mean |du| " +
+            fmt("%.2e", dev_warm.mean) + " vs " + fmt("%.2e", dev_cold.mean) + ")");
   db.warm_cold_solve = summarise(cold).min;
   db.warm_warm_solve = summarise(warm).min;
   db.warm_cold_total = summarise(cold_total).min;
@@ -1202,7 +1239,10 @@ std::string bench_json(const BenchReport& rep) {
       << num(d.warm_cold_total) << ", \"warm_total_s\": " << num(d.warm_warm_total) << ", \"update_s\": "
       << num(d.warm_update) << ", \"solve_fraction\": " << num(d.warm_solve_fraction)
       << ", \"cold_iterations\": " << d.warm_cold_iterations << ", \"warm_iterations\": " << d.warm_warm_iterations
-      << "},\n      \"table1\": [";
+      << ", \"reference_distance\": {\"cold_mean\": " << num(d.warm_ref_cold_mean) << ", \"cold_max\": "
+      << num(d.warm_ref_cold_max) << ", \"cold_share\": " << num(d.warm_ref_cold_share) << ", \"warm_mean\": "
+      << num(d.warm_ref_warm_mean) << ", \"warm_max\": " << num(d.warm_ref_warm_max) << ", \"warm_share\": "
+      << num(d.warm_ref_warm_share) << "}},\n      \"table1\": [";
     for (std::size_t k = 0; k < d.table1.size(); ++k) {
       const Table1Row& t = d.table1[k];
       auto opt = [](const std::optional<double>& v) { return v ? json_number(*v) : std::string("null"); };
@@ -1301,7 +1341,10 @@ std::string bench_table(const BenchReport& rep) {
       << d.warm_warm_iterations << " it) vs cold classification " << fmt("%.3f", d.warm_cold_total) << " s (setup "
       << fmt("%.3f", d.warm_cold_total - d.warm_cold_solve) << " + solve " << fmt("%.3f", d.warm_cold_solve) << ", FMG + "
       << d.warm_cold_iterations << " it) = " << fmt("%.2f", d.warm_start_fraction) << "; solves alone "
-      << fmt("%.2f", d.warm_solve_fraction) << "\n";
+      << fmt("%.2f", d.warm_solve_fraction) << "; distance from the converged reference: re-solve mean |du| "
+      << fmt("%.1e", d.warm_ref_warm_mean) << " (" << fmt("%.2f", 100 * d.warm_ref_warm_share)
+      << " % of voxels beyond 5e-3), cold " << fmt("%.1e", d.warm_ref_cold_mean) << " ("
+      << fmt("%.2f", 100 * d.warm_ref_cold_share) << " %)\n";
 
     s << "\nTable 1 (seconds; paper: 600 MHz Pentium III)\n";
     s << "  " << std::left << std::setw(14) << "dataset" << std::setw(11) << "dims" << std::right << std::setw(7)

@@ -146,12 +146,18 @@ struct DeviceBench {
   // Warm start after a 5 % change of v_iso, same volume as the peers.
   // Warm start: a cold classification at v_iso' = 1.05 v_iso (setup +
   // solve) against a re-solve of a VariationalClassifier set up at v_iso:
-  // update() to v_iso' + a solve from the previous u (mins over repeats).
+  // update() to v_iso' + a solve from the last linear solution
+  // (keep_resolve_start; mins over repeats).
   // warm_start_fraction = warm_total / cold_total, what a user waits for;
   // warm_solve_fraction = warm solve / cold solve (FMG start, same hierarchy).
   double warm_cold_solve = 0, warm_warm_solve = 0, warm_start_fraction = 0, warm_solve_fraction = 0;
   double warm_cold_total = 0, warm_warm_total = 0, warm_update = 0;
   int warm_cold_iterations = 0, warm_warm_iterations = 0;
+  // Distance of the cold classification and of the re-solve (its worst
+  // repeat) from the reference (sharpening from converged solves): mean and
+  // largest |du|, share of voxels beyond 5e-3.
+  double warm_ref_cold_mean = 0, warm_ref_cold_max = 0, warm_ref_cold_share = 0;
+  double warm_ref_warm_mean = 0, warm_ref_warm_max = 0, warm_ref_warm_share = 0;
 
   std::vector<Table1Row> table1;
   std::vector<ScalingRow> scaling;

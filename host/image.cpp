@@ -1,12 +1,18 @@
-// PNG I/O through libpng, the orthogonal-slice montage, and the bitmap font.
+// PNG I/O through libpng, the orthogonal-slice montage, and text: DejaVu
+// Sans through stb_truetype (Debian's libstb and fonts-dejavu-core), the
+// built-in bitmap font where the font file is missing.
 #include "image.hpp"
 
 #include <png.h>
+#include <stb_truetype.h>
 
 #include <algorithm>
 #include <cmath>
 #include <csetjmp>
 #include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <iterator>
 #include <memory>
 
 #include "error.hpp"
@@ -71,6 +77,7 @@ constexpr std::uint16_t kFont5x7[95][5] = {
 
 constexpr int kGlyphRows = 9;    // 7 above the baseline, 2 of descenders
 constexpr int kLineAdvance = 11;  // rows from one line's top to the next's
+constexpr const char* kDefaultFont = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
 
 }  // namespace
 
@@ -104,7 +111,140 @@ const std::uint16_t* glyph_of(char ch) {
   return kFont5x7[(code >= 0x20 && code <= 0x7E ? code : '?') - 0x20];
 }
 
+namespace {
+
+// The TrueType font, loaded once: $SOFTSHELL_FONT, else DejaVu Sans.
+struct Font {
+  std::string path;
+  std::vector<unsigned char> ttf;
+  stbtt_fontinfo info{};
+  int ascent = 0, descent = 0, gap = 0;  // font units
+  bool ok = false;
+};
+
+const Font& font() {
+  static const Font f = [] {
+    Font f;
+    const char* env = std::getenv("SOFTSHELL_FONT");
+    for (const std::string& path : {std::string(env ? env : ""), std::string(kDefaultFont)}) {
+      if (path.empty()) continue;
+      std::ifstream in(path, std::ios::binary);
+      if (!in) continue;
+      f.ttf.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+      const int offset = f.ttf.empty() ? -1 : stbtt_GetFontOffsetForIndex(f.ttf.data(), 0);
+      if (offset >= 0 && stbtt_InitFont(&f.info, f.ttf.data(), offset) &&
+          stbtt_FindGlyphIndex(&f.info, 'g') != 0) {
+        stbtt_GetFontVMetrics(&f.info, &f.ascent, &f.descent, &f.gap);
+        f.path = path;
+        f.ok = true;
+        break;
+      }
+      f.ttf.clear();
+    }
+    return f;
+  }();
+  return f;
+}
+
+// Pixels per em for a scale: 11 px at scale 1 (cap height 8 px).
+float em_scale(const Font& f, int scale) { return stbtt_ScaleForMappingEmToPixels(&f.info, 11.0f * float(scale)); }
+int line_advance(const Font& f, float sc) { return int(std::lround(float(f.ascent - f.descent + f.gap) * sc)); }
+int printable(char ch) {
+  const int code = static_cast<unsigned char>(ch);
+  return code >= 0x20 && code <= 0x7E ? code : '?';
+}
+
+// Width of one line in pixels (fractional), kerning included.
+float line_width(const Font& f, float sc, const std::string& text, std::size_t begin, std::size_t end) {
+  float w = 0;
+  for (std::size_t i = begin; i < end; ++i) {
+    int adv = 0, lsb = 0;
+    const int c = printable(text[i]);
+    stbtt_GetCodepointHMetrics(&f.info, c, &adv, &lsb);
+    w += float(adv) * sc;
+    if (i + 1 < end) w += float(stbtt_GetCodepointKernAdvance(&f.info, c, printable(text[i + 1]))) * sc;
+  }
+  return w;
+}
+
+}  // namespace
+
+bool truetype_text() { return font().ok; }
+std::string text_font_path() { return font().path; }
+
 void draw_text(Image& image, int x, int y, const std::string& text, Rgb colour, int scale) {
+  const Font& f = font();
+  if (!f.ok) {
+    draw_bitmap_text(image, x, y, text, colour, scale);
+    return;
+  }
+  const float sc = em_scale(f, std::max(scale, 1));
+  const int baseline0 = y + int(std::lround(float(f.ascent) * sc));
+  const int advance = line_advance(f, sc);
+  std::size_t begin = 0;
+  for (int line = 0; begin <= text.size(); ++line) {
+    std::size_t end = text.find('\n', begin);
+    if (end == std::string::npos) end = text.size();
+    const int baseline = baseline0 + line * advance;
+    float pen = float(x);
+    for (std::size_t i = begin; i < end; ++i) {
+      const int c = printable(text[i]);
+      int adv = 0, lsb = 0;
+      stbtt_GetCodepointHMetrics(&f.info, c, &adv, &lsb);
+      const float shift = pen - std::floor(pen);
+      int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+      stbtt_GetCodepointBitmapBoxSubpixel(&f.info, c, sc, sc, shift, 0, &x0, &y0, &x1, &y1);
+      const int w = x1 - x0, h = y1 - y0;
+      if (w > 0 && h > 0) {
+        std::vector<unsigned char> alpha(std::size_t(w) * std::size_t(h));
+        stbtt_MakeCodepointBitmapSubpixel(&f.info, alpha.data(), w, h, w, sc, sc, shift, 0, c);
+        const int ox = int(std::floor(pen)) + x0, oy = baseline + y0;
+        for (int gy = 0; gy < h; ++gy) {
+          const int py = oy + gy;
+          if (py < 0 || py >= image.height) continue;
+          for (int gx = 0; gx < w; ++gx) {
+            const int px = ox + gx;
+            const int a = alpha[std::size_t(gy) * std::size_t(w) + std::size_t(gx)];
+            if (px < 0 || px >= image.width || a == 0) continue;
+            std::uint8_t* q = image.pixel(px, py);
+            q[0] = std::uint8_t((q[0] * (255 - a) + colour.r * a + 127) / 255);
+            q[1] = std::uint8_t((q[1] * (255 - a) + colour.g * a + 127) / 255);
+            q[2] = std::uint8_t((q[2] * (255 - a) + colour.b * a + 127) / 255);
+          }
+        }
+      }
+      pen += float(adv) * sc;
+      if (i + 1 < end) pen += float(stbtt_GetCodepointKernAdvance(&f.info, c, printable(text[i + 1]))) * sc;
+    }
+    begin = end + 1;
+  }
+}
+
+int text_width(const std::string& text, int scale) {
+  const Font& f = font();
+  if (!f.ok) return bitmap_text_width(text, scale);
+  const float sc = em_scale(f, std::max(scale, 1));
+  float widest = 0;
+  std::size_t begin = 0;
+  while (begin <= text.size()) {
+    std::size_t end = text.find('\n', begin);
+    if (end == std::string::npos) end = text.size();
+    widest = std::max(widest, line_width(f, sc, text, begin, end));
+    begin = end + 1;
+  }
+  return int(std::ceil(widest));
+}
+
+int text_height(const std::string& text, int scale) {
+  const Font& f = font();
+  if (!f.ok) return bitmap_text_height(text, scale);
+  if (text.empty()) return 0;
+  const float sc = em_scale(f, std::max(scale, 1));
+  const int lines = 1 + int(std::count(text.begin(), text.end(), '\n'));
+  return line_advance(f, sc) * (lines - 1) + int(std::lround(float(f.ascent - f.descent) * sc));
+}
+
+void draw_bitmap_text(Image& image, int x, int y, const std::string& text, Rgb colour, int scale) {
   scale = std::max(scale, 1);
   int cx = x, cy = y;
   for (const char ch : text) {
@@ -120,7 +260,7 @@ void draw_text(Image& image, int x, int y, const std::string& text, Rgb colour, 
   }
 }
 
-int text_width(const std::string& text, int scale) {
+int bitmap_text_width(const std::string& text, int scale) {
   scale = std::max(scale, 1);
   int widest = 0, chars = 0;
   for (const char ch : text) {
@@ -130,7 +270,7 @@ int text_width(const std::string& text, int scale) {
   return widest == 0 ? 0 : (6 * widest - 1) * scale;
 }
 
-int text_height(const std::string& text, int scale) {
+int bitmap_text_height(const std::string& text, int scale) {
   scale = std::max(scale, 1);
   if (text.empty()) return 0;
   const int lines = 1 + int(std::count(text.begin(), text.end(), '\n'));

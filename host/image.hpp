@@ -1,6 +1,6 @@
 // 8-bit RGB images: PNG output (libpng, written atomically like every output),
-// the orthogonal-slice montage behind `softshell slices`, and a small
-// built-in bitmap font for labelling figures.
+// the orthogonal-slice montage behind `softshell slices`, and text for
+// labelling figures.
 #pragma once
 
 #include <cstdint>
@@ -28,16 +28,26 @@ struct Rgb {
 // Fills the rectangle [x, x + w) x [y, y + h), clipped to the image.
 void fill_rect(Image& image, int x, int y, int w, int h, Rgb colour);
 
-// Draws ASCII text with a 5x7 bitmap font (5x9 with the descenders of g, j,
-// p, q, y), each font pixel a scale x scale block, top-left corner at (x, y);
-// glyphs advance 6 * scale pixels, '\n' starts a new line 11 * scale pixels
-// lower. Characters outside printable
-// ASCII draw as '?'. Only glyph pixels are written (no background), clipped
-// to the image.
+// Draws ASCII text, top-left corner at (x, y), in DejaVu Sans (TrueType,
+// anti-aliased, 11 * scale pixels per em: capitals 8 * scale pixels high)
+// when its file is there ($SOFTSHELL_FONT, else Debian's fonts-dejavu-core),
+// else in the bitmap font below. '\n' starts a new line; characters outside
+// printable ASCII draw as '?'. Only glyph pixels are written (blended over
+// the image, no background), clipped to the image.
 void draw_text(Image& image, int x, int y, const std::string& text, Rgb colour, int scale = 1);
 // Width and height in pixels that draw_text covers (0 for empty text).
 int text_width(const std::string& text, int scale = 1);
 int text_height(const std::string& text, int scale = 1);
+// Whether draw_text uses the TrueType font, and its file ("" if not).
+bool truetype_text();
+std::string text_font_path();
+
+// The built-in 5x7 bitmap font (5x9 with the descenders of g, j, p, q, y),
+// each font pixel a scale x scale block; glyphs advance 6 * scale pixels,
+// '\n' starts a new line 11 * scale pixels lower.
+void draw_bitmap_text(Image& image, int x, int y, const std::string& text, Rgb colour, int scale = 1);
+int bitmap_text_width(const std::string& text, int scale = 1);
+int bitmap_text_height(const std::string& text, int scale = 1);
 
 void write_png(const std::string& path, const Image& image);
 Image read_png(const std::string& path);  // RGB8 (other layouts converted)

@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "filter.hpp"
+#include "parallel.hpp"
 
 namespace softshell {
 namespace {
@@ -80,26 +81,40 @@ double VariationalParams::effective_thickness_mm(const Vec3d& spacing) const {
 double crest_of(const Volume& u) {
   const Dims3& d = u.dims;
   if (d[0] < 3 || d[1] < 3 || d[2] < 3) return 0;
-  float umax = 0;
-  for (float x : u.data) umax = std::max(umax, x);
+  // Over z-slabs on every core (the viewer's re-solve waits for it); the
+  // ridge values are gathered in slab order, so the median is the same for
+  // any thread count.
+  const int parts = host_threads(0);
+  std::vector<float> slab_max(std::size_t(range_count(d[2], parts)), 0.0f);
+  parallel_ranges_indexed(d[2], parts, [&](int k, std::size_t z0, std::size_t z1) {
+    float m = 0;
+    for (std::size_t i = z0 * d[0] * d[1]; i < z1 * d[0] * d[1]; ++i) m = std::max(m, u.data[i]);
+    slab_max[std::size_t(k)] = m;
+  });
+  const float umax = *std::max_element(slab_max.begin(), slab_max.end());
   if (!(umax > 0)) return 0;
   const float floor = 0.05f * umax;
   const std::size_t stride[3] = {1, d[0], d[0] * d[1]};
-  std::vector<float> ridge;
-  for (std::size_t z = 1; z + 1 < d[2]; ++z)
-    for (std::size_t y = 1; y + 1 < d[1]; ++y)
-      for (std::size_t x = 1; x + 1 < d[0]; ++x) {
-        const std::size_t i = u.index(x, y, z);
-        const float c = u.data[i];
-        if (c <= floor) continue;
-        int axis = -1;
-        float most = 0;
-        for (int a = 0; a < 3; ++a) {
-          const float d2 = u.data[i - stride[a]] + u.data[i + stride[a]] - 2 * c;
-          if (d2 < most) most = d2, axis = a;
+  std::vector<std::vector<float>> slab_ridge(std::size_t(range_count(d[2] - 2, parts)));
+  parallel_ranges_indexed(d[2] - 2, parts, [&](int k, std::size_t b, std::size_t e) {
+    std::vector<float>& ridge = slab_ridge[std::size_t(k)];
+    for (std::size_t z = b + 1; z < e + 1; ++z)
+      for (std::size_t y = 1; y + 1 < d[1]; ++y)
+        for (std::size_t x = 1; x + 1 < d[0]; ++x) {
+          const std::size_t i = u.index(x, y, z);
+          const float c = u.data[i];
+          if (c <= floor) continue;
+          int axis = -1;
+          float most = 0;
+          for (int a = 0; a < 3; ++a) {
+            const float d2 = u.data[i - stride[a]] + u.data[i + stride[a]] - 2 * c;
+            if (d2 < most) most = d2, axis = a;
+          }
+          if (axis >= 0 && c >= u.data[i - stride[axis]] && c >= u.data[i + stride[axis]]) ridge.push_back(c);
         }
-        if (axis >= 0 && c >= u.data[i - stride[axis]] && c >= u.data[i + stride[axis]]) ridge.push_back(c);
-      }
+  });
+  std::vector<float> ridge;
+  for (std::vector<float>& r : slab_ridge) ridge.insert(ridge.end(), r.begin(), r.end());
   if (ridge.empty()) return 0;
   std::nth_element(ridge.begin(), ridge.begin() + long(ridge.size() / 2), ridge.end());
   return ridge[ridge.size() / 2];

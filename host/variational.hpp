@@ -251,6 +251,11 @@ struct SolverParams {
   // V-cycle per iteration (robust for the strongly anisotropic tangential
   // term), or plain V-cycles.
   bool krylov = true;
+  // With sharpening: the relative residual the linear solve and every
+  // sharpening step but the last stop at (the last one stops at tol). They
+  // only give the next linearisation point; 0 takes tol (the reference the
+  // bench measures re-solves against: sharpening from converged solves).
+  double sharpen_tol = 5e-2;
 };
 
 struct SolveReport {
@@ -276,9 +281,14 @@ class MultigridSolver {
   // previous solve's solution (kept on the device) when `warm` and there is
   // one, else from FMG (or 0, per SolverParams). Never throws for
   // non-convergence: the report says so and the caller decides.
-  // `tol_override` > 0 replaces SolverParams::tol for this solve.
+  // `tol_override` > 0 replaces SolverParams::tol for this solve. Without
+  // `read_back` the solution stays on the device (solution()) and an empty
+  // vector is returned.
   std::vector<float> solve(SolveReport* report = nullptr, const std::vector<float>* init = nullptr,
-                           bool warm = false, double tol_override = 0);
+                           bool warm = false, double tol_override = 0, bool read_back = true);
+  // Makes `u` (a fine-level vector on the device) the previous solution: the
+  // next solve with `warm` starts there (fixed voxels set to 0).
+  void load_solution(const cl::Buffer& u);
   // After fine.update_point(): carries the new mu and rho down every level.
   void update_point();
   // The float64 solution of the last solve when it was refined (tol below
@@ -340,8 +350,10 @@ class VariationalClassifier {
   void update(const VariationalParams& p);
   // The opacity u, clamped to [0, 1], with the volume's geometry: from
   // `init` when given, else from the previous solution when `warm`, else cold.
-  // With sharpening (the default) every solve starts cold: `init` and `warm`
-  // apply to the linear functional only (sharpen_iterations 0).
+  // With sharpening (the default) a solve starts cold, `init` applying to
+  // the linear functional only (sharpen_iterations 0), unless `warm` and the
+  // last linear solution is kept (keep_resolve_start): the linear solve then
+  // starts there.
   // `sequence`: a 3D+t warm start (SequenceStart).
   Volume solve(SolveReport* report = nullptr, const Volume* init = nullptr, bool warm = false,
                const SequenceStart* sequence = nullptr);
@@ -350,6 +362,14 @@ class VariationalClassifier {
   double setup_seconds() const { return setup_seconds_; }    // the constructor, hierarchy included
   double update_seconds() const { return update_seconds_; }  // the last update()
   int levels() const { return mg_->levels(); }
+  // Keeps the linear solution of every solve on the device (one float per
+  // voxel) so that solve(..., warm = true) after update() starts the
+  // linear solve there instead of from full multigrid. Off by default:
+  // one-shot classifications never re-solve.
+  void keep_resolve_start(bool on) {
+    keep_start_ = on;
+    if (!on) resolve_start_ = cl::Buffer(), resolve_start_valid_ = false;
+  }
 
  private:
   Runtime& rt_;
@@ -360,6 +380,9 @@ class VariationalClassifier {
   std::unique_ptr<MultigridSolver> mg_;
   double setup_seconds_ = 0, update_seconds_ = 0, gain_ = 1.0;
   bool sharpened_ = false;  // the system holds the sharpening term of the last solve
+  // The last solve's linear solution (keep_resolve_start).
+  cl::Buffer resolve_start_;
+  bool resolve_start_valid_ = false, keep_start_ = false;
 };
 
 // The whole classifier on a volume in its own intensity units: normalise

@@ -19,7 +19,7 @@ SOFTSHELL_PACKAGES=(
   libteem-dev zlib1g-dev libbz2-dev libpng-dev libnifti2-dev libgdcm-dev
   libcli11-dev libgtest-dev libeigen3-dev
   libglfw3-dev libglm-dev libgl-dev
-  libepoxy-dev libimgui-dev libstb-dev
+  libepoxy-dev libimgui-dev libstb-dev fonts-dejavu-core
   libvolpack1-dev
   xvfb xauth
   clang libclang-rt-dev llvm

@@ -100,10 +100,22 @@ log "Marching Cubes mesh of the classified face"
 
 # The paper's Figures 5 and 6 (docs/renderers.md): ray casting before / after classification, and
 # ray casting, Marching Cubes, shear-warp, oriented splats of the same classified volume.
+# A real-spine row below the face when the spine is there (its own view, no crop).
 if "$ss" figure6 --help >/dev/null 2>&1; then
-  log "the paper's Figures 5 and 6 on the face"
-  "${gl[@]}" "$ss" figure5 "$out/face/volume.nrrd" --iso auto --view -30,10 --crop "$crop" -o "$out/figure5-face.png"
-  "${gl[@]}" "$ss" figure6 "$out/face-variational.nrrd" --view -30,10 --crop "$crop" -o "$out/figure6-face.png"
+  face_row=(--view -30,10 --crop "$crop")
+  if [ -f "$out/spine-variational.nrrd" ]; then
+    log "the paper's Figures 5 and 6: the face and the real spine"
+    rows=(--view -30,10 --view 0,35 --crop "$crop" --crop 0,1,0,1,0,1)
+    "${gl[@]}" "$ss" figure5 "$out/face/volume.nrrd" "$spine" --iso auto "${rows[@]}" \
+      --labels "face phantom (simulated),PLUS spine phantom (real 3D ultrasound)" -o "$out/figure5-face.png"
+    "${gl[@]}" "$ss" figure6 "$out/face-variational.nrrd" "$out/spine-variational.nrrd" "${rows[@]}" \
+      --labels "face phantom (simulated; the defaults),PLUS spine phantom (real 3D ultrasound; the same defaults)" \
+      -o "$out/figure6-face.png"
+  else
+    log "the paper's Figures 5 and 6 on the face"
+    "${gl[@]}" "$ss" figure5 "$out/face/volume.nrrd" --iso auto "${face_row[@]}" -o "$out/figure5-face.png"
+    "${gl[@]}" "$ss" figure6 "$out/face-variational.nrrd" "${face_row[@]}" -o "$out/figure6-face.png"
+  fi
 fi
 
 # An index of what this run wrote: every file under out/ newer than the

@@ -1,7 +1,8 @@
-// The bitmap font (host/image.hpp: draw_text) and `softshell figure2` end to
+// The figures' text (host/image.hpp: draw_text, TrueType, and the bitmap font) and `softshell figure2` end to
 // end: six grey panels of the expected size, captions, panel (a) equal to the
 // input slice, the default slice, and one-line errors for bad arguments.
 #include <algorithm>
+#include <array>
 #include <random>
 #include <map>
 #include <cstdio>
@@ -28,7 +29,7 @@ bool is_grey(const Image& im, int x, int y) {
 TEST(Figure2Text, GlyphsAreDrawnScaledAndClipped) {
   const Rgb c{250, 200, 100};
   Image im(40, 20, 0);
-  draw_text(im, 1, 2, "I", c, 2);
+  draw_bitmap_text(im, 1, 2, "I", c, 2);
   // 'I' in the 5x7 font: the middle column full height, the top and bottom
   // rows three columns wide; each font pixel a 2x2 block.
   auto set = [&](int x, int y) { return im.pixel(x, y)[0] == c.r && im.pixel(x, y)[1] == c.g && im.pixel(x, y)[2] == c.b; };
@@ -43,15 +44,15 @@ TEST(Figure2Text, GlyphsAreDrawnScaledAndClipped) {
     for (int x = 0; x < im.width; ++x) lit += set(x, y);
   EXPECT_EQ(lit, (7u + 4u) * 4u);  // 11 font pixels of 'I'
 
-  EXPECT_EQ(text_width("ab", 1), 11);
-  EXPECT_EQ(text_width("ab\nabc", 2), 34);
-  EXPECT_EQ(text_height("ab\nabc", 1), 20);  // 11 rows to the next line, 9 rows of glyph
+  EXPECT_EQ(bitmap_text_width("ab", 1), 11);
+  EXPECT_EQ(bitmap_text_width("ab\nabc", 2), 34);
+  EXPECT_EQ(bitmap_text_height("ab\nabc", 1), 20);  // 11 rows to the next line, 9 rows of glyph
 
   // g, j, p, q and y have descenders below the baseline (rows 7-8), so "g"
   // does not read as "9" nor "p" as "P"; no other letter reaches there.
   auto rows_lit = [](const std::string& ch) {
     Image t(6, 9);
-    draw_text(t, 0, 0, ch, {255, 255, 255}, 1);
+    draw_bitmap_text(t, 0, 0, ch, {255, 255, 255}, 1);
     std::vector<bool> lit(9, false);
     for (int y = 0; y < 9; ++y)
       for (int x = 0; x < 6; ++x) lit[std::size_t(y)] = lit[std::size_t(y)] || t.pixel(x, y)[0] == 255;
@@ -59,7 +60,7 @@ TEST(Figure2Text, GlyphsAreDrawnScaledAndClipped) {
   };
   auto pixels = [](const std::string& ch) {
     Image t(6, 9);
-    draw_text(t, 0, 0, ch, {255, 255, 255}, 1);
+    draw_bitmap_text(t, 0, 0, ch, {255, 255, 255}, 1);
     std::string bits;
     for (int y = 0; y < 9; ++y)
       for (int x = 0; x < 6; ++x) bits += t.pixel(x, y)[0] == 255 ? '#' : '.';
@@ -75,24 +76,92 @@ TEST(Figure2Text, GlyphsAreDrawnScaledAndClipped) {
   }
   EXPECT_NE(pixels("g"), pixels("9"));
   EXPECT_NE(pixels("p"), pixels("P"));
-  EXPECT_EQ(text_width("", 3), 0);
+  EXPECT_EQ(bitmap_text_width("", 3), 0);
 
   // Every printable character lights something except the space; bytes
   // outside printable ASCII draw as '?'.
   for (int ch = 0x21; ch < 0x7F; ++ch) {
     Image g(8, 8, 0);
-    draw_text(g, 0, 0, std::string(1, char(ch)), c, 1);
+    draw_bitmap_text(g, 0, 0, std::string(1, char(ch)), c, 1);
     EXPECT_TRUE(std::any_of(g.rgb.begin(), g.rgb.end(), [](std::uint8_t b) { return b != 0; })) << char(ch);
   }
   Image q1(8, 8, 0), q2(8, 8, 0);
-  draw_text(q1, 0, 0, "\x01", c, 1);
-  draw_text(q2, 0, 0, "?", c, 1);
+  draw_bitmap_text(q1, 0, 0, "\x01", c, 1);
+  draw_bitmap_text(q2, 0, 0, "?", c, 1);
   EXPECT_EQ(q1.rgb, q2.rgb);
 
   // Clipped at every edge, no writes outside.
   Image small(5, 4, 7);
-  draw_text(small, -3, -3, "W@W", c, 3);
-  draw_text(small, 3, 2, "M", c, 1);
+  draw_bitmap_text(small, -3, -3, "W@W", c, 3);
+  draw_bitmap_text(small, 3, 2, "M", c, 1);
+  EXPECT_EQ(small.rgb.size(), 5u * 4u * 3u);
+}
+
+TEST(Figure2Text, TrueTypeTextIsAntiAliasedProportionalAndMeasuredAsDrawn) {
+  // scripts/common.sh installs fonts-dejavu-core: the figures' text is
+  // DejaVu Sans, not the bitmap font.
+  ASSERT_TRUE(truetype_text()) << "no TrueType font (fonts-dejavu-core)";
+  EXPECT_NE(text_font_path().find("DejaVuSans"), std::string::npos) << text_font_path();
+  const Rgb white{255, 255, 255};
+  // The drawn extent of a text lies inside the box text_width x text_height.
+  auto extent = [&](const std::string& t, int scale, int* lit_out = nullptr, int* grey_out = nullptr) {
+    Image im(400, 120, 0);
+    draw_text(im, 10, 10, t, white, scale);
+    int x0 = im.width, x1 = -1, y0 = im.height, y1 = -1, lit = 0, grey = 0;
+    for (int y = 0; y < im.height; ++y)
+      for (int x = 0; x < im.width; ++x) {
+        const int v = im.pixel(x, y)[0];
+        if (v == 0) continue;
+        ++lit, grey += v < 255;
+        x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
+      }
+    if (lit_out) *lit_out = lit;
+    if (grey_out) *grey_out = grey;
+    return std::array<int, 4>{x0 - 10, y0 - 10, x1 - 10, y1 - 10};
+  };
+  for (int scale : {1, 2, 3}) {
+    SCOPED_TRACE(scale);
+    const std::string t = "Agpy (bone) 12.5 mm\nsecond line";
+    int lit = 0, grey = 0;
+    const auto e = extent(t, scale, &lit, &grey);
+    EXPECT_GE(e[0], -1);
+    EXPECT_GE(e[1], -1);
+    EXPECT_LE(e[2], text_width(t, scale) + 1);
+    EXPECT_LE(e[3], text_height(t, scale) + 1);
+    EXPECT_GE(e[2], text_width(t, scale) - 3 * scale) << "the width is what is drawn";
+    EXPECT_GT(grey, lit / 5) << "anti-aliased edges";
+    // Capitals 8 pixels high per scale: 'H' alone.
+    const auto h = extent("H", scale);
+    EXPECT_NEAR(h[3] - h[1] + 1, 8 * scale, scale);
+  }
+  // Proportional: 'i' is narrower than 'W'; lines add up.
+  EXPECT_LT(text_width("iiii"), text_width("WWWW") / 2);
+  EXPECT_GT(text_height("a\nb\nc"), 2 * text_height("a"));
+  EXPECT_EQ(text_width(""), 0);
+  EXPECT_EQ(text_height(""), 0);
+  // "g" has a descender, "9" does not; "p" differs from "P".
+  const auto g = extent("g", 2), nine = extent("9", 2), base = extent("x", 2);
+  EXPECT_GT(g[3], base[3] + 3);
+  EXPECT_LE(nine[3], base[3] + 1);
+  EXPECT_GT(extent("p", 2)[3], extent("P", 2)[3] + 3);
+  // Outside printable ASCII: '?'; blended over the image; clipped.
+  Image q1(30, 30, 0), q2(30, 30, 0);
+  draw_text(q1, 2, 2, "\x01", white, 1);
+  draw_text(q2, 2, 2, "?", white, 1);
+  EXPECT_EQ(q1.rgb, q2.rgb);
+  Image blue(40, 30, 0);
+  fill_rect(blue, 0, 0, 40, 30, {0, 0, 200});
+  draw_text(blue, 2, 2, "O", {255, 0, 0}, 2);
+  bool mixed = false;
+  for (int y = 0; y < 30; ++y)
+    for (int x = 0; x < 40; ++x) {
+      const std::uint8_t* p = blue.pixel(x, y);
+      mixed = mixed || (p[0] > 0 && p[0] < 255 && p[2] > 0 && p[2] < 200);
+    }
+  EXPECT_TRUE(mixed) << "edge pixels blend the text colour with the ground";
+  Image small(5, 4, 7);
+  draw_text(small, -6, -6, "W@W", white, 3);
+  draw_text(small, 3, 2, "M", white, 1);
   EXPECT_EQ(small.rgb.size(), 5u * 4u * 3u);
 }
 

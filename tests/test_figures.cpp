@@ -134,11 +134,16 @@ TEST_F(FiguresCli, Figure5And6WriteLabelledPanels) {
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_NE(r.out.find("before classification"), std::string::npos) << r.out;
   Image img = read_png(file("f5.png"));
+  // A row label above the panels, a label band below each, the caption at
+  // the bottom (the band and label sizes follow the font).
+  const int head = text_height("Ag", 2) + 12, band = 6 + text_height("Ag", 2) + 2 + text_height("Ag") + 4;
   EXPECT_EQ(img.width, 2 * 96 + 3 * 4);  // panels, gaps
-  EXPECT_EQ(img.height, 80 + 44 + 4);    // panel, label band, gap
-  EXPECT_GT(lit(img, 4, 0, 96, 80), 0.05) << "before";
-  EXPECT_GT(lit(img, 104, 0, 96, 80), 0.05) << "after";
-  EXPECT_GT(lit(img, 4, 80, 96, 44), 0.01) << "label";
+  EXPECT_GT(img.height, head + 80 + band + 4);
+  EXPECT_GT(lit(img, 0, 0, 96, head), 0.01) << "row label";
+  EXPECT_GT(lit(img, 4, head, 96, 80), 0.05) << "before";
+  EXPECT_GT(lit(img, 104, head, 96, 80), 0.05) << "after";
+  EXPECT_GT(lit(img, 4, head + 80, 96, band), 0.01) << "panel labels";
+  EXPECT_GT(lit(img, 0, head + 80 + band + 4, img.width, img.height - (head + 80 + band + 4)), 0.01) << "caption";
 
   r = run({"figure6", raw, "-o", file("f6.png"), "--size", "96x80", "--repeat", "1", "--view", "20,10"});
   ASSERT_EQ(r.status, 0) << r.err;
@@ -146,8 +151,26 @@ TEST_F(FiguresCli, Figure5And6WriteLabelledPanels) {
     EXPECT_NE(r.out.find(s), std::string::npos) << s << " in " << r.out;
   img = read_png(file("f6.png"));
   EXPECT_EQ(img.width, 4 * 96 + 5 * 4);
-  EXPECT_GT(lit(img, 4, 0, 96, 80), 0.05) << "ray casting";
-  EXPECT_GT(lit(img, 4 + 3 * 100, 0, 96, 80), 0.05) << "splats";
+  EXPECT_GT(lit(img, 4, head, 96, 80), 0.05) << "ray casting";
+  EXPECT_GT(lit(img, 4 + 3 * 100, head, 96, 80), 0.05) << "splats";
+
+  // Two rows (a simulated and a second volume), each with its own view and
+  // label: the second row's panels sit one row lower and are drawn.
+  const std::string raw2 = file("raw2.nrrd");
+  ASSERT_EQ(run({"synthetic", "--size", "24", "-o", raw2, "-q"}).status, 0);
+  r = run({"figure6", raw, raw2, "-o", file("f6b.png"), "--size", "96x80", "--repeat", "1", "--view", "20,10", "--view",
+           "0,30", "--labels", "first,second"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("row 2"), std::string::npos) << r.out;
+  const Image two = read_png(file("f6b.png"));
+  const int row_h = head + 80 + band + 4;
+  EXPECT_EQ(two.width, img.width);
+  EXPECT_GT(two.height, 2 * row_h);
+  EXPECT_GT(lit(two, 4, row_h + head, 96, 80), 0.05) << "second row, ray casting";
+  EXPECT_GT(lit(two, 4 + 3 * 100, row_h + head, 96, 80), 0.05) << "second row, splats";
+  expect_one_line_error(run({"figure6", raw, raw2, "-o", file("x.png"), "--labels", "only one"}), {"--labels"});
+  expect_one_line_error(run({"figure6", raw, raw2, "-o", file("x.png"), "--view", "0,0", "--view", "1,1", "--view", "2,2"}),
+                        {"--view"});
 }
 
 TEST_F(FiguresCli, BadInputIsOneLineExit2) {

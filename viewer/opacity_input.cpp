@@ -142,8 +142,10 @@ Volume reclassify(Runtime& rt, OpacityInput& in, const VariationalParams& p, con
     in.classifier.reset();  // free its device memory before the new one is built
     in.classifier = std::make_shared<VariationalClassifier>(rt, in.data, p, SolverParams{},
                                                             in.mask.empty() ? nullptr : &in.mask);
+    // Every slider re-solves: keep the linear solution to start from.
+    in.classifier->keep_resolve_start(true);
   }
-  return in.classifier->solve(report, init);
+  return in.classifier->solve(report, init, true);
 }
 
 }  // namespace softshell::viewer

@@ -69,8 +69,9 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
 // preset chosen in the panel: the next re-solve uses them.
 bool set_bone_cue(OpacityInput& in, BoneCueMode mode);
 
-// Re-solves with new parameters (normalised v_iso), warm-starting from
-// `init` when given. Re-uses in.classifier when only pointwise parameters
+// Re-solves with new parameters (normalised v_iso), warm: from `init` when
+// given without sharpening, else from the last solve (its linear solution,
+// VariationalClassifier::keep_resolve_start). Re-uses in.classifier when only pointwise parameters
 // changed (docs/numerics.md, "Re-solving"), else builds a new one and keeps
 // it there. Non-convergence is in `report`. Not thread-safe: one re-solve at
 // a time.

@@ -318,9 +318,8 @@ class ViewerApp {
     // The worker uses the runtime alone: the main thread does no OpenCL
     // work until the future is ready (regenerate is held back).
     solving_ = std::async(std::launch::async, [this, p] {
-      const Volume init = input_.u;
       SolveReport report;
-      Volume u = reclassify(rt_, input_, p, &init, &report);
+      Volume u = reclassify(rt_, input_, p, nullptr, &report);  // warm: from the last solve
       return std::make_pair(std::move(u), report);
     });
   }

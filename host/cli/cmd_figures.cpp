@@ -7,6 +7,7 @@
 // panels line up, and is labelled with its time per frame. Built into the
 // viewer library (the splat panel needs OpenGL); docs/renderers.md.
 #include <algorithm>
+#include <filesystem>
 #include <cmath>
 #include <functional>
 #include <iomanip>
@@ -281,7 +282,8 @@ Panel shear_warp_panel(const Scene& s, const std::array<Vec3d, 2>& box, float az
 // Panels side by side, each with a label band below: title (large) and the
 // time per frame plus the detail line (small).
 Image compose(const std::vector<Panel>& panels) {
-  constexpr int band = 44, gap = 4;
+  constexpr int gap = 4;
+  const int title_h = text_height("Ag", 2), band = 6 + title_h + 2 + text_height("Ag") + 4;
   int width = gap, height = 0;
   for (const Panel& p : panels) width += p.image.width + gap, height = std::max(height, p.image.height);
   Image out(width, height + band + gap, 24);
@@ -293,7 +295,7 @@ Image compose(const std::vector<Panel>& panels) {
     draw_text(out, x0 + 4, height + 6, p.title, {255, 255, 255}, scale);
     std::string line = p.seconds >= 0 ? format_ms(p.seconds) + " per frame" : "";
     if (!p.detail.empty()) line += (line.empty() ? "" : ", ") + p.detail;
-    draw_text(out, x0 + 4, height + 28, line, {200, 200, 200});
+    draw_text(out, x0 + 4, height + 6 + title_h + 2, line, {200, 200, 200});
     x0 += p.image.width + gap;
   }
   return out;
@@ -311,7 +313,11 @@ void print_panels(const std::string& what, const std::string& out, const std::ve
 // ---------------------------------------------------------------------------
 // figure5 / figure6 options.
 struct FigureOptions {
-  std::string in, out, device, size = "400x400", view = "0,0", crop, iso = "auto";
+  // One row per input; --view, --crop, --iso and --labels: one for every
+  // row, or one per row.
+  std::vector<std::string> ins, views{"0,0"}, crops, isos{"auto"};
+  std::vector<std::string> labels;
+  std::string out, device, size = "400x400", caption;
   int repeat = 3;
   double level = 0.2;  // figure6: the Marching Cubes level, as `render --method mc`
   bool quiet = false;
@@ -320,13 +326,23 @@ struct FigureOptions {
 
 void add_figure_options(CLI::App* sub, FigureOptions& o) {
   sub->add_option("--size", o.size, "Size of each panel in pixels")->capture_default_str()->type_name("WxH");
-  sub->add_option("--view", o.view,
-                  "Camera azimuth,elevation in degrees; 0,0 looks down the beam (+z) from the transducer, x right, -y up")
+  sub->add_option("--view", o.views,
+                  "Camera azimuth,elevation in degrees; 0,0 looks down the beam (+z) from the transducer, x right, -y "
+                  "up. Once for every row, or once per input in order")
       ->capture_default_str()
       ->type_name("AZ,EL");
-  sub->add_option("--crop", o.crop, "Keep only this box, fractions of the volume's extent per axis")
+  sub->add_option("--crop", o.crops,
+                  "Keep only this box, fractions of the volume's extent per axis. Once for every row, or once per "
+                  "input (0,1,0,1,0,1 keeps all)")
       ->type_name("X0,X1,Y0,Y1,Z0,Z1");
-  sub->add_option("--iso", o.iso, "Isovalue for classifying a raw volume (its units, or auto)")->capture_default_str();
+  sub->add_option("--iso", o.isos,
+                  "Isovalue for classifying a raw volume (its units, or auto). Once for every row, or once per input")
+      ->capture_default_str();
+  sub->add_option("--labels", o.labels, "Row labels, one per input (default: the file names)")
+      ->delimiter(',')
+      ->type_name("A,B,..");
+  sub->add_option("--caption", o.caption, "Caption under the figure (default: what the figure shows)")
+      ->type_name("TEXT");
   sub->add_option("--repeat", o.repeat, "Frames timed per panel (median, after one warm-up frame)")
       ->capture_default_str()
       ->check(int_range(1, 1000));
@@ -337,19 +353,75 @@ void add_figure_options(CLI::App* sub, FigureOptions& o) {
 
 struct FigureSetup {
   int width = 0, height = 0;
-  float az = 0, el = 0;
-  viewer::RenderSettings settings;
+  std::vector<float> az, el;                  // per row
+  std::vector<viewer::RenderSettings> settings;  // per row (crop)
+  std::vector<std::string> isos, labels;      // per row
 };
+
+// The value of a per-row option for row k: one for all, or one per input.
+const std::string& per_row(const std::vector<std::string>& v, std::size_t k) { return v.size() == 1 ? v[0] : v[k]; }
+
+void check_per_row(const std::vector<std::string>& v, std::size_t rows, const std::string& option, bool optional) {
+  if ((optional && v.empty()) || v.size() == 1 || v.size() == rows) return;
+  throw InputError(option + ": give it once for every row or once per input (" + std::to_string(rows) +
+                   " inputs, " + std::to_string(v.size()) + " given)");
+}
 
 FigureSetup figure_setup(const FigureOptions& o) {
   FigureSetup f;
+  const std::size_t rows = o.ins.size();
   std::tie(f.width, f.height) = parse_size(o.size, "--size");
-  std::tie(f.az, f.el) = parse_view(o.view, "--view");
   if (o.repeat < 1 || o.repeat > 1000) throw InputError("--repeat must be in [1, 1000]");
-  f.settings = SplatViewOptions{}.settings();
-  if (!o.crop.empty()) parse_crop(o.crop, f.settings);
-  check_png_output(o.in, o.out);
+  check_per_row(o.views, rows, "--view", false);
+  check_per_row(o.crops, rows, "--crop", true);
+  check_per_row(o.isos, rows, "--iso", false);
+  const std::vector<std::string>& labels = o.labels;
+  if (!labels.empty() && labels.size() != rows)
+    throw InputError("--labels: " + std::to_string(labels.size()) + " labels for " + std::to_string(rows) +
+                     " inputs (one per input)");
+  for (std::size_t k = 0; k < rows; ++k) {
+    const auto [az, el] = parse_view(per_row(o.views, k), "--view");
+    f.az.push_back(az), f.el.push_back(el);
+    viewer::RenderSettings s = SplatViewOptions{}.settings();
+    if (!o.crops.empty()) parse_crop(per_row(o.crops, k), s);
+    f.settings.push_back(s);
+    f.isos.push_back(per_row(o.isos, k));
+    f.labels.push_back(labels.empty() ? std::filesystem::path(o.ins[k]).filename().string() : labels[k]);
+    check_png_output(o.ins[k], o.out);
+  }
   return f;
+}
+
+// Rows stacked, each headed by its label, and the caption below, wrapped to
+// the figure's width.
+Image stack_rows(const std::vector<Image>& rows, const std::vector<std::string>& labels, const std::string& caption) {
+  constexpr int margin = 6;
+  const int label_h = text_height("Ag", 2) + 2 * margin;
+  int width = 0, height = 0;
+  for (const Image& r : rows) width = std::max(width, r.width), height += label_h + r.height;
+  std::vector<std::string> lines;
+  std::string line;
+  std::istringstream words(caption);
+  for (std::string w; words >> w;) {
+    const std::string longer = line.empty() ? w : line + " " + w;
+    if (!line.empty() && text_width(longer) > width - 2 * margin) lines.push_back(line), line = w;
+    else line = longer;
+  }
+  if (!line.empty()) lines.push_back(line);
+  const int line_h = text_height("Ag") + 3;
+  const int caption_h = lines.empty() ? 0 : int(lines.size()) * line_h + 2 * margin;
+  Image out(std::max(width, 1), height + caption_h, 24);
+  int y = 0;
+  for (std::size_t k = 0; k < rows.size(); ++k) {
+    draw_text(out, margin, y + margin, labels[k], {255, 226, 140}, 2);
+    y += label_h;
+    for (int r = 0; r < rows[k].height; ++r)
+      std::copy(rows[k].pixel(0, r), rows[k].pixel(0, r) + 3 * rows[k].width, out.pixel(0, y + r));
+    y += rows[k].height;
+  }
+  for (std::size_t l = 0; l < lines.size(); ++l)
+    draw_text(out, margin, y + margin + int(l) * line_h, lines[l], {210, 210, 210});
+  return out;
 }
 
 RaycastParams opacity_params(const FigureOptions& o, const viewer::RenderSettings& s) {
@@ -358,70 +430,92 @@ RaycastParams opacity_params(const FigureOptions& o, const viewer::RenderSetting
   return raycast_params(r, -1.0, s);
 }
 
-int run_figure5(const FigureOptions& o) {
-  const auto t0 = Clock::now();
-  const FigureSetup f = figure_setup(o);
-  const progress::Stage command("figure5");
-  Runtime rt(o.device);
-  const Volume raw = read_volume(o.in);
+// One row of figure5: ray casting of input k before and after classification.
+Image figure5_row(Runtime& rt, const FigureOptions& o, const FigureSetup& f, std::size_t k) {
+  const std::string& in = o.ins[k];
+  const Volume raw = read_volume(in);
   if (viewer::looks_like_opacity(raw))
-    throw input_error(o.in, "figure5 needs the raw volume (before classification); this is an opacity volume");
-  const viewer::OpacityInput input = viewer::load_opacity(rt, o.in, viewer::InputKind::Raw, o.iso);
+    throw input_error(in, "figure5 needs the raw volume (before classification); this is an opacity volume");
+  const viewer::OpacityInput input = viewer::load_opacity(rt, in, viewer::InputKind::Raw, f.isos[k]);
   const Volume unit = unit_samples(raw);
   const double iso_unit = std::clamp(raw.intensity_map().to_unit(input.iso), 0.0, 1.0);
-  const RaycastParams before = raycast_params(o.raycast, iso_unit, f.settings);
-  const RaycastParams after = opacity_params(o, f.settings);
+  const RaycastParams before = raycast_params(o.raycast, iso_unit, f.settings[k]);
+  const RaycastParams after = opacity_params(o, f.settings[k]);
 
-  const Scene scene{rt, input.u, framed_camera(visible_box(input.u, after), f.az, f.el), f.settings,
+  const Scene scene{rt, input.u, framed_camera(visible_box(input.u, after), f.az[k], f.el[k]), f.settings[k],
                     f.width, f.height, o.repeat};
   std::vector<Panel> panels;
-  std::optional<progress::Stage> panel(std::in_place, "panel 1/2: ray casting before classification");
+  const std::string row = o.ins.size() > 1 ? "row " + std::to_string(k + 1) + "/" + std::to_string(o.ins.size()) + ", " : "";
+  std::optional<progress::Stage> panel(std::in_place, row + "panel 1/2: ray casting before classification");
   panels.push_back(raycast_panel(scene, unit, before, "before classification"));
-  panel.emplace("panel 2/2: ray casting after classification");
+  panel.emplace(row + "panel 2/2: ray casting after classification");
   std::ostringstream ramp;
   ramp << std::fixed << std::setprecision(2) << "ray cast, intensity ramp " << before.tf_lo << "-" << before.tf_hi;
   panels.back().detail = ramp.str();
   panels.push_back(raycast_panel(scene, input.u, after, "after classification"));
   panels.back().detail = "ray cast, opacity u (> " + format_number(after.tf_cut) + ")";
   panel.reset();
-  write_png(o.out, compose(panels));
   if (!o.quiet) {
-    print_panels("figure5 (ray casting before / after variational classification) " + o.in, o.out, panels, f.width,
-                 f.height);
-    std::cout << "  input    " << input.note << '\n'
-              << "  time     " << std::fixed << std::setprecision(2) << seconds_since(t0) << " s on "
-              << rt.info().label() << '\n';
+    print_panels("figure5 row " + std::to_string(k + 1) + ": " + in, o.out, panels, f.width, f.height);
+    std::cout << "  input    " << input.note << '\n';
   }
+  return compose(panels);
+}
+
+// One row of figure6: the classified input k by four renderers.
+Image figure6_row(Runtime& rt, const FigureOptions& o, const FigureSetup& f, std::size_t k) {
+  const std::string& in = o.ins[k];
+  const viewer::OpacityInput input = viewer::load_opacity(rt, in, viewer::InputKind::Auto, f.isos[k]);
+  const RaycastParams p = opacity_params(o, f.settings[k]);
+  const auto box = visible_box(input.u, p);
+  const Scene scene{rt, input.u, framed_camera(box, f.az[k], f.el[k]), f.settings[k], f.width, f.height, o.repeat};
+  std::vector<Panel> panels;
+  const std::string row = o.ins.size() > 1 ? "row " + std::to_string(k + 1) + "/" + std::to_string(o.ins.size()) + ", " : "";
+  std::optional<progress::Stage> panel(std::in_place, row + "panel 1/4: ray casting");
+  panels.push_back(raycast_panel(scene, input.u, p, "ray casting"));
+  panel.emplace(row + "panel 2/4: Marching Cubes");
+  panels.push_back(marching_cubes_panel(scene, o.level));
+  panel.emplace(row + "panel 3/4: shear-warp");
+  panels.push_back(shear_warp_panel(scene, box, f.az[k], f.el[k]));
+  panel.emplace(row + "panel 4/4: oriented splats");
+  panels.push_back(splat_panel(scene));
+  panel.reset();
+  if (!o.quiet) {
+    print_panels("figure6 row " + std::to_string(k + 1) + ": " + in, o.out, panels, f.width, f.height);
+    std::cout << "  input    " << input.note << '\n';
+  }
+  return compose(panels);
+}
+
+int run_figure(const FigureOptions& o, const std::string& name, const std::string& caption,
+               Image (*row)(Runtime&, const FigureOptions&, const FigureSetup&, std::size_t)) {
+  const auto t0 = Clock::now();
+  const FigureSetup f = figure_setup(o);
+  const progress::Stage command(name);
+  Runtime rt(o.device);
+  std::vector<Image> rows;
+  for (std::size_t k = 0; k < o.ins.size(); ++k) rows.push_back(row(rt, o, f, k));
+  write_png(o.out, stack_rows(rows, f.labels, o.caption.empty() ? caption : o.caption));
+  if (!o.quiet)
+    std::cout << name << " -> " << o.out << "\n  time     " << std::fixed << std::setprecision(2) << seconds_since(t0)
+              << " s on " << rt.info().label() << '\n';
   return 0;
 }
 
+int run_figure5(const FigureOptions& o) {
+  return run_figure(o, "figure5",
+                    "Ray casting before (left: the B-mode intensity through a ramp transfer function) and after "
+                    "(right: the opacity u) variational classification, as in the paper's Figure 5. Times are per "
+                    "frame on this machine.",
+                    figure5_row);
+}
+
 int run_figure6(const FigureOptions& o) {
-  const auto t0 = Clock::now();
-  const FigureSetup f = figure_setup(o);
-  const progress::Stage command("figure6");
-  Runtime rt(o.device);
-  const viewer::OpacityInput input = viewer::load_opacity(rt, o.in, viewer::InputKind::Auto, o.iso);
-  const RaycastParams p = opacity_params(o, f.settings);
-  const auto box = visible_box(input.u, p);
-  const Scene scene{rt, input.u, framed_camera(box, f.az, f.el), f.settings, f.width, f.height, o.repeat};
-  std::vector<Panel> panels;
-  std::optional<progress::Stage> panel(std::in_place, "panel 1/4: ray casting");
-  panels.push_back(raycast_panel(scene, input.u, p, "ray casting"));
-  panel.emplace("panel 2/4: Marching Cubes");
-  panels.push_back(marching_cubes_panel(scene, o.level));
-  panel.emplace("panel 3/4: shear-warp");
-  panels.push_back(shear_warp_panel(scene, box, f.az, f.el));
-  panel.emplace("panel 4/4: oriented splats");
-  panels.push_back(splat_panel(scene));
-  panel.reset();
-  write_png(o.out, compose(panels));
-  if (!o.quiet) {
-    print_panels("figure6 (renderers of the same classified volume) " + o.in, o.out, panels, f.width, f.height);
-    std::cout << "  input    " << input.note << '\n'
-              << "  time     " << std::fixed << std::setprecision(2) << seconds_since(t0) << " s on "
-              << rt.info().label() << '\n';
-  }
-  return 0;
+  return run_figure(o, "figure6",
+                    "One classified volume per row drawn four ways, as in the paper's Figure 6: ray casting of u, "
+                    "Marching Cubes of u at the splats' epsilon, shear-warp (VolPack) and oriented splats (one "
+                    "Gaussian triangle per voxel, perpendicular to grad u). Times are per frame on this machine.",
+                    figure6_row);
 }
 
 }  // namespace
@@ -507,7 +601,7 @@ void add_figure5_command(CLI::App& app, Action& action) {
       "The paper's Figure 5: ray casting of a raw ultrasound volume before variational classification (intensity "
       "through a ramp transfer function) and after (the opacity u), side by side, each labelled with its time per "
       "frame. Ray casting only (no OpenGL).");
-  sub->add_option("IN", o->in, "Raw ultrasound volume (not an opacity volume)")->required();
+  sub->add_option("IN", o->ins, "Raw ultrasound volume(s) (not opacity volumes): one row each")->required();
   o->out = "fig5.png";
   sub->add_option("-o,--output", o->out, "Output PNG")->capture_default_str();
   add_figure_options(sub, *o);
@@ -521,7 +615,8 @@ void add_figure6_command(CLI::App& app, Action& action) {
       "The paper's Figure 6: one classified volume rendered by ray casting, Marching Cubes, shear-warp (VolPack) "
       "and oriented splats, side by side, each labelled with its time per frame. A raw volume is classified first "
       "with the defaults. The splat panel uses OpenGL (run under xvfb-run -a without a display).");
-  sub->add_option("IN", o->in, "Opacity volume (float in [0, 1]) or raw ultrasound volume")->required();
+  sub->add_option("IN", o->ins, "Opacity volume(s) (float in [0, 1]) or raw ultrasound volume(s): one row each")
+      ->required();
   o->out = "fig6.png";
   sub->add_option("-o,--output", o->out, "Output PNG")->capture_default_str();
   add_figure_options(sub, *o);
