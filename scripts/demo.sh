@@ -107,14 +107,14 @@ if "$ss" figure6 --help >/dev/null 2>&1; then
     log "the paper's Figures 5 and 6: the face and the real spine"
     rows=(--view -30,10 --view 0,35 --crop "$crop" --crop 0,1,0,1,0,1)
     "${gl[@]}" "$ss" figure5 "$out/face/volume.nrrd" "$spine" --iso auto "${rows[@]}" \
-      --labels "face phantom (simulated),PLUS spine phantom (real 3D ultrasound)" -o "$out/figure5-face.png"
+      --labels "face phantom (simulated),PLUS spine phantom (real 3D ultrasound)" -o "$out/figure5.png"
     "${gl[@]}" "$ss" figure6 "$out/face-variational.nrrd" "$out/spine-variational.nrrd" "${rows[@]}" \
       --labels "face phantom (simulated; the defaults),PLUS spine phantom (real 3D ultrasound; the same defaults)" \
-      -o "$out/figure6-face.png"
+      -o "$out/figure6.png"
   else
     log "the paper's Figures 5 and 6 on the face"
-    "${gl[@]}" "$ss" figure5 "$out/face/volume.nrrd" --iso auto "${face_row[@]}" -o "$out/figure5-face.png"
-    "${gl[@]}" "$ss" figure6 "$out/face-variational.nrrd" "${face_row[@]}" -o "$out/figure6-face.png"
+    "${gl[@]}" "$ss" figure5 "$out/face/volume.nrrd" --iso auto "${face_row[@]}" -o "$out/figure5.png"
+    "${gl[@]}" "$ss" figure6 "$out/face-variational.nrrd" "${face_row[@]}" -o "$out/figure6.png"
   fi
 fi
 
@@ -140,8 +140,8 @@ describe() {
     render-*.png) echo "oriented splats" ;;
     turntable/*) echo "turntable frame (oriented splats)" ;;
     *.ply) echo "Marching Cubes mesh of the opacity at 0.2 (binary PLY)" ;;
-    figure5-*.png) echo "the paper's Figure 5: ray casting before / after classification" ;;
-    figure6-*.png) echo "the paper's Figure 6: ray casting, Marching Cubes, shear-warp, splats" ;;
+    figure5*.png) echo "the paper's Figure 5: ray casting before / after classification" ;;
+    figure6*.png) echo "the paper's Figure 6: ray casting, Marching Cubes, shear-warp, splats" ;;
     INDEX.txt) echo "this index" ;;
     *) echo "" ;;
   esac
