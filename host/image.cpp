@@ -169,6 +169,37 @@ float line_width(const Font& f, float sc, const std::string& text, std::size_t b
 
 }  // namespace
 
+std::vector<std::string> wrap_text(const std::string& text, int width, int scale) {
+  std::vector<std::string> lines;
+  std::size_t begin = 0;
+  while (begin <= text.size()) {
+    std::size_t end = text.find('\n', begin);
+    if (end == std::string::npos) end = text.size();
+    std::string line;
+    std::size_t i = begin;
+    while (i < end) {
+      // The next word with the spaces before it (kept, so that aligned
+      // columns of a footer stay aligned).
+      std::size_t j = i;
+      while (j < end && text[j] == ' ') ++j;
+      while (j < end && text[j] != ' ') ++j;
+      const std::string piece = text.substr(i, j - i);
+      if (!line.empty() && text_width(line + piece, scale) > width) {
+        lines.push_back(line);
+        std::size_t k = 0;
+        while (k < piece.size() && piece[k] == ' ') ++k;
+        line = piece.substr(k);
+      } else {
+        line += piece;
+      }
+      i = j;
+    }
+    lines.push_back(line);
+    begin = end + 1;
+  }
+  return lines;
+}
+
 bool truetype_text() { return font().ok; }
 std::string text_font_path() { return font().path; }
 

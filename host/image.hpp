@@ -38,6 +38,9 @@ void draw_text(Image& image, int x, int y, const std::string& text, Rgb colour, 
 // Width and height in pixels that draw_text covers (0 for empty text).
 int text_width(const std::string& text, int scale = 1);
 int text_height(const std::string& text, int scale = 1);
+// Lines of at most `width` pixels (a word wider than that stands alone on
+// its line); '\n' in the text starts a new line.
+std::vector<std::string> wrap_text(const std::string& text, int width, int scale = 1);
 // Whether draw_text uses the TrueType font, and its file ("" if not).
 bool truetype_text();
 std::string text_font_path();

@@ -225,11 +225,7 @@ Image compose(const std::vector<Image>& panels, const std::vector<std::string>& 
   const int caption = text_height("A", scale) + 6;
   // The footer: lines separated by '\n'.
   std::vector<std::string> lines;
-  for (std::size_t a = 0; !footer.empty() && a <= footer.size();) {
-    const std::size_t e = std::min(footer.find('\n', a), footer.size());
-    lines.push_back(footer.substr(a, e - a));
-    a = e + 1;
-  }
+  if (!footer.empty()) lines = wrap_text(footer, 3 * pw + 2 * kGap, 1);
   const int line_h = text_height("A", 1) + 4;
   const int footer_h = lines.empty() ? 0 : int(lines.size()) * line_h + kGap;
   const int cell_h = caption + ph;

@@ -399,15 +399,7 @@ Image stack_rows(const std::vector<Image>& rows, const std::vector<std::string>&
   const int label_h = text_height("Ag", 2) + 2 * margin;
   int width = 0, height = 0;
   for (const Image& r : rows) width = std::max(width, r.width), height += label_h + r.height;
-  std::vector<std::string> lines;
-  std::string line;
-  std::istringstream words(caption);
-  for (std::string w; words >> w;) {
-    const std::string longer = line.empty() ? w : line + " " + w;
-    if (!line.empty() && text_width(longer) > width - 2 * margin) lines.push_back(line), line = w;
-    else line = longer;
-  }
-  if (!line.empty()) lines.push_back(line);
+  const std::vector<std::string> lines = caption.empty() ? std::vector<std::string>{} : wrap_text(caption, width - 2 * margin);
   const int line_h = text_height("Ag") + 3;
   const int caption_h = lines.empty() ? 0 : int(lines.size()) * line_h + 2 * margin;
   Image out(std::max(width, 1), height + caption_h, 24);
