@@ -200,6 +200,37 @@ std::vector<std::string> wrap_text(const std::string& text, int width, int scale
   return lines;
 }
 
+Rgb depth_colour(double t) {
+  t = std::clamp(t, 0.0, 1.0);
+  auto mix = [](const double a[3], const double b[3], double f) {
+    return Rgb{std::uint8_t(std::lround(255 * (a[0] + (b[0] - a[0]) * f))),
+               std::uint8_t(std::lround(255 * (a[1] + (b[1] - a[1]) * f))),
+               std::uint8_t(std::lround(255 * (a[2] + (b[2] - a[2]) * f)))};
+  };
+  static const double near[3] = {1.0, 0.9, 0.72}, mid[3] = {0.93, 0.55, 0.33}, deep[3] = {0.5, 0.16, 0.12};
+  return t < 0.5 ? mix(near, mid, 2 * t) : mix(mid, deep, 2 * t - 1);
+}
+
+std::array<int, 4> draw_depth_legend(Image& image, double near_mm, double far_mm) {
+  auto mm = [](double v) {
+    char b[32];
+    std::snprintf(b, sizeof b, std::abs(v) < 100 ? "%.1f mm" : "%.0f mm", v);
+    return std::string(b);
+  };
+  const std::string top = mm(near_mm), bottom = mm(far_mm);
+  const int bw = 12, bh = image.height / 2;
+  const int label_w = std::max({text_width(top), text_width(bottom), text_width("depth")});
+  const int bx = image.width - 10 - bw, by = (image.height - bh) / 2;
+  const int line = text_height("Ag");
+  if (bh < 3 * line || bx - 6 - label_w < image.width / 2 || by - line - 4 < 0) return {0, 0, 0, 0};
+  const Rgb text{220, 220, 220};
+  for (int y = 0; y < bh; ++y) fill_rect(image, bx, by + y, bw, 1, depth_colour(bh > 1 ? double(y) / (bh - 1) : 0.0));
+  draw_text(image, bx + bw - text_width("depth"), by - line - 4, "depth", text);
+  draw_text(image, bx - 6 - text_width(top), by, top, text);
+  draw_text(image, bx - 6 - text_width(bottom), by + bh - line, bottom, text);
+  return {bx, by, bw, bh};
+}
+
 bool truetype_text() { return font().ok; }
 std::string text_font_path() { return font().path; }
 

@@ -3,6 +3,7 @@
 // labelling figures.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -51,6 +52,17 @@ std::string text_font_path();
 void draw_bitmap_text(Image& image, int x, int y, const std::string& text, Rgb colour, int scale = 1);
 int bitmap_text_width(const std::string& text, int scale = 1);
 int bitmap_text_height(const std::string& text, int scale = 1);
+
+// The depth colour map of the renderers (viewer/shaders: splat.vert and
+// mesh.frag, SlicerHeart-style), t in [0, 1] from near the transducer to
+// deep: light skin tone, orange-brown, dark red-brown.
+Rgb depth_colour(double t);
+// A colour bar of depth_colour over the right edge of a rendered image:
+// the bar (12 px wide, half the image high, centred vertically, 10 px from
+// the edge), "depth" above it and the near and far depths (mm) beside its
+// ends. Returns the bar's rectangle {x, y, w, h}; nothing is drawn (w = 0)
+// on an image too small to hold it.
+std::array<int, 4> draw_depth_legend(Image& image, double near_mm, double far_mm);
 
 void write_png(const std::string& path, const Image& image);
 Image read_png(const std::string& path);  // RGB8 (other layouts converted)

@@ -319,6 +319,45 @@ TEST_F(ViewerCli, SavedParametersReproduceTheClassification) {
   EXPECT_NE(uc.data, ua.data);
 }
 
+TEST_F(ViewerCli, DepthColourMapRendersWithAColourBarOfItsRange) {
+  // render --colour-map depth draws a colour bar at the right edge: the
+  // shader's depth colours from near (top) to deep (bottom), labelled; the
+  // drawn object's near side is as light as the bar's top and its deep side
+  // darker; --legend off leaves the edge to the picture.
+  const std::string in = file("raw.nrrd");
+  ASSERT_EQ(run({"synthetic", "--size", "32", "-o", in, "-q"}).status, 0);
+  const RunResult r = run({"render", in, "-o", file("d.png"), "--size", "320x240", "--colour-map", "depth", "-q"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  ASSERT_EQ(run({"render", in, "-o", file("n.png"), "--size", "320x240", "--colour-map", "depth", "--legend", "off", "-q"})
+                .status,
+            0);
+  const Image with = read_png(file("d.png")), without = read_png(file("n.png"));
+  // Where draw_depth_legend puts the bar on a 320x240 picture.
+  const int bw = 12, bh = 120, bx = 320 - 10 - bw, by = 60;
+  auto same = [](const std::uint8_t* p, Rgb c) { return p[0] == c.r && p[1] == c.g && p[2] == c.b; };
+  int matching = 0;
+  for (int y = 0; y < bh; ++y) matching += same(with.pixel(bx + bw / 2, by + y), depth_colour(double(y) / (bh - 1)));
+  EXPECT_EQ(matching, bh) << "the bar is the depth colour map, near at the top";
+  const Rgb top = depth_colour(0), bottom = depth_colour(1);
+  EXPECT_GT(top.g, bottom.g + 100) << "light near, dark deep";
+  // Labels beside the bar: light text left of it, nothing there without the legend.
+  auto lit = [](const Image& im, int x0, int y0, int w, int h) {
+    int n = 0;
+    for (int y = y0; y < y0 + h; ++y)
+      for (int x = x0; x < x0 + w; ++x) n += im.pixel(x, y)[0] > 150 && im.pixel(x, y)[2] > 150;
+    return n;
+  };
+  EXPECT_GT(lit(with, bx - 70, by, 64, 14), 10) << "the near depth's label";
+  EXPECT_GT(lit(with, bx - 70, by + bh - 14, 64, 14), 10) << "the far depth's label";
+  EXPECT_EQ(lit(without, bx, by, bw, bh), 0) << "--legend off drew a bar";
+  // Elsewhere the two pictures are the same.
+  int differ = 0;
+  for (int y = 0; y < 240; ++y)
+    for (int x = 0; x < 320 / 2; ++x) differ += !same(with.pixel(x, y), {without.pixel(x, y)[0], without.pixel(x, y)[1], without.pixel(x, y)[2]});
+  EXPECT_EQ(differ, 0);
+  expect_one_line_error(run({"render", in, "-o", file("x.png"), "--legend", "maybe"}), {"--legend"});
+}
+
 TEST_F(ViewerCli, PresetsSetClassificationAndRenderingAndGiveWayToOptions) {
   // host/presets.hpp. A raw volume viewed with --preset bone: the saved
   // parameters name the preset and hold its rendering (threshold 0.3, light

@@ -290,6 +290,32 @@ class ViewerApp {
     set_frame((input_.frame + 1) % input_.sequence.size());
   }
 
+  // The depth colour map's range as a bar (near left, deep right), in the
+  // panel under the colour choice: the same colours as the shaders
+  // (depth_colour in host/image.hpp).
+  void depth_legend() {
+    char near_text[32], far_text[32];
+    std::snprintf(near_text, sizeof near_text, "%.1f mm", double(settings_.depth_lo));
+    std::snprintf(far_text, sizeof far_text, "%.1f mm", double(settings_.depth_hi));
+    ImGui::TextUnformatted(near_text);
+    ImGui::SameLine();
+    const float w = std::max(40.0f, ImGui::GetContentRegionAvail().x - ImGui::CalcTextSize(far_text).x - 8.0f);
+    const float h = ImGui::GetTextLineHeight();
+    const ImVec2 p = ImGui::GetCursorScreenPos();
+    ImDrawList* dl = ImGui::GetWindowDrawList();
+    constexpr int steps = 16;
+    for (int k = 0; k < steps; ++k) {
+      const Rgb a = depth_colour(double(k) / steps), b = depth_colour(double(k + 1) / steps);
+      const ImU32 ca = IM_COL32(a.r, a.g, a.b, 255), cb = IM_COL32(b.r, b.g, b.b, 255);
+      dl->AddRectFilledMultiColor(ImVec2(p.x + w * k / steps, p.y), ImVec2(p.x + w * (k + 1) / steps, p.y + h), ca, cb,
+                                  cb, ca);
+    }
+    ImGui::Dummy(ImVec2(w, h));
+    if (ImGui::IsItemHovered()) ImGui::SetTooltip("depth along the beam: light near the transducer, dark deep");
+    ImGui::SameLine();
+    ImGui::TextUnformatted(far_text);
+  }
+
   void sequence_controls() {
     int k = int(input_.frame);
     const int n = int(input_.sequence.size());
@@ -688,6 +714,7 @@ class ViewerApp {
       ImGui::RadioButton("colour by depth", &cmap, 1);
       settings_.depth_colour = cmap == 1;
       if (settings_.depth_colour && mode_ == ViewRenderer::Raycast) ImGui::TextDisabled("(the ray caster draws one colour)");
+      if (settings_.depth_colour && mode_ != ViewRenderer::Raycast) depth_legend();
       ImGui::ColorEdit3("colour", &settings_.colour.x, ImGuiColorEditFlags_NoInputs);
       ImGui::SameLine();
       ImGui::ColorEdit3("background", &settings_.background.x, ImGuiColorEditFlags_NoInputs);

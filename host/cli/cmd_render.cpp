@@ -30,7 +30,7 @@ namespace softshell::cli {
 namespace {
 
 struct RenderOptions {
-  std::string in, out, device, size = "400x400", view = "0,0", crop, iso = "auto", colour_map, light;
+  std::string in, out, device, size = "400x400", view = "0,0", crop, iso = "auto", colour_map, light, legend = "on";
   std::set<std::string> given;  // long option names given on the command line
   int turntable = 0, benchmark = 0;
   std::optional<std::size_t> frame;  // 3D+t: one frame; default every frame (splats)
@@ -183,7 +183,9 @@ int run_render(const RenderOptions& o) {
       cam.azimuth = az + 360.0f * float(i) / float(frames);
     }
     stats = r.render(cam, settings);
-    write_png(outputs[std::size_t(i)], r.read().rgb());
+    Image picture = r.read().rgb();
+    if (settings.depth_colour && o.legend == "on") draw_depth_legend(picture, settings.depth_lo, settings.depth_hi);
+    write_png(outputs[std::size_t(i)], picture);
     step->fraction(double(i + 1) / frames, "frame " + std::to_string(i + 1) + " of " + std::to_string(frames));
   }
   step.reset();
@@ -253,6 +255,11 @@ void add_render_command(CLI::App& app, Action& action) {
                   "to dark red-brown deep (splats)")
       ->type_name("solid|depth")
       ->check(one_of({"solid", "depth"}));
+  sub->add_option("--legend", o->legend,
+                  "With --colour-map depth: a colour bar of the depth range (mm along the beam) at the right edge")
+      ->capture_default_str()
+      ->type_name("on|off")
+      ->check(one_of({"on", "off"}));
   sub->add_option("--light", o->light,
                   "Light direction from the view direction in degrees, azimuth (right +) and elevation (up +), each in "
                   "[-90, 90] (default -30,30)")
