@@ -91,6 +91,12 @@ void fill_rect(Image& image, int x, int y, int w, int h, Rgb colour) {
     }
 }
 
+void blit(Image& dst, const Image& src, int x0, int y0) {
+  for (int y = 0; y < src.height; ++y)
+    if (y0 + y >= 0 && y0 + y < dst.height)
+      std::copy_n(src.pixel(0, y), std::min(src.width, dst.width - x0) * 3, dst.pixel(x0, y0 + y));
+}
+
 // Rows 0-8: the lower-case letters with descenders (x-height rows 2-6 as
 // the rest of the font, descender rows 7-8).
 const std::uint16_t* glyph_of(char ch) {
@@ -154,30 +160,42 @@ int printable(char ch) {
   return code >= 0x20 && code <= 0x7E ? code : '?';
 }
 
-// Width of one line in pixels (fractional), kerning included.
-float line_width(const Font& f, float sc, const std::string& text, std::size_t begin, std::size_t end) {
-  float w = 0;
-  for (std::size_t i = begin; i < end; ++i) {
-    int adv = 0, lsb = 0;
-    const int c = printable(text[i]);
-    stbtt_GetCodepointHMetrics(&f.info, c, &adv, &lsb);
-    w += float(adv) * sc;
-    if (i + 1 < end) w += float(stbtt_GetCodepointKernAdvance(&f.info, c, printable(text[i + 1]))) * sc;
+// Calls f(line, begin, end) for each '\n'-separated line of `text`.
+template <class F>
+void for_each_line(const std::string& text, F&& f) {
+  std::size_t begin = 0;
+  for (int line = 0; begin <= text.size(); ++line) {
+    std::size_t end = text.find('\n', begin);
+    if (end == std::string::npos) end = text.size();
+    f(line, begin, end);
+    begin = end + 1;
   }
-  return w;
+}
+
+// Walks the glyphs of text[begin, end) from pen position `pen`, calling
+// glyph(codepoint, pen) for each, advancing by the glyph's advance and the
+// kerning to the next; returns the pen after the last glyph.
+template <class G>
+float walk_glyphs(const Font& f, float sc, const std::string& text, std::size_t begin, std::size_t end, float pen,
+                  G&& glyph) {
+  for (std::size_t i = begin; i < end; ++i) {
+    const int c = printable(text[i]);
+    int adv = 0, lsb = 0;
+    stbtt_GetCodepointHMetrics(&f.info, c, &adv, &lsb);
+    glyph(c, pen);
+    pen += float(adv) * sc;
+    if (i + 1 < end) pen += float(stbtt_GetCodepointKernAdvance(&f.info, c, printable(text[i + 1]))) * sc;
+  }
+  return pen;
 }
 
 }  // namespace
 
 std::vector<std::string> wrap_text(const std::string& text, int width, int scale) {
   std::vector<std::string> lines;
-  std::size_t begin = 0;
-  while (begin <= text.size()) {
-    std::size_t end = text.find('\n', begin);
-    if (end == std::string::npos) end = text.size();
+  for_each_line(text, [&](int, std::size_t begin, std::size_t end) {
     std::string line;
-    std::size_t i = begin;
-    while (i < end) {
+    for (std::size_t i = begin; i < end;) {
       // The next word with the spaces before it (kept, so that aligned
       // columns of a footer stay aligned).
       std::size_t j = i;
@@ -186,17 +204,14 @@ std::vector<std::string> wrap_text(const std::string& text, int width, int scale
       const std::string piece = text.substr(i, j - i);
       if (!line.empty() && text_width(line + piece, scale) > width) {
         lines.push_back(line);
-        std::size_t k = 0;
-        while (k < piece.size() && piece[k] == ' ') ++k;
-        line = piece.substr(k);
+        line = piece.substr(std::min(piece.find_first_not_of(' '), piece.size()));
       } else {
         line += piece;
       }
       i = j;
     }
     lines.push_back(line);
-    begin = end + 1;
-  }
+  });
   return lines;
 }
 
@@ -243,43 +258,32 @@ void draw_text(Image& image, int x, int y, const std::string& text, Rgb colour, 
   const float sc = em_scale(f, std::max(scale, 1));
   const int baseline0 = y + int(std::lround(float(f.ascent) * sc));
   const int advance = line_advance(f, sc);
-  std::size_t begin = 0;
-  for (int line = 0; begin <= text.size(); ++line) {
-    std::size_t end = text.find('\n', begin);
-    if (end == std::string::npos) end = text.size();
+  for_each_line(text, [&](int line, std::size_t begin, std::size_t end) {
     const int baseline = baseline0 + line * advance;
-    float pen = float(x);
-    for (std::size_t i = begin; i < end; ++i) {
-      const int c = printable(text[i]);
-      int adv = 0, lsb = 0;
-      stbtt_GetCodepointHMetrics(&f.info, c, &adv, &lsb);
+    walk_glyphs(f, sc, text, begin, end, float(x), [&](int c, float pen) {
       const float shift = pen - std::floor(pen);
       int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
       stbtt_GetCodepointBitmapBoxSubpixel(&f.info, c, sc, sc, shift, 0, &x0, &y0, &x1, &y1);
       const int w = x1 - x0, h = y1 - y0;
-      if (w > 0 && h > 0) {
-        std::vector<unsigned char> alpha(std::size_t(w) * std::size_t(h));
-        stbtt_MakeCodepointBitmapSubpixel(&f.info, alpha.data(), w, h, w, sc, sc, shift, 0, c);
-        const int ox = int(std::floor(pen)) + x0, oy = baseline + y0;
-        for (int gy = 0; gy < h; ++gy) {
-          const int py = oy + gy;
-          if (py < 0 || py >= image.height) continue;
-          for (int gx = 0; gx < w; ++gx) {
-            const int px = ox + gx;
-            const int a = alpha[std::size_t(gy) * std::size_t(w) + std::size_t(gx)];
-            if (px < 0 || px >= image.width || a == 0) continue;
-            std::uint8_t* q = image.pixel(px, py);
-            q[0] = std::uint8_t((q[0] * (255 - a) + colour.r * a + 127) / 255);
-            q[1] = std::uint8_t((q[1] * (255 - a) + colour.g * a + 127) / 255);
-            q[2] = std::uint8_t((q[2] * (255 - a) + colour.b * a + 127) / 255);
-          }
+      if (w <= 0 || h <= 0) return;
+      std::vector<unsigned char> alpha(std::size_t(w) * std::size_t(h));
+      stbtt_MakeCodepointBitmapSubpixel(&f.info, alpha.data(), w, h, w, sc, sc, shift, 0, c);
+      const int ox = int(std::floor(pen)) + x0, oy = baseline + y0;
+      for (int gy = 0; gy < h; ++gy) {
+        const int py = oy + gy;
+        if (py < 0 || py >= image.height) continue;
+        for (int gx = 0; gx < w; ++gx) {
+          const int px = ox + gx;
+          const int a = alpha[std::size_t(gy) * std::size_t(w) + std::size_t(gx)];
+          if (px < 0 || px >= image.width || a == 0) continue;
+          std::uint8_t* q = image.pixel(px, py);
+          q[0] = std::uint8_t((q[0] * (255 - a) + colour.r * a + 127) / 255);
+          q[1] = std::uint8_t((q[1] * (255 - a) + colour.g * a + 127) / 255);
+          q[2] = std::uint8_t((q[2] * (255 - a) + colour.b * a + 127) / 255);
         }
       }
-      pen += float(adv) * sc;
-      if (i + 1 < end) pen += float(stbtt_GetCodepointKernAdvance(&f.info, c, printable(text[i + 1]))) * sc;
-    }
-    begin = end + 1;
-  }
+    });
+  });
 }
 
 int text_width(const std::string& text, int scale) {
@@ -287,13 +291,9 @@ int text_width(const std::string& text, int scale) {
   if (!f.ok) return bitmap_text_width(text, scale);
   const float sc = em_scale(f, std::max(scale, 1));
   float widest = 0;
-  std::size_t begin = 0;
-  while (begin <= text.size()) {
-    std::size_t end = text.find('\n', begin);
-    if (end == std::string::npos) end = text.size();
-    widest = std::max(widest, line_width(f, sc, text, begin, end));
-    begin = end + 1;
-  }
+  for_each_line(text, [&](int, std::size_t begin, std::size_t end) {
+    widest = std::max(widest, walk_glyphs(f, sc, text, begin, end, 0.0f, [](int, float) {}));
+  });
   return int(std::ceil(widest));
 }
 
@@ -429,12 +429,6 @@ std::vector<MontagePanel> montage_panels(const Volume* v, int height) {
     panels.push_back(std::move(panel));
   }
   return panels;
-}
-
-void blit(Image& dst, const Image& src, int x0, int y0) {
-  for (int y = 0; y < src.height; ++y)
-    if (y0 + y >= 0 && y0 + y < dst.height)
-      std::copy_n(src.pixel(0, y), std::min(src.width, dst.width - x0) * 3, dst.pixel(x0, y0 + y));
 }
 
 // A round length (1, 2 or 5 times a power of ten, in mm) of about a quarter

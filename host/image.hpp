@@ -28,6 +28,9 @@ struct Rgb {
 
 // Fills the rectangle [x, x + w) x [y, y + h), clipped to the image.
 void fill_rect(Image& image, int x, int y, int w, int h, Rgb colour);
+// Copies `src` into `dst` with its top-left corner at (x0, y0), x0 >= 0;
+// rows and columns beyond dst are left out.
+void blit(Image& dst, const Image& src, int x0, int y0);
 
 // Draws ASCII text, top-left corner at (x, y), in DejaVu Sans (TrueType,
 // anti-aliased, 11 * scale pixels per em: capitals 8 * scale pixels high)

@@ -234,7 +234,7 @@ Image compose(const std::vector<Image>& panels, const std::vector<std::string>& 
   for (int k = 0; k < 6; ++k) {
     const int x0 = kGap + (k % 3) * (pw + kGap), y0 = kGap + (k / 3) * (cell_h + kGap);
     draw_text(img, x0, y0 + 2, use_long ? long_labels[k] : short_labels[k], kLabel, scale);
-    for (int y = 0; y < ph; ++y) std::copy_n(panels[k].pixel(0, y), pw * 3, img.pixel(x0, y0 + caption + y));
+    blit(img, panels[k], x0, y0 + caption);  // every panel is pw x ph
   }
   for (std::size_t l = 0; l < lines.size(); ++l)
     draw_text(img, kGap, img.height - footer_h + int(l) * line_h, lines[l], kLabel, 1);

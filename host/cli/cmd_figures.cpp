@@ -289,8 +289,7 @@ Image compose(const std::vector<Panel>& panels) {
   Image out(width, height + band + gap, 24);
   int x0 = gap;
   for (const Panel& p : panels) {
-    for (int y = 0; y < p.image.height; ++y)
-      std::copy(p.image.pixel(0, y), p.image.pixel(0, y) + 3 * p.image.width, out.pixel(x0, y + 0));
+    blit(out, p.image, x0, 0);
     const int scale = text_width(p.title, 2) <= p.image.width - 8 ? 2 : 1;
     draw_text(out, x0 + 4, height + 6, p.title, {255, 255, 255}, scale);
     std::string line = p.seconds >= 0 ? format_ms(p.seconds) + " per frame" : "";
@@ -407,8 +406,7 @@ Image stack_rows(const std::vector<Image>& rows, const std::vector<std::string>&
   for (std::size_t k = 0; k < rows.size(); ++k) {
     draw_text(out, margin, y + margin, labels[k], {255, 226, 140}, 2);
     y += label_h;
-    for (int r = 0; r < rows[k].height; ++r)
-      std::copy(rows[k].pixel(0, r), rows[k].pixel(0, r) + 3 * rows[k].width, out.pixel(0, y + r));
+    blit(out, rows[k], 0, y);
     y += rows[k].height;
   }
   for (std::size_t l = 0; l < lines.size(); ++l)
@@ -420,6 +418,11 @@ RaycastParams opacity_params(const FigureOptions& o, const viewer::RenderSetting
   RaycastRenderOptions r = o.raycast;
   r.tf_lo = r.tf_hi = "auto";  // the classified panel shows u itself (above --tf-cut)
   return raycast_params(r, -1.0, s);
+}
+
+// The progress stage's prefix for row k ("row 2/3, "), empty for one row.
+std::string row_stage(const FigureOptions& o, std::size_t k) {
+  return o.ins.size() > 1 ? "row " + std::to_string(k + 1) + "/" + std::to_string(o.ins.size()) + ", " : "";
 }
 
 // One row of figure5: ray casting of input k before and after classification.
@@ -437,7 +440,7 @@ Image figure5_row(Runtime& rt, const FigureOptions& o, const FigureSetup& f, std
   const Scene scene{rt, input.u, framed_camera(visible_box(input.u, after), f.az[k], f.el[k]), f.settings[k],
                     f.width, f.height, o.repeat};
   std::vector<Panel> panels;
-  const std::string row = o.ins.size() > 1 ? "row " + std::to_string(k + 1) + "/" + std::to_string(o.ins.size()) + ", " : "";
+  const std::string row = row_stage(o, k);
   std::optional<progress::Stage> panel(std::in_place, row + "panel 1/2: ray casting before classification");
   panels.push_back(raycast_panel(scene, unit, before, "before classification"));
   panel.emplace(row + "panel 2/2: ray casting after classification");
@@ -462,7 +465,7 @@ Image figure6_row(Runtime& rt, const FigureOptions& o, const FigureSetup& f, std
   const auto box = visible_box(input.u, p);
   const Scene scene{rt, input.u, framed_camera(box, f.az[k], f.el[k]), f.settings[k], f.width, f.height, o.repeat};
   std::vector<Panel> panels;
-  const std::string row = o.ins.size() > 1 ? "row " + std::to_string(k + 1) + "/" + std::to_string(o.ins.size()) + ", " : "";
+  const std::string row = row_stage(o, k);
   std::optional<progress::Stage> panel(std::in_place, row + "panel 1/4: ray casting");
   panels.push_back(raycast_panel(scene, input.u, p, "ray casting"));
   panel.emplace(row + "panel 2/4: Marching Cubes");
