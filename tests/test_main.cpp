@@ -113,6 +113,18 @@ double relative_l2(const std::vector<float>& a, const std::vector<float>& b) {
   return den > 0 ? std::sqrt(num / den) : std::sqrt(num);
 }
 
+MeanDeviation mean_deviation(const std::vector<float>& a, const std::vector<float>& b, double beyond) {
+  MeanDeviation d;
+  const std::size_t n = std::min(a.size(), b.size());
+  std::size_t count = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double e = std::abs(double(a[i]) - double(b[i]));
+    d.mean += e, count += e > beyond;
+  }
+  if (n > 0) d.mean /= double(n), d.share = double(count) / double(n);
+  return d;
+}
+
 }  // namespace softshell::test
 
 int main(int argc, char** argv) {

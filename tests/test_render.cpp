@@ -248,6 +248,28 @@ TEST(Render, BackToFrontNearRedOverFarBlue) {
 
 // A slab of u = 1, 2.4 voxels thick, tilted by atan(1/4) about y: its faces
 // are voxel staircases with a step every 4 voxels along x.
+// Luminance of a pixel (Rec. 601 weights).
+double luma(const RgbaImage& img, int x, int y) {
+  const std::uint8_t* p = img.pixel(x, y);
+  return 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2];
+}
+
+// The splats of `set`, the camera fitted to them and turned to azimuth,
+// elevation; the picture is also written to $SOFTSHELL_TEST_IMAGES/NAME.png
+// when that is set.
+RgbaImage draw_fitted(HeadlessRenderer& r, const SplatSet& set, float azimuth, float elevation,
+                      const RenderSettings& s, const std::string& name) {
+  r.upload(set);
+  OrbitCamera cam;
+  cam.fit(set.box_lo(), set.box_hi());
+  cam.azimuth = azimuth;
+  cam.elevation = elevation;
+  r.render(cam, s);
+  RgbaImage img = r.read();
+  if (const char* dir = std::getenv("SOFTSHELL_TEST_IMAGES")) write_png(std::string(dir) + "/" + name + ".png", img.rgb());
+  return img;
+}
+
 Volume tilted_slab(int nx, int ny, int nz) {
   Volume u({std::size_t(nx), std::size_t(ny), std::size_t(nz)});
   for (int z = 0; z < nz; ++z)
@@ -264,10 +286,7 @@ double banding(const RgbaImage& img, int x0, int x1, int y0, int y1, int half) {
   std::vector<double> profile;
   for (int x = x0; x < x1; ++x) {
     double sum = 0;
-    for (int y = y0; y < y1; ++y) {
-      const std::uint8_t* p = img.pixel(x, y);
-      sum += 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2];
-    }
+    for (int y = y0; y < y1; ++y) sum += luma(img, x, y);
     profile.push_back(sum / (y1 - y0));
   }
   std::vector<double> residual;
@@ -331,18 +350,11 @@ TEST(Render, ShellCentresRemoveTheBandsOfATiltedSlab) {
   for (const SplatCentres c : {SplatCentres::Voxel, SplatCentres::Shell}) {
     SplatParams p;
     p.centres = c;
-    const SplatSet set = generate_splats(runtime(), u, p);
-    r.upload(set);
-    OrbitCamera cam;
-    cam.fit(set.box_lo(), set.box_hi());
-    cam.azimuth = 0.0f;
-    cam.elevation = -60.0f;  // the slab at a grazing angle, where the bands show
     RenderSettings s;
     s.background = glm::vec3(0.0f);
-    r.render(cam, s);
-    const RgbaImage img = r.read();
-    if (const char* dir = std::getenv("SOFTSHELL_TEST_IMAGES"))
-      write_png(std::string(dir) + "/banding-" + splat_centres_name(c) + ".png", img.rgb());
+    // The slab at a grazing angle (elevation -60), where the bands show.
+    const RgbaImage img = draw_fitted(r, generate_splats(runtime(), u, p), 0.0f, -60.0f, s,
+                                      std::string("banding-") + splat_centres_name(c));
     // The slab fills the middle of the image; the step period is about
     // 4 voxels = size / 64 * 4 px (fit frames the whole box).
     band[c == SplatCentres::Shell] = banding(img, size / 5, size * 4 / 5, size * 2 / 5, size * 3 / 5, 20);
@@ -407,23 +419,11 @@ TEST(Render, AmbientOcclusionDarkensTheInsideOfACreaseOnly) {
   for (const bool on : {false, true}) {
     SplatParams p;
     p.occlusion = on;
-    const SplatSet set = generate_splats(runtime(), u, p);
-    r.upload(set);
-    OrbitCamera cam;
-    cam.fit(set.box_lo(), set.box_hi());
-    cam.azimuth = 135.0f;
-    cam.elevation = -30.0f;
-    RenderSettings s;
-    r.render(cam, s);
-    const RgbaImage img = r.read();
-    if (const char* dir = std::getenv("SOFTSHELL_TEST_IMAGES"))
-      write_png(std::string(dir) + "/occlusion-" + (on ? "on" : "off") + ".png", img.rgb());
+    const RgbaImage img = draw_fitted(r, generate_splats(runtime(), u, p), 135.0f, -30.0f, RenderSettings{},
+                                      std::string("occlusion-") + (on ? "on" : "off"));
     for (int x = 0; x < size; ++x) {
       double sum = 0;
-      for (int y = size * 2 / 5; y < size * 3 / 5; ++y) {
-        const std::uint8_t* px = img.pixel(x, y);
-        sum += 0.299 * px[0] + 0.587 * px[1] + 0.114 * px[2];
-      }
+      for (int y = size * 2 / 5; y < size * 3 / 5; ++y) sum += luma(img, x, y);
       column[on].push_back(sum);
     }
   }
@@ -461,21 +461,9 @@ TEST(Render, RimGaussianClosesTheScreenDoorOfAThinShell) {
   for (const SplatGaussian g : {SplatGaussian::Paper, SplatGaussian::Rim}) {
     SplatParams p;
     p.gaussian = g;
-    const SplatSet set = generate_splats(runtime(), u, p);
-    r.upload(set);
-    OrbitCamera cam;
-    cam.fit(set.box_lo(), set.box_hi());
-    cam.azimuth = 180.0f;
-    cam.elevation = 10.0f;
-    RenderSettings s;
-    r.render(cam, s);
-    const RgbaImage img = r.read();
-    if (const char* dir = std::getenv("SOFTSHELL_TEST_IMAGES"))
-      write_png(std::string(dir) + "/screen-door-" + splat_gaussian_name(g) + ".png", img.rgb());
-    const auto lum = [&](int x, int y) {
-      const std::uint8_t* px = img.pixel(x, y);
-      return 0.299 * px[0] + 0.587 * px[1] + 0.114 * px[2];
-    };
+    const RgbaImage img = draw_fitted(r, generate_splats(runtime(), u, p), 180.0f, 10.0f, RenderSettings{},
+                                      std::string("screen-door-") + splat_gaussian_name(g));
+    const auto lum = [&](int x, int y) { return luma(img, x, y); };
     double rms = 0, mean = 0;
     int count = 0;
     for (int y = size / 2 - 25; y < size / 2 + 25; ++y)  // inside the sphere's image (radius ~45 px)

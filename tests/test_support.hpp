@@ -70,6 +70,11 @@ std::vector<float> download(Runtime& rt, const cl::Buffer& buf, std::size_t n);
 double max_relative_deviation(const std::vector<float>& a, const std::vector<float>& b);
 // ||a - b|| / ||b|| (||a - b|| when b is all 0).
 double relative_l2(const std::vector<float>& a, const std::vector<float>& b);
+// Mean |a - b| and the share of samples with |a - b| > `beyond`.
+struct MeanDeviation {
+  double mean = 0, share = 0;
+};
+MeanDeviation mean_deviation(const std::vector<float>& a, const std::vector<float>& b, double beyond);
 
 // Asserts |got - want| <= abs_tol + rel_tol * |want| everywhere; on failure,
 // reports the first failing index as (x, y, z) and the worst error.
