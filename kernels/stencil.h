@@ -47,9 +47,10 @@ inline float diagonal_coef(const float V, const float mu, const float dT) { retu
 
 /* Stores new pointwise densities m, r of voxel p and, when it is free, its
  * diagonal and right-hand side (V: the level's voxel volume). */
-inline void store_point(__global float* mu, __global float* rho, __global float* coef, __global float* b,
-                        __global const uchar* fixed, __global const float* dT, const size_t p, const float V,
-                        const float m, const float r) {
+__attribute__((always_inline)) inline void store_point(__global float* mu, __global float* rho,
+                                                       __global float* coef, __global float* b,
+                                                       __global const uchar* fixed, __global const float* dT,
+                                                       const size_t p, const float V, const float m, const float r) {
   mu[p] = m;
   rho[p] = r;
   if (fixed[p]) return;

@@ -9,9 +9,11 @@
  * and every voxel on the volume boundary is fixed, so interior voxels never
  * look outside the volume.
  *
- * The row helpers are always_inline: left to itself clang keeps stencil_row a
- * call, and a call in the work-item loop stops PoCL's loop vectoriser (the
- * apply ran scalar at ~1/3 of its vector speed on the CPU device).
+ * The row helpers and the density helpers are always_inline: left to itself
+ * clang keeps stencil_row (or density_mu) a call, and a call in the work-item
+ * loop stops PoCL's loop vectoriser (the apply ran scalar at ~1/3 of its
+ * vector speed on the CPU device; system_update_point at 14.5 ms instead of
+ * 4.5 ms at 105^3, docs/benchmarks.md "Solver kernels one by one").
  */
 #include "grid.h"
 #include "stencil.h"
@@ -28,13 +30,13 @@ inline bool on_boundary(const GridDesc g, int x, int y, int z) {
  * a change of those re-targets a system in place (system_update_point). */
 /* x^q for x >= 0: the usual integer powers by multiplication (pow() keeps
  * PoCL's work-group loop from vectorising), others by exp2(q log2 x). */
-inline float shell_power(const float x, const float q) {
+__attribute__((always_inline)) inline float shell_power(const float x, const float q) {
   if (q == 1.0f) return x;
   if (q == 2.0f) return x * x;
   if (q == 4.0f) return (x * x) * (x * x);
   return x > 0.0f ? exp2(q * log2(x)) : 0.0f;
 }
-inline float density_c(const ClassifyCoeffs k, const float grad2) {
+__attribute__((always_inline)) inline float density_c(const ClassifyCoeffs k, const float grad2) {
   if (k.g_ref > 0.0f) {
     /* The shell functional: the edge strength relative to the data's own
      * strong edges, saturating at 1 (gain and voxel size drop out). */
@@ -43,7 +45,8 @@ inline float density_c(const ClassifyCoeffs k, const float grad2) {
   }
   return k.delta + (1.0f - k.delta) * sqrt(grad2);
 }
-inline float density_mu(const ClassifyCoeffs k, const float v, const float vs, const float grad2) {
+__attribute__((always_inline)) inline float density_mu(const ClassifyCoeffs k, const float v, const float vs,
+                                                      const float grad2) {
   const float dv = v - k.v_iso, dvs = vs - k.v_iso;
   const float eps = k.g_ref > 0.0f ? k.epsilon * k.g_ref * k.g_ref : k.epsilon;
   float W = (k.omega * dv * dv + (1.0f - k.omega) * dvs * dvs) / (grad2 + eps);
@@ -53,7 +56,9 @@ inline float density_mu(const ClassifyCoeffs k, const float v, const float vs, c
   if (k.shell_h2 > 0.0f) W = fmin(shell_power(W / k.shell_h2, k.profile_power), k.weight_cap);
   return k.alpha * W + k.gamma * density_c(k, grad2);
 }
-inline float density_rho(const ClassifyCoeffs k, const float grad2) { return k.gamma * density_c(k, grad2) * k.u_ind; }
+__attribute__((always_inline)) inline float density_rho(const ClassifyCoeffs k, const float grad2) {
+  return k.gamma * density_c(k, grad2) * k.u_ind;
+}
 
 /* mu, rho, T = beta (|g|^2 I - g g^T) + kappa I with g = grad v~ (kappa: the
  * optional isotropic smoothness term, 0 in the paper's functional); fixed =

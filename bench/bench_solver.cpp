@@ -1,0 +1,282 @@
+// The solver's kernels one by one, against the device's copy and the host's
+// STREAM copy, in one run: the Gauss-Seidel sweep (forward and reverse), the
+// operator apply and residual, the grid transfers and the vector kernels on
+// the face phantom's system; then one cold solve and one PCG iteration
+// (the difference of two solves one iteration apart). Every kernel result is
+// checked against the host reference (bench.hpp) before it is timed.
+//
+//   softshell_bench_solver [--size N] [--reps R] [--device D] [--trace]
+//
+// Byte model: docs/benchmarks.md ("Byte model"). Times are the minimum of R.
+#include <algorithm>
+#include <chrono>
+#include <memory>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "bench.hpp"
+#include "error.hpp"
+#include "phantom.hpp"
+#include "progress.hpp"
+#include "stream.hpp"
+#include "variational.hpp"
+
+using namespace softshell;
+
+namespace {
+
+int usage() {
+  std::cerr << "usage: softshell_bench_solver [--size N] [--reps R] [--device I|NAME] [--trace]\n";
+  return 2;
+}
+
+template <class F>
+double best_of(int reps, F&& f) {
+  f();  // warm-up
+  double best = 1e30;
+  for (int r = 0; r < reps; ++r) best = std::min(best, f());
+  return best;
+}
+
+double max_relative(const std::vector<float>& a, const std::vector<double>& ref) {
+  double dev = 0, scale = 0;
+  for (std::size_t i = 0; i < a.size(); ++i)
+    dev = std::max(dev, std::abs(double(a[i]) - ref[i])), scale = std::max(scale, std::abs(ref[i]));
+  return scale > 0 ? dev / scale : dev;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int size = 128, reps = 10;
+  std::string device;
+  bool trace = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--help" || a == "-h") return usage(), 0;
+    if (a != "--trace" && i + 1 >= argc) return usage();
+    if (a == "--size") size = std::atoi(argv[++i]);
+    else if (a == "--reps") reps = std::atoi(argv[++i]);
+    else if (a == "--device") device = argv[++i];
+    else if (a == "--trace") trace = true;
+    else {
+      std::cerr << "softshell_bench_solver: unknown option " << a << "\n";
+      return usage();
+    }
+  }
+  if (size < 16 || size > 512) {
+    std::cerr << "softshell_bench_solver: --size must be in [16, 512]\n";
+    return 2;
+  }
+  if (reps < 1 || reps > 1000) {
+    std::cerr << "softshell_bench_solver: --reps must be in [1, 1000]\n";
+    return 2;
+  }
+  try {
+    Runtime rt(device);
+    PhantomParams pp;
+    pp.shape = PhantomShape::Face;
+    pp.size = size;
+    const Phantom ph = make_phantom(rt, pp);
+    Volume vn = ph.volume;
+    const IntensityMap map = ph.volume.intensity_map();
+    for (float& f : vn.data) f = float(map.to_unit(f));
+    VariationalParams vp;
+    vp.v_iso = map.to_unit(ph.fluid_median + 0.5 * (ph.tissue_median - ph.fluid_median));
+    DeviceSystem sys(rt, vn, vp);
+    rt.queue().finish();
+
+    HostStencil hs;
+    hs.grid = sys.grid();
+    hs.coef = sys.download_coefficients();
+    hs.b = sys.download_b();
+    hs.fixed = sys.download_densities().fixed;
+    const std::size_t N = sys.voxels(), bytes = N * sizeof(float);
+
+    // Yardsticks: the device's copy kernel and the host's own STREAM.
+    const std::size_t sn = std::size_t(1) << 24;
+    cl::Buffer sa = rt.buffer(sn * 4), sb = rt.buffer(sn * 4);
+    rt.queue().enqueueFillBuffer(sa, 1.0f, 0, sn * 4);
+    Stream stream(rt);
+    const double copy_s = best_of(reps, [&] {
+      cl::Event e = stream.copy(sa, sb, sn);
+      e.wait();
+      return event_seconds(e);
+    });
+    const double dev_copy = 8.0 * double(sn) / copy_s * 1e-9;
+    sa = cl::Buffer(), sb = cl::Buffer();
+    const HostStream hstream = host_stream(sn, reps);
+    std::printf("%s, %dx%dx%d = %zu voxels\n", rt.info().device_name.c_str(), hs.grid.nx, hs.grid.ny, hs.grid.nz, N);
+    std::printf("device copy %.1f GB/s, host copy %.1f GB/s (%d threads)\n\n", dev_copy, hstream.copy_gbps,
+                hstream.threads);
+
+    cl::Buffer x = rt.buffer(bytes), y = rt.buffer(bytes);
+    std::vector<float> u0(N);
+    for (std::size_t i = 0; i < N; ++i) u0[i] = hs.fixed[i] ? 0.0f : float((i * 2654435761u) % 1000) / 1000.0f;
+    rt.queue().enqueueWriteBuffer(x, CL_TRUE, 0, bytes, u0.data());
+
+    std::printf("%-26s %9s %8s %8s %8s %s\n", "kernel", "ms", "GB/s", "of dev", "of host", "check");
+    auto row = [&](const char* name, double s, double bpv, double check) {
+      const double gbps = bpv * double(N) / s * 1e-9;
+      std::printf("%-26s %9.3f %8.1f %8.2f %8.2f %.1e\n", name, s * 1e3, gbps, gbps / dev_copy,
+                  gbps / hstream.copy_gbps, check);
+    };
+
+    for (int rev = 0; rev < 2; ++rev) {
+      // Check one sweep against the host's, then time.
+      rt.queue().enqueueWriteBuffer(x, CL_TRUE, 0, bytes, u0.data());
+      sys.relax_gs(sys.b(), x, 1, rev).second.wait();
+      std::vector<float> got(N), want = u0;
+      rt.queue().enqueueReadBuffer(x, CL_TRUE, 0, bytes, got.data());
+      host_gs_slab_sweep(hs, want, sys.gs_slab(), rev);
+      const double check = max_relative(got, std::vector<double>(want.begin(), want.end()));
+      const double s = best_of(reps, [&] {
+        const auto span = sys.relax_gs(sys.b(), x, 1, rev);
+        span.second.wait();
+        return event_span_seconds(span.first, span.second);
+      });
+      row(rev ? "sweep (reverse)" : "sweep (forward)", s, 52, check);
+    }
+    {
+      rt.queue().enqueueWriteBuffer(x, CL_TRUE, 0, bytes, u0.data());
+      sys.apply(x, y).wait();
+      std::vector<float> got(N);
+      rt.queue().enqueueReadBuffer(y, CL_TRUE, 0, bytes, got.data());
+      const double check = max_relative(got, host_apply(hs, u0));
+      row("apply", best_of(reps, [&] {
+            cl::Event e = sys.apply(x, y);
+            e.wait();
+            return event_seconds(e);
+          }),
+          48, check);
+      std::vector<double> ref = host_apply(hs, u0);
+      for (std::size_t i = 0; i < N; ++i) ref[i] = double(hs.b[i]) - ref[i];
+      sys.residual(sys.b(), x, y).wait();
+      rt.queue().enqueueReadBuffer(y, CL_TRUE, 0, bytes, got.data());
+      row("residual", best_of(reps, [&] {
+            cl::Event e = sys.residual(sys.b(), x, y);
+            e.wait();
+            return event_seconds(e);
+          }),
+          52, max_relative(got, ref));
+    }
+
+    // Every level's sweep, wall clock with launches (small levels: launch-bound).
+    {
+      std::unique_ptr<DeviceSystem> coarse;
+      const DeviceSystem* level = &sys;
+      std::printf("\n%-26s %12s %14s\n", "level", "sweep ms", "us per voxel*1e3");
+      while (true) {
+        const GridDesc& g = level->grid();
+        const std::size_t n = level->voxels();
+        cl::Buffer u = rt.buffer(n * 4);
+        rt.queue().enqueueFillBuffer(u, 0.0f, 0, n * 4);
+        const int k = 20;
+        const double s = best_of(3, [&] {
+          rt.queue().finish();
+          const auto t0 = std::chrono::steady_clock::now();
+          level->relax_gs(level->b(), u, k, false);
+          rt.queue().finish();
+          return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / k;
+        });
+        char name[64];
+        std::snprintf(name, sizeof name, "%dx%dx%d", g.nx, g.ny, g.nz);
+        std::printf("%-26s %12.3f %14.2f\n", name, s * 1e3, s / double(n) * 1e9);
+        if (std::min({g.nx, g.ny, g.nz}) <= 5) break;
+        coarse = DeviceSystem::coarsen(*level);
+        level = coarse.get();
+      }
+    }
+
+    // The whole solve and one PCG iteration.
+    SolverParams sp;
+    MultigridSolver mg(sys, sp);
+    SolveReport rep;
+    mg.solve(&rep);
+    const int its = rep.cycles;
+    double best = 1e30, bytes_moved = 0;
+    for (int r = 0; r < std::max(3, reps / 2); ++r) {
+      mg.solve(&rep);
+      best = std::min(best, rep.seconds);
+      bytes_moved = rep.bytes;
+    }
+    std::printf("\nsolve: %d levels, %d PCG iterations, %.1f ms, %.0f B/voxel, %.1f GB/s (%.2f of host copy: bound "
+                "ratio %.2f)\n",
+                mg.levels(), its, best * 1e3, bytes_moved / double(N), bytes_moved / best * 1e-9,
+                bytes_moved / best * 1e-9 / hstream.copy_gbps, best / (bytes_moved / (hstream.copy_gbps * 1e9)));
+    SolverParams sp1 = sp;
+    sp1.tol = 1e-4;  // below it the solve refines in float64
+    auto timed = [&](int cycles) {
+      SolverParams s = sp1;
+      s.max_cycles = cycles;
+      MultigridSolver m(sys, s);
+      SolveReport r;
+      m.solve(&r);
+      double t = 1e30;
+      for (int k = 0; k < std::max(3, reps / 2); ++k) m.solve(&r), t = std::min(t, r.seconds);
+      return t;
+    };
+    const double t1 = timed(2), t3 = timed(4);
+    std::printf("one PCG iteration: %.1f ms (solves of 2 and 4 iterations: %.1f, %.1f ms)\n", (t3 - t1) / 2 * 1e3,
+                t1 * 1e3, t3 * 1e3);
+
+    // The pointwise updates of a re-classification, wall clock.
+    auto wall = [&](auto&& f) {
+      return best_of(reps, [&] {
+        rt.queue().finish();
+        const auto t0 = std::chrono::steady_clock::now();
+        f();
+        rt.queue().finish();
+        return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      });
+    };
+    const double t_point = wall([&] { sys.update_point(vp); });
+    const double t_sharpen = wall([&] { sys.update_sharpen(vp, mg.solution(), 1.0, 1.0); });
+    const double t_down = wall([&] { mg.update_point(); });
+    std::printf("update: pointwise %.2f ms, with sharpening %.2f ms, down the levels %.2f ms\n", t_point * 1e3,
+                t_sharpen * 1e3, t_down * 1e3);
+
+    // A re-classification as the viewer makes it (bench.cpp's bench_warm):
+    // one classifier solved at v_iso, then v_iso x 1.05 re-targeted and
+    // re-solved warm; beside a cold classification at v_iso x 1.05. With
+    // --trace the stages of the last re-solve go to stderr as JSON lines.
+    {
+      const Volume& v = ph.volume;
+      VariationalParams p0;
+      p0.v_iso = vp.v_iso;
+      VariationalParams p1 = p0;
+      p1.v_iso = 1.05 * p0.v_iso;
+      VariationalClassifier c(rt, v, p0, sp);
+      c.keep_resolve_start(true);
+      SolveReport r;
+      c.solve(&r);
+      double cold = 1e30, warm = 1e30, upd = 1e30;
+      int cold_cycles = 0, warm_cycles = 0;
+      for (int k = 0; k < std::max(3, reps / 2); ++k) {
+        ClassifyTiming t;
+        classify_variational(rt, v, p1, sp, &r, nullptr, nullptr, &t);
+        cold = std::min(cold, t.setup + t.solve), cold_cycles = r.cycles;
+        if (trace && k + 1 == std::max(3, reps / 2)) progress::set_mode(progress::Mode::Json);
+        const auto t0 = std::chrono::steady_clock::now();
+        c.update(p1);
+        const double tu = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        c.solve(&r, nullptr, true);
+        const double tw = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        progress::set_mode(progress::Mode::Off);
+        upd = std::min(upd, tu), warm = std::min(warm, tw), warm_cycles = r.cycles;
+        c.update(p0);
+        c.solve(&r, nullptr, true);
+      }
+      std::printf("re-classification: %.1f ms (update %.1f ms, %d cycles) vs cold %.1f ms (%d cycles): %.2f of cold\n",
+                  warm * 1e3, upd * 1e3, warm_cycles, cold * 1e3, cold_cycles, warm / cold);
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    std::cerr << "softshell_bench_solver: " << e.what() << "\n";
+    return 1;
+  }
+}
