@@ -5,7 +5,7 @@
 // (the difference of two solves one iteration apart). Every kernel result is
 // checked against the host reference (bench.hpp) before it is timed.
 //
-//   softshell_bench_solver [--size N] [--reps R] [--device D] [--trace]
+//   softshell_bench_solver [--size N] [--reps R] [--device D] [--slab P] [--trace]
 //
 // Byte model: docs/benchmarks.md ("Byte model"). Times are the minimum of R.
 #include <algorithm>
@@ -30,7 +30,7 @@ using namespace softshell;
 namespace {
 
 int usage() {
-  std::cerr << "usage: softshell_bench_solver [--size N] [--reps R] [--device I|NAME] [--trace]\n";
+  std::cerr << "usage: softshell_bench_solver [--size N] [--reps R] [--device I|NAME] [--slab P] [--trace]\n";
   return 2;
 }
 
@@ -55,6 +55,7 @@ int main(int argc, char** argv) {
   int size = 128, reps = 10;
   std::string device;
   bool trace = false;
+  int slab = 0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") return usage(), 0;
@@ -63,6 +64,7 @@ int main(int argc, char** argv) {
     else if (a == "--reps") reps = std::atoi(argv[++i]);
     else if (a == "--device") device = argv[++i];
     else if (a == "--trace") trace = true;
+    else if (a == "--slab") slab = std::atoi(argv[++i]);
     else {
       std::cerr << "softshell_bench_solver: unknown option " << a << "\n";
       return usage();
@@ -88,6 +90,7 @@ int main(int argc, char** argv) {
     VariationalParams vp;
     vp.v_iso = map.to_unit(ph.fluid_median + 0.5 * (ph.tissue_median - ph.fluid_median));
     DeviceSystem sys(rt, vn, vp);
+    if (slab > 0) sys.set_gs_slab(slab);
     rt.queue().finish();
 
     HostStencil hs;
@@ -208,6 +211,9 @@ int main(int argc, char** argv) {
                 "ratio %.2f)\n",
                 mg.levels(), its, best * 1e3, bytes_moved / double(N), bytes_moved / best * 1e-9,
                 bytes_moved / best * 1e-9 / hstream.copy_gbps, best / (bytes_moved / (hstream.copy_gbps * 1e9)));
+    std::printf("residuals:");
+    for (double r : rep.residuals) std::printf(" %.2e", r);
+    std::printf("\n");
     SolverParams sp1 = sp;
     sp1.tol = 1e-4;  // below it the solve refines in float64
     auto timed = [&](int cycles) {

@@ -991,18 +991,15 @@ void host_gs_slab_sweep(const HostStencil& s, std::vector<float>& u, int slab, b
     }
   };
   // Colour c: the slabs [k slab, (k + 1) slab) with k = c mod 2; every voxel
-  // in order, forward: plane, row parity, row, x ascending; reverse: all of it
-  // backwards. Rows of one parity in a plane are not coupled, so their order
-  // is free (the device walks them ascending either way).
+  // in order, forward: plane, row, x ascending (lexicographic in each slab);
+  // reverse: all of it backwards. Slabs of one colour are not coupled, so
+  // their order is free.
   for (int i = 0; i < 2; ++i) {
     const int c = reverse ? 1 - i : i;
     for (int z0 = c * slab; z0 < g.nz; z0 += 2 * slab)
       for (int j = 0; j < slab && z0 + j < g.nz; ++j) {
         const int z = reverse ? std::min(z0 + slab, g.nz) - 1 - j : z0 + j;
-        for (int k = 0; k < 2; ++k) {
-          const int py = reverse ? 1 - k : k;
-          for (int y = py; y < g.ny; y += 2) relax_row(y, z);
-        }
+        for (int k = 0; k < g.ny; ++k) relax_row(reverse ? g.ny - 1 - k : k, z);
       }
   }
 }

@@ -212,8 +212,9 @@ std::vector<double> host_apply(const HostStencil& s, const std::vector<float>& x
 void host_gs_colour_sweep(const HostStencil& s, std::vector<float>& u);
 // One slab Gauss-Seidel sweep as the device's GsOrder::Slabs does it (the
 // sweep reference there): 2 colours of z-slabs of `slab` planes, each slab
-// plane by plane, even rows then odd rows, x ascending; `reverse`: exactly
-// backwards. slab = 1 is the 4-colour row Gauss-Seidel.
+// plane by plane, rows ascending, x ascending; `reverse`: exactly backwards.
+// slab = 1 is zebra-plane Gauss-Seidel (even planes, then odd), lexicographic
+// in each plane.
 void host_gs_slab_sweep(const HostStencil& s, std::vector<float>& u, int slab, bool reverse);
 
 struct PeerSolve {

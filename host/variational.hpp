@@ -187,9 +187,10 @@ class DeviceSystem {
   // (x, y, z), a work-item per voxel (coalesced: GPUs); GsOrder::Slabs, 2
   // colours of z-slabs of gs_slab() planes, a work-item per slab relaxing its
   // planes, rows and x in order (kernels/system.cl, relax_gs_slabs: whole
-  // cache lines: CPUs; a stronger, line-ordered smoother). Default: Points on
-  // GPUs, Slabs of 1 plane otherwise (the 4-colour row Gauss-Seidel); coarsen()
-  // passes both on.
+  // cache lines, one ascending stream per array: CPUs; a stronger,
+  // line-ordered smoother). Default: Points on GPUs, Slabs of 1 plane
+  // otherwise (zebra-plane Gauss-Seidel, lexicographic in each plane);
+  // coarsen() passes both on.
   GsOrder gs_order() const { return gs_order_; }
   int gs_slab() const;  // planes per slab (GsOrder::Slabs)
   void set_gs_order(GsOrder o) { gs_order_ = o; }

@@ -297,20 +297,22 @@ __kernel void relax_gs_colour(__global const float* restrict coef, __global cons
  * consecutive z-planes (colour: the parity of z / slab); slabs of one colour
  * are a slab apart, so no 19-point stencil couples them and a colour is
  * race-free. One work-item relaxes one slab: plane by plane, in each plane the
- * even rows, then the odd rows (rows 2 apart are not coupled: their order is
- * free, and they are walked in ascending memory order), each x-row in order.
- * `reverse` runs all of it backwards (with the colours in reverse order this is
- * exactly the forward sweep backwards, so forward + reverse is a symmetric
- * smoother), rows still in ascending memory order. slab = 1 (the host's
- * default) is the 4-colour row Gauss-Seidel: colours by the parity of (y, z),
- * in the order (0,0), (1,0), (0,1), (1,1). Every coefficient cache line is
- * used in full, which suits CPUs; on GPUs a work-item per slab is too little
- * parallelism and uncoalesced (relax_gs_colour there).
+ * rows in order of y, each x-row in order of x (lexicographic). `reverse` runs
+ * all of it backwards (with the colours in reverse order this is exactly the
+ * forward sweep backwards, so forward + reverse is a symmetric smoother). A
+ * work-item's accesses are then one stream per array, ascending (descending
+ * in reverse), which the CPU's prefetchers follow: the earlier order, a
+ * plane's even rows and then its odd rows, broke every stream after one row
+ * (7 cache lines at 105^3) and ran the sweep 1.3-1.5x slower
+ * (docs/benchmarks.md, "Solver kernels one by one"). Every coefficient cache
+ * line is used in full, which suits CPUs; on GPUs a work-item per slab is too
+ * little parallelism and uncoalesced (relax_gs_colour there).
  * Global size: ceil(nz / (2 slab)).
  *
  * Within a row only the coupling to the previous voxel in walking order sees a
  * value updated in this pass; the rest of each row sum is formed for a chunk
- * of the row at once (a plain loop the compiler vectorises), then the chunk is
+ * of the row at once (a plain loop the compiler vectorises; in reverse it walks
+ * the chunk downwards, keeping the stream descending), then the chunk is
  * finished serially: u_p = r_p - l_p u_prev, with r_p = (b_p - the other
  * off-diagonal terms) / A[p][p] and l_p = A[p][prev] / A[p][p]. */
 #define GS_ROW_CHUNK 128
@@ -326,7 +328,8 @@ __attribute__((always_inline)) inline void gs_row(__global const float* restrict
     const int m = min(GS_ROW_CHUNK, n - done);
     const size_t p0 = row + (size_t)(reverse ? g.nx - 1 - done - m : 1 + done); /* lowest x of the chunk */
     float r[GS_ROW_CHUNK], l[GS_ROW_CHUNK];
-    for (int i = 0; i < m; ++i) {
+    for (int j = 0; j < m; ++j) {
+      const int i = reverse ? m - 1 - j : j;
       const size_t p = p0 + i;
       /* The x-neighbour visited later: still its old value. */
       float acc = reverse ? -coef[N + p - 1] * xv[p - 1] : -coef[N + p] * xv[p + 1];
@@ -385,12 +388,10 @@ __kernel void relax_gs_slabs(__global const float* restrict coef, __global const
   const int z1 = min(z0 + slab, g.nz);
   if (reverse) {
     for (int z = z1 - 1; z >= z0; --z)
-      for (int py = 1; py >= 0; --py)
-        for (int y = py; y < g.ny; y += 2) gs_any_row(coef, bv, xv, g, y, z, 1);
+      for (int y = g.ny - 1; y >= 0; --y) gs_any_row(coef, bv, xv, g, y, z, 1);
   } else {
     for (int z = z0; z < z1; ++z)
-      for (int py = 0; py <= 1; ++py)
-        for (int y = py; y < g.ny; y += 2) gs_any_row(coef, bv, xv, g, y, z, 0);
+      for (int y = 0; y < g.ny; ++y) gs_any_row(coef, bv, xv, g, y, z, 0);
   }
 }
 

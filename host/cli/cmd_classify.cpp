@@ -833,7 +833,7 @@ void add_classify_command(CLI::App& app, Action& action) {
       ->capture_default_str()
       ->check(one_of({"pcg", "v"}));
   g->add_option("--smoother", o->smoother,
-                "gs: Gauss-Seidel (4-colour rows on CPUs, 8 colours on GPUs); jacobi: weighted Jacobi")
+                "gs: Gauss-Seidel (2 colours of z-planes, rows in order, on CPUs; 8 colours on GPUs); jacobi: weighted Jacobi")
       ->capture_default_str()
       ->check(one_of({"gs", "jacobi"}));
   g->add_flag("--no-fmg", o->no_fmg, "Start from u = 0 instead of a full-multigrid guess");
