@@ -5,7 +5,7 @@
 // (the difference of two solves one iteration apart). Every kernel result is
 // checked against the host reference (bench.hpp) before it is timed.
 //
-//   softshell_bench_solver [--size N] [--reps R] [--device D] [--slab P] [--trace]
+//   softshell_bench_solver [--size N] [--reps R] [--device D] [--slab P] [--sweeps S] [--trace]
 //
 // Byte model: docs/benchmarks.md ("Byte model"). Times are the minimum of R.
 #include <algorithm>
@@ -30,7 +30,7 @@ using namespace softshell;
 namespace {
 
 int usage() {
-  std::cerr << "usage: softshell_bench_solver [--size N] [--reps R] [--device I|NAME] [--slab P] [--trace]\n";
+  std::cerr << "usage: softshell_bench_solver [--size N] [--reps R] [--device I|NAME] [--slab P] [--sweeps S] [--trace]\n";
   return 2;
 }
 
@@ -55,7 +55,7 @@ int main(int argc, char** argv) {
   int size = 128, reps = 10;
   std::string device;
   bool trace = false;
-  int slab = 0;
+  int slab = 0, sweeps = 0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") return usage(), 0;
@@ -65,6 +65,7 @@ int main(int argc, char** argv) {
     else if (a == "--device") device = argv[++i];
     else if (a == "--trace") trace = true;
     else if (a == "--slab") slab = std::atoi(argv[++i]);
+    else if (a == "--sweeps") sweeps = std::atoi(argv[++i]);
     else {
       std::cerr << "softshell_bench_solver: unknown option " << a << "\n";
       return usage();
@@ -197,6 +198,7 @@ int main(int argc, char** argv) {
 
     // The whole solve and one PCG iteration.
     SolverParams sp;
+    if (sweeps > 0) sp.pre_sweeps = sp.post_sweeps = sweeps;
     MultigridSolver mg(sys, sp);
     SolveReport rep;
     mg.solve(&rep);

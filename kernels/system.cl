@@ -345,16 +345,46 @@ __attribute__((always_inline)) inline void gs_row(__global const float* restrict
       r[i] = (bv[p] + acc) * inv;
       l[i] = (reverse ? coef[N + p] : coef[N + p - 1]) * inv;
     }
-    /* The serial part: one fma per voxel, the previous value in a register. */
+    /* The serial part, in blocks of 4: with u_prev the value before the block,
+     * u_k = m_k u_prev + d_k (m_0 = -l_0, d_0 = r_0, m_k = -l_k m_(k-1),
+     * d_k = r_k - l_k d_(k-1)), so the chain through u_prev is one fma per 4
+     * voxels; m and d do not wait for it (the plain recurrence, one dependent
+     * fma per voxel, bounded the sweep: 1.15-1.2x slower at 105^3). The
+     * same values up to rounding (the host reference is the plain recurrence
+     * in float64, checked to 1e-5). */
     if (reverse) {
       float u = xv[p0 + m];
-      for (int i = m - 1; i >= 0; --i) {
+      int i = m - 1;
+      for (; i >= 3; i -= 4) {
+        const float m0 = -l[i], d0 = r[i];
+        const float m1 = -l[i - 1] * m0, d1 = fma(-l[i - 1], d0, r[i - 1]);
+        const float m2 = -l[i - 2] * m1, d2 = fma(-l[i - 2], d1, r[i - 2]);
+        const float m3 = -l[i - 3] * m2, d3 = fma(-l[i - 3], d2, r[i - 3]);
+        xv[p0 + i] = fma(m0, u, d0);
+        xv[p0 + i - 1] = fma(m1, u, d1);
+        xv[p0 + i - 2] = fma(m2, u, d2);
+        u = fma(m3, u, d3);
+        xv[p0 + i - 3] = u;
+      }
+      for (; i >= 0; --i) {
         u = fma(-l[i], u, r[i]);
         xv[p0 + i] = u;
       }
     } else {
       float u = xv[p0 - 1];
-      for (int i = 0; i < m; ++i) {
+      int i = 0;
+      for (; i + 3 < m; i += 4) {
+        const float m0 = -l[i], d0 = r[i];
+        const float m1 = -l[i + 1] * m0, d1 = fma(-l[i + 1], d0, r[i + 1]);
+        const float m2 = -l[i + 2] * m1, d2 = fma(-l[i + 2], d1, r[i + 2]);
+        const float m3 = -l[i + 3] * m2, d3 = fma(-l[i + 3], d2, r[i + 3]);
+        xv[p0 + i] = fma(m0, u, d0);
+        xv[p0 + i + 1] = fma(m1, u, d1);
+        xv[p0 + i + 2] = fma(m2, u, d2);
+        u = fma(m3, u, d3);
+        xv[p0 + i + 3] = u;
+      }
+      for (; i < m; ++i) {
         u = fma(-l[i], u, r[i]);
         xv[p0 + i] = u;
       }
