@@ -1,7 +1,8 @@
 // The solver's kernels one by one, against the device's copy and the host's
 // STREAM copy, in one run: the Gauss-Seidel sweep (forward and reverse), the
 // operator apply and residual, the grid transfers and the vector kernels on
-// the face phantom's system; then one cold solve and one PCG iteration
+// the face phantom's system (the grid transfers' results are checked by the
+// Transfers test instead); then one cold solve and one PCG iteration
 // (the difference of two solves one iteration apart). Every kernel result is
 // checked against the host reference (bench.hpp) before it is timed.
 //
@@ -126,8 +127,11 @@ int main(int argc, char** argv) {
     std::printf("%-26s %9s %8s %8s %8s %s\n", "kernel", "ms", "GB/s", "of dev", "of host", "check");
     auto row = [&](const char* name, double s, double bpv, double check) {
       const double gbps = bpv * double(N) / s * 1e-9;
-      std::printf("%-26s %9.3f %8.1f %8.2f %8.2f %.1e\n", name, s * 1e3, gbps, gbps / dev_copy,
-                  gbps / hstream.copy_gbps, check);
+      std::printf("%-26s %9.3f %8.1f %8.2f %8.2f ", name, s * 1e3, gbps, gbps / dev_copy, gbps / hstream.copy_gbps);
+      if (check >= 0)
+        std::printf("%.1e\n", check);
+      else
+        std::printf("(tests)\n");
     };
 
     for (int rev = 0; rev < 2; ++rev) {
@@ -167,6 +171,40 @@ int main(int argc, char** argv) {
             return event_seconds(e);
           }),
           52, max_relative(got, ref));
+    }
+
+    // The grid transfers between the fine level and the next: the CPU's row
+    // kernels and the GPU's per-voxel ones (both checked in
+    // Transfers.RowAndVoxelKernelsAreTheHostInterpolationAndItsTranspose).
+    {
+      const std::unique_ptr<DeviceSystem> coarse = DeviceSystem::coarsen(sys);
+      const GridDesc gf = sys.grid(), gc = coarse->grid();
+      const std::size_t nc = coarse->voxels();
+      cl::Buffer ec = rt.buffer(nc * 4), rc = rt.buffer(nc * 4);
+      rt.queue().enqueueFillBuffer(ec, 0.5f, 0, nc * 4);
+      for (const bool rows : {true, false}) {
+        cl::Kernel pk = rt.kernel("multigrid.cl", rows ? "mg_prolong_add_rows" : "mg_prolong_add");
+        cl::Kernel rk = rt.kernel("multigrid.cl", rows ? "mg_restrict_residual_rows" : "mg_restrict_residual");
+        Runtime::set_args(pk, ec, sys.fixed(), y, gf, gc);
+        Runtime::set_args(rk, x, coarse->fixed(), rc, gf, gc);
+        auto launch = [&](cl::Kernel& k, const GridDesc& g) {
+          cl::Event e;
+          if (rows)
+            rt.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(std::size_t(g.ny), std::size_t(g.nz)),
+                                             cl::NDRange(1, 1), nullptr, &e);
+          else
+            e = rt.enqueue_3d(k, g);
+          e.wait();
+          return event_seconds(e);
+        };
+        // Byte model (docs/benchmarks.md): prolongation 4 per coarse + 9 per
+        // fine voxel, restriction 4 per fine + 5 per coarse.
+        const double bpv_p = 9.0 + 4.0 * double(nc) / double(N), bpv_r = 4.0 + 5.0 * double(nc) / double(N);
+        row(rows ? "prolongation (rows)" : "prolongation (voxels)", best_of(reps, [&] { return launch(pk, gf); }),
+            bpv_p, -1.0);
+        row(rows ? "restriction (rows)" : "restriction (voxels)", best_of(reps, [&] { return launch(rk, gc); }),
+            bpv_r, -1.0);
+      }
     }
 
     // Every level's sweep, wall clock with launches (small levels: launch-bound).

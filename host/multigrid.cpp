@@ -40,8 +40,9 @@ class Multigrid {
   Multigrid(DeviceSystem& fine, const SolverParams& sp)
       : sp_(sp),
         rt_(fine.runtime()),
-        restrict_(rt_.kernel("multigrid.cl", "mg_restrict_residual")),
-        prolong_(rt_.kernel("multigrid.cl", "mg_prolong_add")) {
+        rows_(!rt_.info().is_gpu()),
+        restrict_(rt_.kernel("multigrid.cl", rows_ ? "mg_restrict_residual_rows" : "mg_restrict_residual")),
+        prolong_(rt_.kernel("multigrid.cl", rows_ ? "mg_prolong_add_rows" : "mg_prolong_add")) {
     add_level(nullptr, &fine);
     while (int(levels_.size()) < std::max(1, sp.max_levels)) {
       const GridDesc& g = levels_.back().sys->grid();
@@ -171,20 +172,34 @@ class Multigrid {
     levels_.push_back(std::move(L));
   }
 
+  // On CPUs the transfers run a work-item per x-row (kernels/multigrid.cl,
+  // *_rows: rows read in memory order), on GPUs a work-item per voxel.
+  void launch_rows(cl::Kernel& k, const GridDesc& g) {
+    rt_.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(std::size_t(g.ny), std::size_t(g.nz)),
+                                     cl::NDRange(1, 1));
+  }
+
   void restrict_residual(const Level& F, const Level& C) {
     Runtime::set_args(restrict_, F.r, C.sys->fixed(), C.rhs, F.sys->grid(), C.sys->grid());
-    rt_.enqueue_3d(restrict_, C.sys->grid());
+    if (rows_)
+      launch_rows(restrict_, C.sys->grid());
+    else
+      rt_.enqueue_3d(restrict_, C.sys->grid());
     count(*F.sys, 4), count(*C.sys, 4 + 1);  // fine r read; coarse rhs written, fixed read
   }
 
   void prolong_add(const Level& C, const Level& F) {
     Runtime::set_args(prolong_, C.u, F.sys->fixed(), F.u, F.sys->grid(), C.sys->grid());
-    rt_.enqueue_3d(prolong_, F.sys->grid());
+    if (rows_)
+      launch_rows(prolong_, F.sys->grid());
+    else
+      rt_.enqueue_3d(prolong_, F.sys->grid());
     count(*C.sys, 4), count(*F.sys, 8 + 1);  // coarse u read; fine u read and written, fixed read
   }
 
   SolverParams sp_;
   Runtime& rt_;
+  bool rows_;                     // CPU device: the transfers' row kernels
   cl::Kernel restrict_, prolong_;  // created once: the V-cycle launches them every level
   double b_norm_ = 0;               // ||b|| of the fine level, fixed for the solve
   std::vector<Level> levels_;

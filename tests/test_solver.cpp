@@ -613,5 +613,95 @@ TEST(SolverRefinement, TightTolerancesReachAFloat64ResidualAndTheOracle) {
   EXPECT_LE(stored_residual64(fine_v, mgv.solution64()), 1e-7);
 }
 
+// ---- grid transfers
+
+// The transfers of kernels/multigrid.cl against a float64 host description
+// of P (trilinear: 1-D weights 1 at j = 2I, 1/2 at 2I +- 1) and R = P^T, on
+// random fields and random fixed voxels: the CPU's row kernels (a work-item
+// per x-row, which the solver runs on CPUs) and the GPU's per-voxel ones.
+// Odd and even fine sizes; a fine row of 521 voxels makes the prolongation
+// take its coarse row in pieces (PROLONG_ROW_MAX 256).
+TEST(Transfers, RowAndVoxelKernelsAreTheHostInterpolationAndItsTranspose) {
+  Runtime& rt = runtime();
+  for (const Dims3 fd : {Dims3{13, 10, 9}, Dims3{8, 11, 6}, Dims3{521, 6, 5}}) {
+    const Dims3 cd{fd[0] / 2 + 1, fd[1] / 2 + 1, fd[2] / 2 + 1};
+    SCOPED_TRACE(std::to_string(fd[0]) + "x" + std::to_string(fd[1]) + "x" + std::to_string(fd[2]));
+    const GridDesc gf = make_grid(fd, {1, 1, 1}), gc = make_grid(cd, {2, 2, 2});
+    const std::size_t nf = fd[0] * fd[1] * fd[2], nc = cd[0] * cd[1] * cd[2];
+    std::mt19937_64 rng(fd[0] * 7 + fd[1]);
+    std::uniform_real_distribution<float> U(-1.0f, 1.0f);
+    std::vector<float> rf(nf), uf(nf), ec(nc);
+    for (float& f : rf) f = U(rng);
+    for (float& f : uf) f = U(rng);
+    for (float& f : ec) f = U(rng);
+    std::vector<std::uint8_t> fixed_f(nf), fixed_c(nc);
+    for (auto& f : fixed_f) f = U(rng) > 0.6f;
+    for (std::size_t Z = 0; Z < cd[2]; ++Z)
+      for (std::size_t Y = 0; Y < cd[1]; ++Y)
+        for (std::size_t X = 0; X < cd[0]; ++X)
+          fixed_c[X + cd[0] * (Y + cd[1] * Z)] = X == 0 || Y == 0 || Z == 0 || X == cd[0] - 1 ||
+                                                 Y == cd[1] - 1 || Z == cd[2] - 1 || U(rng) > 0.7f;
+    // The host references in float64.
+    auto taps = [](std::size_t j, std::vector<std::pair<std::size_t, double>>& out) {
+      out.clear();
+      if (j % 2 == 0)
+        out.push_back({j / 2, 1.0});
+      else
+        out.push_back({j / 2, 0.5}), out.push_back({j / 2 + 1, 0.5});
+    };
+    std::vector<float> want_u = uf, want_r(nc, 0.0f);
+    std::vector<double> acc(nc, 0.0);
+    std::vector<std::pair<std::size_t, double>> tx, ty, tz;
+    for (std::size_t z = 0; z < fd[2]; ++z)
+      for (std::size_t y = 0; y < fd[1]; ++y)
+        for (std::size_t x = 0; x < fd[0]; ++x) {
+          const std::size_t j = x + fd[0] * (y + fd[1] * z);
+          taps(x, tx), taps(y, ty), taps(z, tz);
+          double e = 0;
+          for (auto [X, wx] : tx)
+            for (auto [Y, wy] : ty)
+              for (auto [Z, wz] : tz) {
+                const std::size_t I = X + cd[0] * (Y + cd[1] * Z);
+                e += wx * wy * wz * ec[I];
+                acc[I] += wx * wy * wz * rf[j];  // R = P^T
+              }
+          if (!fixed_f[j]) want_u[j] = float(double(uf[j]) + e);
+        }
+    for (std::size_t I = 0; I < nc; ++I) want_r[I] = fixed_c[I] ? 0.0f : float(acc[I]);
+
+    auto bytes = [&](const std::vector<std::uint8_t>& v) {
+      cl::Buffer b = rt.buffer(v.size());
+      rt.queue().enqueueWriteBuffer(b, CL_TRUE, 0, v.size(), v.data());
+      return b;
+    };
+    const cl::Buffer fixed_fb = bytes(fixed_f), fixed_cb = bytes(fixed_c), ecb = test::upload(rt, ec),
+                     rfb = test::upload(rt, rf);
+    for (const bool rows : {true, false}) {
+      SCOPED_TRACE(rows ? "row kernels" : "per-voxel kernels");
+      cl::Buffer ufb = test::upload(rt, uf), rcb = rt.buffer(nc * sizeof(float));
+      cl::Kernel pk = rt.kernel("multigrid.cl", rows ? "mg_prolong_add_rows" : "mg_prolong_add");
+      cl::Kernel rk = rt.kernel("multigrid.cl", rows ? "mg_restrict_residual_rows" : "mg_restrict_residual");
+      Runtime::set_args(pk, ecb, fixed_fb, ufb, gf, gc);
+      Runtime::set_args(rk, rfb, fixed_cb, rcb, gf, gc);
+      if (rows) {
+        rt.queue().enqueueNDRangeKernel(pk, cl::NullRange, cl::NDRange(fd[1], fd[2]), cl::NDRange(1, 1));
+        rt.queue().enqueueNDRangeKernel(rk, cl::NullRange, cl::NDRange(cd[1], cd[2]), cl::NDRange(1, 1));
+      } else {
+        rt.enqueue_3d(pk, gf);
+        rt.enqueue_3d(rk, gc);
+      }
+      const std::vector<float> got_u = test::download(rt, ufb, nf), got_r = test::download(rt, rcb, nc);
+      EXPECT_LT(test::max_relative_deviation(got_u, want_u), 1e-6);
+      EXPECT_LT(test::max_relative_deviation(got_r, want_r), 1e-6);
+      // Fixed voxels are left alone, fixed coarse voxels get 0.
+      std::size_t moved = 0, nonzero = 0;
+      for (std::size_t j = 0; j < nf; ++j) moved += fixed_f[j] && got_u[j] != uf[j];
+      for (std::size_t I = 0; I < nc; ++I) nonzero += fixed_c[I] && got_r[I] != 0.0f;
+      EXPECT_EQ(moved, 0u);
+      EXPECT_EQ(nonzero, 0u);
+    }
+  }
+}
+
 }  // namespace
 }  // namespace softshell
