@@ -18,7 +18,7 @@
 #include "grid.h"
 #include "stencil.h"
 
-inline bool on_boundary(const GridDesc g, int x, int y, int z) {
+__attribute__((always_inline)) inline bool on_boundary(const GridDesc g, int x, int y, int z) {
   return x == 0 || y == 0 || z == 0 || x == g.nx - 1 || y == g.ny - 1 || z == g.nz - 1;
 }
 
@@ -157,9 +157,10 @@ __kernel void system_update_sharpen(__global const float* restrict v, __global c
 /* ------------------------------------------------------------- assembly */
 
 /* T component (a, b) of voxel q (T[0..5] = xx, yy, zz, xy, xz, yz). */
-inline float tensor_ab(__global const float* txx, __global const float* tyy, __global const float* tzz,
-                       __global const float* txy, __global const float* txz, __global const float* tyz,
-                       size_t q, int a, int b) {
+__attribute__((always_inline)) inline float tensor_ab(__global const float* txx, __global const float* tyy,
+                                                     __global const float* tzz, __global const float* txy,
+                                                     __global const float* txz, __global const float* tyz, size_t q,
+                                                     int a, int b) {
   if (a == b) return a == 0 ? txx[q] : (a == 1 ? tyy[q] : tzz[q]);
   const int s = a + b; /* 1: xy, 2: xz, 3: yz */
   return s == 1 ? txy[q] : (s == 2 ? txz[q] : tyz[q]);
