@@ -86,20 +86,14 @@ int main(int argc, char** argv) {
     pp.shape = PhantomShape::Face;
     pp.size = size;
     const Phantom ph = make_phantom(rt, pp);
-    Volume vn = ph.volume;
-    const IntensityMap map = ph.volume.intensity_map();
-    for (float& f : vn.data) f = float(map.to_unit(f));
+    const Volume vn = normalised(ph.volume);
     VariationalParams vp;
-    vp.v_iso = map.to_unit(ph.fluid_median + 0.5 * (ph.tissue_median - ph.fluid_median));
+    vp.v_iso = phantom_iso(ph);
     DeviceSystem sys(rt, vn, vp);
     if (slab > 0) sys.set_gs_slab(slab);
     rt.queue().finish();
 
-    HostStencil hs;
-    hs.grid = sys.grid();
-    hs.coef = sys.download_coefficients();
-    hs.b = sys.download_b();
-    hs.fixed = sys.download_densities().fixed;
+    const HostStencil hs = host_stencil(sys);
     const std::size_t N = sys.voxels(), bytes = N * sizeof(float);
 
     // Yardsticks: the device's copy kernel and the host's own STREAM.
@@ -188,12 +182,7 @@ int main(int argc, char** argv) {
         Runtime::set_args(pk, ec, sys.fixed(), y, gf, gc);
         Runtime::set_args(rk, x, coarse->fixed(), rc, gf, gc);
         auto launch = [&](cl::Kernel& k, const GridDesc& g) {
-          cl::Event e;
-          if (rows)
-            rt.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(std::size_t(g.ny), std::size_t(g.nz)),
-                                             cl::NDRange(1, 1), nullptr, &e);
-          else
-            e = rt.enqueue_3d(k, g);
+          cl::Event e = rows ? rt.enqueue_rows(k, g) : rt.enqueue_3d(k, g);
           e.wait();
           return event_seconds(e);
         };

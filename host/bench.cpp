@@ -195,6 +195,8 @@ PeerSolve eigen_cg_typed(const HostStencil& s, double tol, int max_iterations) {
 
 // ------------------------------------------------------------ device parts
 
+}  // namespace
+
 HostStencil host_stencil(const DeviceSystem& sys) {
   HostStencil h;
   h.grid = sys.grid();
@@ -211,10 +213,11 @@ Volume normalised(const Volume& v) {
   return vn;
 }
 
-// v_iso half-way between the phantom's fluid and tissue medians, normalised.
 double phantom_iso(const Phantom& ph) {
   return ph.volume.intensity_map().to_unit(ph.fluid_median + 0.5 * (ph.tissue_median - ph.fluid_median));
 }
+
+namespace {
 
 // >>> Table 1 shapes: PhantomParams::dims <<<
 // Non-cubic phantoms come with PhantomParams::dims (std::array<int, 3>,

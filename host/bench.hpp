@@ -28,6 +28,9 @@
 
 namespace softshell {
 
+class DeviceSystem;
+struct Phantom;
+
 // Hook for the renderers (Table 1's last columns): the seconds one 400x400
 // image of `opacity` takes with `method` ("shearwarp" or "splat"), or
 // nullopt when that renderer is not available. Unset: the columns read
@@ -203,6 +206,13 @@ struct HostStencil {
   std::vector<std::uint8_t> fixed;  // N (1: u held at 0)
   std::size_t voxels() const { return grid_voxels(grid); }
 };
+
+// A device system's stencil, right-hand side and fixed flags, downloaded.
+HostStencil host_stencil(const DeviceSystem& sys);
+// The volume in normalised units (IntensityMap::to_unit), as DeviceSystem takes it.
+Volume normalised(const Volume& v);
+// v_iso half-way between a phantom's fluid and tissue medians, normalised.
+double phantom_iso(const Phantom& ph);
 
 // ||b - A u|| / ||b|| in float64.
 double host_relative_residual(const HostStencil& s, const std::vector<float>& u);

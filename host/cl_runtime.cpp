@@ -298,6 +298,13 @@ cl::Event Runtime::enqueue_1d(const cl::Kernel& k, std::size_t n, const std::vec
   return e;
 }
 
+cl::Event Runtime::enqueue_rows(const cl::Kernel& k, const GridDesc& g) {
+  cl::Event e;
+  queue_.enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(std::size_t(g.ny), std::size_t(g.nz)),
+                              cl::NDRange(1, 1), nullptr, &e);
+  return e;
+}
+
 double event_seconds(const cl::Event& e) {
   const auto start = e.getProfilingInfo<CL_PROFILING_COMMAND_START>();
   const auto end = e.getProfilingInfo<CL_PROFILING_COMMAND_END>();

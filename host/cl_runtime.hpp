@@ -86,6 +86,10 @@ class Runtime {
   // over n items; global sizes are rounded up, kernels bounds-check.
   cl::Event enqueue_3d(const cl::Kernel& k, const GridDesc& g, const std::vector<cl::Event>* wait = nullptr);
   cl::Event enqueue_1d(const cl::Kernel& k, std::size_t n, const std::vector<cl::Event>* wait = nullptr);
+  // Enqueues a row kernel: one work-item (and work-group) per x-row of the
+  // grid, global size ny x nz; the kernel walks its row itself (the CPU
+  // layouts of kernels/multigrid.cl).
+  cl::Event enqueue_rows(const cl::Kernel& k, const GridDesc& g);
 
   // Work-group shape for 3-D voxel kernels and a global size rounded up to it.
   cl::NDRange local_3d() const;

@@ -174,26 +174,22 @@ class Multigrid {
 
   // On CPUs the transfers run a work-item per x-row (kernels/multigrid.cl,
   // *_rows: rows read in memory order), on GPUs a work-item per voxel.
-  void launch_rows(cl::Kernel& k, const GridDesc& g) {
-    rt_.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(std::size_t(g.ny), std::size_t(g.nz)),
-                                     cl::NDRange(1, 1));
+  void launch(const cl::Kernel& k, const GridDesc& g) {
+    if (rows_)
+      rt_.enqueue_rows(k, g);
+    else
+      rt_.enqueue_3d(k, g);
   }
 
   void restrict_residual(const Level& F, const Level& C) {
     Runtime::set_args(restrict_, F.r, C.sys->fixed(), C.rhs, F.sys->grid(), C.sys->grid());
-    if (rows_)
-      launch_rows(restrict_, C.sys->grid());
-    else
-      rt_.enqueue_3d(restrict_, C.sys->grid());
+    launch(restrict_, C.sys->grid());
     count(*F.sys, 4), count(*C.sys, 4 + 1);  // fine r read; coarse rhs written, fixed read
   }
 
   void prolong_add(const Level& C, const Level& F) {
     Runtime::set_args(prolong_, C.u, F.sys->fixed(), F.u, F.sys->grid(), C.sys->grid());
-    if (rows_)
-      launch_rows(prolong_, F.sys->grid());
-    else
-      rt_.enqueue_3d(prolong_, F.sys->grid());
+    launch(prolong_, F.sys->grid());
     count(*C.sys, 4), count(*F.sys, 8 + 1);  // coarse u read; fine u read and written, fixed read
   }
 

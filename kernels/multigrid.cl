@@ -119,13 +119,8 @@ __kernel void mg_restrict_residual_rows(__global const float* restrict r_f, __gl
   const int Y = get_global_id(0), Z = get_global_id(1);
   if (Y >= gc.ny || Z >= gc.nz) return;
   const size_t row_c = (size_t)gc.nx * ((size_t)Y + (size_t)gc.ny * Z);
-  if (Y == 0 || Z == 0 || Y == gc.ny - 1 || Z == gc.nz - 1) {
-    for (int X = 0; X < gc.nx; ++X) r_c[row_c + X] = 0.0f;  /* coarse boundary: fixed */
-    return;
-  }
-  r_c[row_c] = 0.0f;
-  r_c[row_c + gc.nx - 1] = 0.0f;
-  for (int X = 1; X < gc.nx - 1; ++X) r_c[row_c + X] = 0.0f;
+  for (int X = 0; X < gc.nx; ++X) r_c[row_c + X] = 0.0f;
+  if (Y == 0 || Z == 0 || Y == gc.ny - 1 || Z == gc.nz - 1) return; /* coarse boundary: fixed */
   /* A free coarse voxel is interior, so 2X +- 1, 2Y +- 1 and 2Z +- 1 lie in the fine grid. */
   for (int dz = -1; dz <= 1; ++dz)
     for (int dy = -1; dy <= 1; ++dy) {

@@ -162,18 +162,13 @@ SmallSystem small_system(int size) {
   pp.size = size;
   pp.seed = 3;
   const Phantom ph = make_phantom(rt, pp);
-  Volume vn = ph.volume;
-  const IntensityMap map = vn.intensity_map();
-  for (float& f : vn.data) f = float(map.to_unit(f));
+  const Volume vn = normalised(ph.volume);
   VariationalParams vp;
-  vp.v_iso = map.to_unit(ph.fluid_median + 0.5 * (ph.tissue_median - ph.fluid_median));
+  vp.v_iso = phantom_iso(ph);
   SmallSystem s;
   s.sys = std::make_unique<DeviceSystem>(rt, vn, vp);
   rt.queue().finish();  // the constructor uploads from vn without waiting
-  s.hs.grid = s.sys->grid();
-  s.hs.coef = s.sys->download_coefficients();
-  s.hs.b = s.sys->download_b();
-  s.hs.fixed = s.sys->download_densities().fixed;
+  s.hs = host_stencil(*s.sys);
   return s;
 }
 
@@ -315,11 +310,7 @@ TEST(BenchPeers, ReachTheResidualOfTheSoftshellSolve) {
     EXPECT_LT(distance(p.u), 1e-2);  // the same system: the same solution
   }
   auto coarse = DeviceSystem::coarsen(*s.sys);
-  HostStencil hc;
-  hc.grid = coarse->grid();
-  hc.coef = coarse->download_coefficients();
-  hc.b = coarse->download_b();
-  hc.fixed = coarse->download_densities().fixed;
+  const HostStencil hc = host_stencil(*coarse);
   const PeerSolve gs = gauss_seidel_two_level_peer(s.hs, hc, 1e-4);
   EXPECT_LE(gs.residual, 1.1e-4);
   EXPECT_LT(distance(gs.u), 1e-2);

@@ -684,8 +684,8 @@ TEST(Transfers, RowAndVoxelKernelsAreTheHostInterpolationAndItsTranspose) {
       Runtime::set_args(pk, ecb, fixed_fb, ufb, gf, gc);
       Runtime::set_args(rk, rfb, fixed_cb, rcb, gf, gc);
       if (rows) {
-        rt.queue().enqueueNDRangeKernel(pk, cl::NullRange, cl::NDRange(fd[1], fd[2]), cl::NDRange(1, 1));
-        rt.queue().enqueueNDRangeKernel(rk, cl::NullRange, cl::NDRange(cd[1], cd[2]), cl::NDRange(1, 1));
+        rt.enqueue_rows(pk, gf);
+        rt.enqueue_rows(rk, gc);
       } else {
         rt.enqueue_3d(pk, gf);
         rt.enqueue_3d(rk, gc);
