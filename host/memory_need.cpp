@@ -54,7 +54,7 @@ MemoryNeed classify_memory_need(const Dims3& dims, Classifier method, bool mask,
   if (method == Classifier::Variational) {
     m.device_per_voxel = kVariationalFine + kVariationalCoarse;
     m.host_per_voxel = 2 * kHostVolume + (mask ? 1.0 : 0.0) + (refine ? kRefineHost : 0.0);
-    m.largest_buffer = std::uint64_t(n) * STENCIL_COEFS * sizeof(float);
+    m.largest_buffer = std::uint64_t(STENCIL_SLICE(std::uint64_t(n))) * STENCIL_COEFS * sizeof(float);
   } else {
     m.device_per_voxel = kLevoyDevice;
     m.host_per_voxel = 2 * kHostVolume + (mask ? 1.0 : 0.0);

@@ -135,12 +135,12 @@ double reference_edge_gradient(const std::vector<float>& grad2, double share) {
 
 DeviceSystem::DeviceSystem(Runtime& rt, const GridDesc& g) : rt_(rt), grid_(g) {
   const std::size_t n = voxels();
-  rt.check_allocation(n * STENCIL_COEFS * sizeof(float), "the classifier's 19-point system");
+  rt.check_allocation(STENCIL_SLICE(n) * STENCIL_COEFS * sizeof(float), "the classifier's 19-point system");
   mu_ = rt.buffer(n * sizeof(float));
   rho_ = rt.buffer(n * sizeof(float));
   for (auto& t : T_) t = rt.buffer(n * sizeof(float));
   fixed_ = rt.buffer(n);
-  coef_ = rt.buffer(n * STENCIL_COEFS * sizeof(float));
+  coef_ = rt.buffer(STENCIL_SLICE(n) * STENCIL_COEFS * sizeof(float));
   b_ = rt.buffer(n * sizeof(float));
   dT_ = rt.buffer(n * sizeof(float));
   partial_ = rt.buffer(std::max(kReduceGroups, kReduceChunks) * sizeof(float));
@@ -427,7 +427,14 @@ Densities DeviceSystem::download_densities() const {
 }
 
 std::vector<float> DeviceSystem::download_coefficients() const {
-  return download<float>(rt_, coef_, voxels() * STENCIL_COEFS);
+  // The device's slices are STENCIL_SLICE(n) apart; the host's are packed.
+  const std::size_t n = voxels();
+  std::vector<float> coef(n * STENCIL_COEFS);
+  for (std::size_t k = 0; k < STENCIL_COEFS; ++k)
+    rt_.queue().enqueueReadBuffer(coef_, CL_FALSE, k * STENCIL_SLICE(n) * sizeof(float), n * sizeof(float),
+                                  coef.data() + k * n);
+  rt_.queue().finish();
+  return coef;
 }
 
 std::vector<float> DeviceSystem::download_b() const { return download<float>(rt_, b_, voxels()); }

@@ -3,17 +3,29 @@
  *
  * The operator couples a voxel to its 6 face and 12 edge neighbours only
  * (never to the 8 corners of its 3x3x3 neighbourhood), on every multigrid
- * level. Per voxel 10 coefficients, structure of arrays (coef[k * N + p]):
- * k = 0 is the diagonal, k = 1..9 the face and edge offsets with a positive
- * linear index, in increasing order (x fastest). The entry for the opposite
- * offset lives at the neighbour:
- *   A[p][p - off_k] = coef[k * N + (p - off_k)].
+ * level. Per voxel 10 coefficients, structure of arrays (coef[k * S + p],
+ * S = STENCIL_SLICE(N) for a level of N voxels): k = 0 is the diagonal,
+ * k = 1..9 the face and edge offsets with a positive linear index, in
+ * increasing order (x fastest). The entry for the opposite offset lives at
+ * the neighbour:
+ *   A[p][p - off_k] = coef[k * S + (p - off_k)].
  * STENCIL_OFFSETS(X) expands X(k, dx, dy, dz) for k = 0..9.
  */
 #ifndef SOFTSHELL_STENCIL_H
 #define SOFTSHELL_STENCIL_H
 
 #define STENCIL_COEFS 10
+
+/* Floats from one coefficient slice to the next: N rounded up to 4 KiB, plus
+ * 7 cache lines. A sweep walks all ten slices (and b and u) at the same voxel
+ * at once; with a slice stride of N floats, and N a multiple of 1024 (every
+ * power-of-two grid from 16^3 up), all of them share their offset within a
+ * 4 KiB page, so they fall into one set of the CPU's L1 (whose set index lies
+ * within the page offset) and evict one another: the sweep at 128^3 ran
+ * 10-20 % slower per voxel than at 129^3. With the 7-line shift the ten slices
+ * land on ten different sets (docs/benchmarks.md, "Solver kernels one by
+ * one"). The host's downloads return the slices packed (k * N + p). */
+#define STENCIL_SLICE(n) (((n) + 1023) / 1024 * 1024 + 112)
 
 #define STENCIL_OFFSETS(X)                                                    \
   X(0, 0, 0, 0) X(1, 1, 0, 0) X(2, -1, 1, 0) X(3, 0, 1, 0) X(4, 1, 1, 0)    \

@@ -186,7 +186,7 @@ __kernel void system_assemble(__global const float* restrict mu, __global const 
                               __global float* restrict b, __global float* restrict dT, const GridDesc g) {
   const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
   if (!grid_contains(g, x, y, z)) return;
-  const size_t N = grid_voxels(g);
+  const size_t N = STENCIL_SLICE(grid_voxels(g));
   const size_t p = grid_index(g, x, y, z);
   const float V = g.hx * g.hy * g.hz;
   if (fixed[p]) {
@@ -254,7 +254,7 @@ __attribute__((always_inline)) inline float apply_row(__global const float* rest
                                                      __global const float* restrict xv, const GridDesc g, const int x,
                                                      const int y, const int z, const size_t p) {
   return on_boundary(g, x, y, z) ? coef[p] * xv[p]
-                                 : stencil_row(coef, xv, grid_voxels(g), p, g.nx, (long)g.nx * g.ny);
+                                 : stencil_row(coef, xv, STENCIL_SLICE(grid_voxels(g)), p, g.nx, (long)g.nx * g.ny);
 }
 
 __kernel void system_apply(__global const float* restrict coef, __global const float* restrict xv,
@@ -289,7 +289,7 @@ __kernel void relax_gs_colour(__global const float* restrict coef, __global cons
     xv[p] = bv[p] / coef[p];
     return;
   }
-  const size_t N = grid_voxels(g);
+  const size_t N = STENCIL_SLICE(grid_voxels(g));
   const float ax = stencil_row(coef, xv, N, p, g.nx, (long)g.nx * g.ny);
   xv[p] += (bv[p] - ax) / coef[p];
 }
@@ -322,7 +322,7 @@ __kernel void relax_gs_colour(__global const float* restrict coef, __global cons
 __attribute__((always_inline)) inline void gs_row(__global const float* restrict coef,
                                                   __global const float* restrict bv, __global float* xv,
                                                   const GridDesc g, const size_t row, const int reverse) {
-  const size_t N = grid_voxels(g);
+  const size_t N = STENCIL_SLICE(grid_voxels(g));
   const long sy = g.nx, sz = (long)g.nx * g.ny;
   const int n = g.nx - 2;
   for (int done = 0; done < n; done += GS_ROW_CHUNK) {

@@ -252,6 +252,23 @@ TEST(SystemOracle, StencilTableIsThePositiveHalf) {
   }
 }
 
+
+TEST(SystemOracle, CoefficientSlicesFallOnDifferentCacheLinesOfAPage) {
+  // The sweep reads all ten slices at the same voxel at once: their offsets
+  // within a 4 KiB page (which index the L1's sets) must differ by whole
+  // cache lines, for every grid, the power-of-two ones above all; and a
+  // slice holds the level. kernels/stencil.h, STENCIL_SLICE.
+  for (std::size_t n : {std::size_t(16 * 16 * 16), std::size_t(64 * 64 * 64), std::size_t(128 * 128 * 128),
+                        std::size_t(256 * 256 * 256), std::size_t(105 * 105 * 105), std::size_t(1), std::size_t(1023)}) {
+    const std::size_t s = STENCIL_SLICE(n);
+    EXPECT_GE(s, n);
+    EXPECT_LT(s, n + 1024 + 128) << "n = " << n;
+    std::vector<std::size_t> lines;
+    for (std::size_t k = 0; k < STENCIL_COEFS; ++k) lines.push_back((k * s * sizeof(float)) % 4096 / 64);
+    std::sort(lines.begin(), lines.end());
+    EXPECT_EQ(std::adjacent_find(lines.begin(), lines.end()), lines.end()) << "two slices share a set, n = " << n;
+  }
+}
 TEST(SystemOracle, AssemblyIsTheEnergysGradient) {
   // The oracle's two routes agree in double: 2 (A u - b) from the assembled
   // matrix equals central differences of E; A is symmetric; E(u) = u'Au - 2b'u
