@@ -89,6 +89,11 @@ LevelledVolume auto_iso_levelled(const Volume& v, const std::vector<std::uint8_t
 double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const AutoIsoParams& params = {},
                 AutoIsoReport* report = nullptr);
 
+// The k-th smallest (k from 0) of the values >= 0 among g[0, n),
+// the others ignored: what std::nth_element over them gives. k must be below
+// their count. `threads` as AutoIsoParams::threads; the same for any count.
+float kth_nonnegative(const float* g, std::size_t n, std::size_t k, int threads = 0);
+
 // The warning (one line, newline-terminated; empty: none) for an explicit
 // --iso outside the samples' values [min, max]: no boundary of the data lies
 // at that value, so the result is empty (or everything). Not an error: a

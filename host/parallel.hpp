@@ -4,6 +4,7 @@
 #pragma once
 
 #include <algorithm>
+#include <atomic>
 #include <cstddef>
 #include <thread>
 #include <vector>
@@ -37,6 +38,28 @@ void parallel_ranges_indexed(std::size_t n, int parts, F&& f) {
   for (int k = 1; k < count; ++k)
     pool.emplace_back([&f, n, c, k] { f(k, n * std::size_t(k) / c, n * std::size_t(k + 1) / c); });
   f(0, std::size_t(0), n / c);
+  for (std::thread& t : pool) t.join();
+}
+
+// Calls f(k, begin, end) for `chunks` contiguous ranges of [0, n) (at most
+// n; range k = [n k / count, n (k + 1) / count)), handed out in order to
+// `parts` threads as they become free: for work that is uneven over the
+// range (a split into `parts` equal ranges leaves the threads waiting on the
+// busiest). Keep per-chunk results and combine them in chunk order for the
+// same bits for any thread count.
+template <class F>
+void parallel_chunks(std::size_t n, int parts, int chunks, F&& f) {
+  const int count = range_count(n, chunks);
+  const std::size_t c = std::size_t(count);
+  std::atomic<int> next{0};
+  auto work = [&] {
+    for (int k; (k = next.fetch_add(1)) < count;) f(k, n * std::size_t(k) / c, n * std::size_t(k + 1) / c);
+  };
+  const int threads = std::min(range_count(n, parts), count);
+  std::vector<std::thread> pool;
+  pool.reserve(std::size_t(threads > 0 ? threads - 1 : 0));
+  for (int t = 1; t < threads; ++t) pool.emplace_back(work);
+  work();
   for (std::thread& t : pool) t.join();
 }
 

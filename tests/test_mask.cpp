@@ -2,6 +2,7 @@
 // automatic isovalue (host/auto_iso.hpp), and `classify --mask / --iso auto`
 // end to end; on synthetic volumes, the phantoms and the real spine sweep.
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -16,6 +17,7 @@
 #include "error.hpp"
 #include "io.hpp"
 #include "mask.hpp"
+#include "parallel.hpp"
 #include "phantom.hpp"
 #include "test_support.hpp"
 
@@ -775,6 +777,58 @@ class CliMask : public test::CliTest {
 };
 
 // ---- threads ---------------------------------------------------------------------------------------------
+
+TEST(HostThreads, ChunksCoverTheRangeOnceEachInOrder) {
+  // parallel_chunks: every index in exactly one chunk, chunk k the k-th
+  // contiguous range, for any thread and chunk count (more chunks than
+  // items included).
+  for (const std::size_t n : {std::size_t(1), std::size_t(7), std::size_t(254)})
+    for (const int threads : {1, 2, 3, 8})
+      for (const int chunks : {1, 5, 63, 300}) {
+        std::vector<int> seen(n, 0);
+        const int count = range_count(n, chunks);
+        std::vector<std::pair<std::size_t, std::size_t>> ranges;
+        ranges.resize(std::size_t(count));
+        std::atomic<int> calls{0};
+        parallel_chunks(n, threads, chunks, [&](int k, std::size_t b, std::size_t e) {
+          ranges[std::size_t(k)] = {b, e};
+          for (std::size_t i = b; i < e; ++i) ++seen[i];  // ranges are disjoint: no race
+          ++calls;
+        });
+        EXPECT_EQ(calls.load(), count);
+        EXPECT_EQ(std::count(seen.begin(), seen.end(), 1), long(n)) << n << " " << threads << " " << chunks;
+        std::size_t at = 0;
+        for (const auto& r : ranges) {
+          EXPECT_EQ(r.first, at);
+          at = r.second;
+        }
+        EXPECT_EQ(at, n);
+      }
+}
+
+TEST(HostThreads, KthNonNegativeIsNthElementOverTheNonNegativeValues) {
+  // The edge threshold of --iso auto: the k-th smallest of the usable
+  // voxels' |grad| (the others are -1), against std::nth_element over them,
+  // with ties, zeros of both signs, values spanning many octaves and ranks
+  // at both ends.
+  std::mt19937 rng(test::seed());
+  std::uniform_real_distribution<float> uni(0.0f, 1.0f);
+  std::vector<float> g(100000);
+  for (float& x : g) {
+    const float u = uni(rng);
+    x = u < 0.3f ? -1.0f : u < 0.35f ? 0.0f : u < 0.37f ? -0.0f : u < 0.5f ? 0.25f : std::ldexp(uni(rng), int(uni(rng) * 40) - 20);
+  }
+  std::vector<float> kept;
+  for (float x : g)
+    if (x >= 0) kept.push_back(x);
+  for (const std::size_t k : {std::size_t(0), std::size_t(1), kept.size() / 3, kept.size() * 95 / 100, kept.size() - 1}) {
+    std::vector<float> ref = kept;
+    std::nth_element(ref.begin(), ref.begin() + long(k), ref.end());
+    for (const int threads : {1, 2, 3})
+      EXPECT_EQ(kth_nonnegative(g.data(), g.size(), k, threads), ref[k]) << "k = " << k << ", threads " << threads;
+  }
+  EXPECT_THROW(kth_nonnegative(g.data(), g.size(), kept.size(), 2), std::invalid_argument);
+}
 
 TEST(HostThreads, MaskNearFieldFillAndIsoAreTheSameForAnyThreadCount) {
   // The host stages of `classify --iso auto --mask auto` split their passes
