@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "parallel.hpp"
 #include "volume.hpp"
 
 namespace softshell {
@@ -69,6 +70,15 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
 // nonzero samples) is largest along it.
 // `threads` (0: every core) does not change the result.
 int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int threads = 0);
+
+// The data lowpassed across the beam only (a Gaussian of sigma_mm along the
+// two axes other than `beam_axis`; beam lines stay lines: speckle averaged,
+// depth resolution kept), normalised over the scanned samples: each output
+// is sum w_k v_k / sum w_k over the scanned taps inside the volume (the
+// sample itself where none is), in double, the terms in tap order. The near
+// field and the reverberation rule read it. The same for any thread count.
+UninitArray<float> lowpass_across_beam(const Volume& v, const std::vector<std::uint8_t>* scanned, int beam_axis,
+                                       double sigma_mm, int threads = 0);
 
 // The bright layered near field under the probe (skin, fat, muscle: an
 // occluder, not the object; docs/real-data.md, "The near field"). Along the
