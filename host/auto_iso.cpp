@@ -109,6 +109,21 @@ void blur_axis(float* a, float* b, const Dims3& d, int axis, const std::vector<f
 }
 
 
+// For x in [0, len) of a row of v~ (c: its first voxel; sy, sz: the strides):
+// g[x] = |central-difference gradient| (h2: twice the spacings) and bin[x] =
+// the histogram bin of c[x] (lo, width, bins), in double as the per-voxel
+// loop had them: vectorised (this file is built with -fno-math-errno, which
+// a vectorised sqrt needs; built for AVX2 too; the same bits).
+__attribute__((target_clones("avx2", "default"))) void row_gradients(
+    const float* c, std::size_t len, std::size_t sy, std::size_t sz, double h2x, double h2y, double h2z, double lo,
+    double width, int bins, float* g, int* bin) {
+  for (std::size_t x = 0; x < len; ++x) {
+    const double gx = (c[x + 1] - c[x - 1]) / h2x, gy = (c[x + sy] - c[x - sy]) / h2y, gz = (c[x + sz] - c[x - sz]) / h2z;
+    g[x] = float(std::sqrt(gx * gx + gy * gy + gz * gz));
+    bin[x] = std::clamp(int((c[x] - lo) / width), 0, bins - 1);
+  }
+}
+
 }  // namespace
 
 // Non-negative floats order as their bit patterns: count them per top 16
@@ -246,19 +261,24 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     // Per plane: the histogram's sums and counts, added up in z order.
     std::vector<double> psum(d[2] * std::size_t(bins), 0.0);
     std::vector<std::size_t> pcount(d[2] * std::size_t(bins), 0);
+    // Each row's gradients and bins first, for all its voxels (a loop without
+    // branches that vectorises), then the usable ones entered.
+    const std::size_t len = d[0] - 2;
     over_planes([&](std::size_t z0, std::size_t z1) {
+      std::vector<float> g(len);
+      std::vector<int> bin(len);
       for (std::size_t z = z0; z < z1; ++z)
-        for (std::size_t y = 1; y + 1 < d[1]; ++y)
-          for (std::size_t x = 1; x + 1 < d[0]; ++x) {
-            const std::size_t i = v.index(x, y, z);
+        for (std::size_t y = 1; y + 1 < d[1]; ++y) {
+          const std::size_t row = v.index(1, y, z);
+          row_gradients(num.data() + row, len, sy, sz, 2 * hx, 2 * hy, 2 * hz, lo, width, bins, g.data(), bin.data());
+          for (std::size_t x = 0; x < len; ++x) {
+            const std::size_t i = row + x;
             if (!usable(i)) continue;
-            const double gx = (num[i + sx] - num[i - sx]) / (2 * hx), gy = (num[i + sy] - num[i - sy]) / (2 * hy),
-                         gz = (num[i + sz] - num[i - sz]) / (2 * hz);
-            gfield[i] = float(std::sqrt(gx * gx + gy * gy + gz * gz));
-            const int b = std::clamp(int((num[i] - lo) / width), 0, bins - 1);
-            psum[z * std::size_t(bins) + std::size_t(b)] += gfield[i];
-            ++pcount[z * std::size_t(bins) + std::size_t(b)];
+            gfield[i] = g[x];
+            psum[z * std::size_t(bins) + std::size_t(bin[x])] += g[x];
+            ++pcount[z * std::size_t(bins) + std::size_t(bin[x])];
           }
+        }
     });
     for (std::size_t z = 0; z < d[2]; ++z)
       for (int b = 0; b < bins; ++b) sum[b] += psum[z * std::size_t(bins) + std::size_t(b)], count[b] += pcount[z * std::size_t(bins) + std::size_t(b)];
@@ -311,17 +331,33 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     for (std::size_t i = i0; i < i1; ++i)
       if (gfield[i] < 0) num[i] = std::numeric_limits<float>::quiet_NaN();
   });
+  // A voxel's step (which neighbour, or none: 26) depends on the voxel alone,
+  // and the climbs from neighbouring edge voxels run along the same ridges
+  // (at 256^3 about 9 M steps from 1.5 M climbs): each voxel's step, up and
+  // down, is found once and kept (255: not yet). Two threads may find the
+  // same step at once and store the same byte: relaxed atomic accesses.
+  constexpr std::uint8_t kUnknown = 255, kStay = 26;
+  UninitArray<std::uint8_t> step_up(n), step_down(params.rule == AutoIsoRule::Local ? n : 0);
+  over_voxels([&](std::size_t i0, std::size_t i1) {
+    std::fill(step_up.data() + i0, step_up.data() + i1, kUnknown);
+    if (step_down.size()) std::fill(step_down.data() + i0, step_down.data() + i1, kUnknown);
+  });
   auto climb = [&](std::size_t x, std::size_t y, std::size_t z, float sign) {
+    std::uint8_t* steps = sign > 0 ? step_up.data() : step_down.data();
     std::size_t i = v.index(x, y, z);
     for (int step = 0; step < params.climb_steps; ++step) {
-      std::size_t best_i = i;
-      float best = sign * num[i];
-      for (const long o : around) {
-        const std::size_t j = std::size_t(long(i) + o);
-        if (sign * num[j] > best) best_i = j, best = sign * num[j];
+      std::uint8_t k = __atomic_load_n(&steps[i], __ATOMIC_RELAXED);
+      if (k == kUnknown) {
+        k = kStay;
+        float best = sign * num[i];
+        for (std::uint8_t q = 0; q < 26; ++q) {
+          const float c = sign * num[std::size_t(long(i) + around[q])];
+          if (c > best) k = q, best = c;
+        }
+        __atomic_store_n(&steps[i], k, __ATOMIC_RELAXED);
       }
-      if (best_i == i) break;
-      i = best_i;
+      if (k == kStay) break;
+      i = std::size_t(long(i) + around[k]);
     }
     return i;
   };
