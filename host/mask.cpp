@@ -672,18 +672,18 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
   const UninitArray<float> lp = lowpass_across_beam(v, scanned, ax, params.sigma_mm, threads);
   const auto is_scanned = [&](std::size_t i) { return !scanned || (*scanned)[i] != 0; };
   // lo (median) and hi (99th percentile) of the scanned samples.
-  std::vector<float> vals;
-  vals.reserve(n);
-  for (std::size_t i = 0; i < n; ++i)
-    if (is_scanned(i)) vals.push_back(lp[i]);
-  if (vals.size() < 100) return done();
+  const std::size_t count = scanned ? std::size_t(std::count_if(scanned->begin(), scanned->end(),
+                                                                [](std::uint8_t m) { return m != 0; }))
+                                    : n;
+  if (count < 100) return done();
   const auto quantile = [&](double q) {
-    const auto k = std::size_t(q * double(vals.size() - 1));
-    std::nth_element(vals.begin(), vals.begin() + long(k), vals.end());
-    return double(vals[k]);
+    const auto k = std::size_t(q * double(count - 1));
+    return double(kth_smallest_where(n, k, threads, [&](std::size_t i, float& f) {
+      f = lp[i];
+      return is_scanned(i);
+    }));
   };
   const double lo = quantile(0.5), hi = quantile(0.99);
-  std::vector<float>().swap(vals);
   if (!(hi > lo)) return done();
   const double strong = lo + params.strong * (hi - lo);
   const int u_ax = ax == 0 ? 1 : 0, w_ax = ax == 2 ? 1 : 2;
@@ -697,23 +697,31 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
   const auto crest_reach = std::size_t(std::ceil(1.0 / h));
   std::vector<long> echo(lines, -1);
   std::size_t with_data = 0;
-  for (std::size_t l = 0; l < lines; ++l) {
-    bool any = false;
-    for (std::size_t p = 0; p < d[ax]; ++p) {
-      const std::size_t i = at(l, p);
-      if (!is_scanned(i)) continue;
-      any = true;
-      if (lp[i] < strong) continue;
-      std::size_t best = p;
-      for (std::size_t q = p + 1; q < d[ax] && q <= p + crest_reach; ++q) {
-        const std::size_t j = at(l, q);
-        if (is_scanned(j) && lp[j] > lp[at(l, best)]) best = q;
+  {
+    // Lines over threads (each line's search is its own; the counts are sums).
+    const int parts = range_count(lines, threads);
+    std::vector<std::size_t> pechoes(std::size_t(parts), 0), pdata(std::size_t(parts), 0);
+    parallel_ranges_indexed(lines, threads, [&](int k, std::size_t l0, std::size_t l1) {
+      for (std::size_t l = l0; l < l1; ++l) {
+        bool any = false;
+        for (std::size_t p = 0; p < d[ax]; ++p) {
+          const std::size_t i = at(l, p);
+          if (!is_scanned(i)) continue;
+          any = true;
+          if (lp[i] < strong) continue;
+          std::size_t best = p;
+          for (std::size_t q = p + 1; q < d[ax] && q <= p + crest_reach; ++q) {
+            const std::size_t j = at(l, q);
+            if (is_scanned(j) && lp[j] > lp[at(l, best)]) best = q;
+          }
+          echo[l] = long(best);
+          ++pechoes[std::size_t(k)];
+          break;
+        }
+        pdata[std::size_t(k)] += any;
       }
-      echo[l] = long(best);
-      ++rep.lines;
-      break;
-    }
-    with_data += any;
+    });
+    for (int k = 0; k < parts; ++k) rep.lines += pechoes[std::size_t(k)], with_data += pdata[std::size_t(k)];
   }
   if (rep.lines < 16 || double(rep.lines) < 0.05 * double(with_data)) return done();
   // The echo train: Q(s), the median over the aligned lines.

@@ -6,6 +6,9 @@
 #include <algorithm>
 #include <atomic>
 #include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <stdexcept>
 #include <memory>
 #include <thread>
 #include <vector>
@@ -68,6 +71,53 @@ void parallel_chunks(std::size_t n, int parts, int chunks, F&& f) {
 template <class F>
 void parallel_ranges(std::size_t n, int parts, F&& f) {
   parallel_ranges_indexed(n, parts, [&f](int, std::size_t b, std::size_t e) { f(b, e); });
+}
+
+// The k-th smallest (k from 0) of the values that value(i, out) yields for i
+// in [0, n) (it returns false for an i that has none; no NaN): what
+// std::nth_element over them gives, without gathering them all. Floats order
+// as a key made of their bits (sign flipped for positives, all bits for
+// negatives; -0 taken as +0): count the values per top 16 bits of their key
+// on every thread, find the bucket that holds rank k, and select within it
+// (a serial gather and nth_element of 8 M values took 0.06-0.08 s at 256^3).
+// Throws std::invalid_argument when k is not below their count.
+template <class Value>
+float kth_smallest_where(std::size_t n, std::size_t k, int threads, Value value) {
+  constexpr std::size_t kBuckets = 1u << 16;
+  auto bucket_of = [](float f) {
+    f += 0.0f;  // -0 as +0
+    std::uint32_t u;
+    std::memcpy(&u, &f, sizeof u);
+    return std::size_t(((u >> 31) ? ~u : (u | 0x80000000u)) >> 16);
+  };
+  threads = host_threads(threads);
+  const int parts = range_count(n, threads);
+  std::vector<std::vector<std::size_t>> counts(std::size_t(parts), std::vector<std::size_t>(kBuckets, 0));
+  parallel_ranges_indexed(n, threads, [&](int t, std::size_t i0, std::size_t i1) {
+    std::vector<std::size_t>& c = counts[std::size_t(t)];
+    float f;
+    for (std::size_t i = i0; i < i1; ++i)
+      if (value(i, f)) ++c[bucket_of(f)];
+  });
+  std::size_t bucket = 0, below = 0;
+  for (;; ++bucket) {
+    if (bucket == kBuckets) throw std::invalid_argument("kth_smallest_where: k is not below the count");
+    std::size_t c = 0;
+    for (const auto& part : counts) c += part[bucket];
+    if (below + c > k) break;
+    below += c;
+  }
+  std::vector<std::vector<float>> found;
+  found.resize(std::size_t(parts));
+  parallel_ranges_indexed(n, threads, [&](int t, std::size_t i0, std::size_t i1) {
+    float f;
+    for (std::size_t i = i0; i < i1; ++i)
+      if (value(i, f) && bucket_of(f) == bucket) found[std::size_t(t)].push_back(f);
+  });
+  std::vector<float> in_bucket;
+  for (const auto& f : found) in_bucket.insert(in_bucket.end(), f.begin(), f.end());
+  std::nth_element(in_bucket.begin(), in_bucket.begin() + long(k - below), in_bucket.end());
+  return in_bucket[k - below];
 }
 
 // An array whose pages are first touched by whoever writes each element

@@ -880,6 +880,27 @@ TEST(HostThreads, KthNonNegativeIsNthElementOverTheNonNegativeValues) {
       EXPECT_EQ(kth_nonnegative(g.data(), g.size(), k, threads), ref[k]) << "k = " << k << ", threads " << threads;
   }
   EXPECT_THROW(kth_nonnegative(g.data(), g.size(), kept.size(), 2), std::invalid_argument);
+
+  // kth_smallest_where over values of both signs (the reverberation rule's
+  // quantiles of a float volume), every second index taken.
+  std::vector<float> h(g.size());
+  for (float& x : h) {
+    const float u = uni(rng);
+    x = u < 0.1f ? -0.0f : u < 0.2f ? 0.0f : u < 0.3f ? -7.5f : (uni(rng) - 0.5f) * std::ldexp(1.0f, int(uni(rng) * 60) - 30);
+  }
+  std::vector<float> taken;
+  for (std::size_t i = 0; i < h.size(); i += 2) taken.push_back(h[i]);
+  for (const std::size_t k : {std::size_t(0), taken.size() / 10, taken.size() / 2, taken.size() * 99 / 100, taken.size() - 1}) {
+    std::vector<float> ref = taken;
+    std::nth_element(ref.begin(), ref.begin() + long(k), ref.end());
+    for (const int threads : {1, 2, 5}) {
+      const float got = kth_smallest_where(h.size(), k, threads, [&](std::size_t i, float& f) {
+        f = h[i];
+        return i % 2 == 0;
+      });
+      EXPECT_EQ(got, ref[k]) << "k = " << k << ", threads " << threads;
+    }
+  }
 }
 
 TEST(HostThreads, MaskNearFieldFillAndIsoAreTheSameForAnyThreadCount) {
