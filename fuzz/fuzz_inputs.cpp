@@ -395,7 +395,7 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
     }
     const std::vector<std::uint8_t>* m = mask.empty() ? nullptr : &mask;
     double iso;
-    std::vector<float> field;
+    HostVector<float> field;
     if (auto_iso_value) {
       AutoIsoParams ap;
       ap.rule = rule;

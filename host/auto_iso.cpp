@@ -373,7 +373,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   std::nth_element(sorted.begin(), sorted.begin() + long(sorted.size() / 2), sorted.end());
   const double ridge_iso = sorted[sorted.size() / 2];
   double local_iso = ridge_iso;
-  std::vector<float> field;
+  HostVector<float> field;  // resize leaves it untouched: the threads filling it touch it first
   if (!locals.empty()) {
     sorted = locals;
     std::nth_element(sorted.begin(), sorted.begin() + long(sorted.size() / 2), sorted.end());
@@ -478,8 +478,8 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   return iso;
 }
 
-Volume level_isovalue(const Volume& v, const std::vector<float>& field, double iso) {
-  if (field.size() != v.voxels()) throw std::invalid_argument("level_isovalue: field size differs from the volume");
+Volume level_isovalue(const Volume& v, const float* field, std::size_t field_size, double iso) {
+  if (field_size != v.voxels()) throw std::invalid_argument("level_isovalue: field size differs from the volume");
   std::vector<float> out(v.voxels());
   // In double, then clamped to float's range: on float data spanning
   // +-3e38 the difference would overflow to infinity (found by fuzzing).

@@ -31,6 +31,7 @@
 #include <string>
 #include <vector>
 
+#include "parallel.hpp"
 #include "volume.hpp"
 
 namespace softshell {
@@ -60,14 +61,20 @@ struct AutoIsoReport {
   std::vector<std::size_t> count;     // voxels per bin
   std::size_t voxels = 0;             // voxels that entered
   double local_iso = 0;               // the Local rule's global value (median of the edges' isovalues)
-  std::vector<float> field;           // Local, want_field: the isovalue per voxel, file units
+  HostVector<float> field;            // Local, want_field: the isovalue per voxel, file units
 };
 
 // The volume with its local isovalue field levelled out: v - field + iso
 // (file units, float samples). Log-compressed brightness drifts are additive,
 // so a shift, not a gain, is what undoes them; `field` is smooth (tens of mm),
 // so gradients are left all but unchanged.
-Volume level_isovalue(const Volume& v, const std::vector<float>& field, double iso);
+Volume level_isovalue(const Volume& v, const float* field, std::size_t field_size, double iso);
+inline Volume level_isovalue(const Volume& v, const HostVector<float>& field, double iso) {
+  return level_isovalue(v, field.data(), field.size(), iso);
+}
+inline Volume level_isovalue(const Volume& v, const std::vector<float>& field, double iso) {
+  return level_isovalue(v, field.data(), field.size(), iso);
+}
 
 // `classify --iso auto` for the variational classifier in one call: the
 // Local rule's isovalue (file units) taken from `v` (the mask as for

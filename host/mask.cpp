@@ -174,7 +174,9 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
         }
       }
   std::vector<std::uint8_t> mask(n);
-  for (std::size_t i = 0; i < n; ++i) mask[i] = state[i] == kUnscanned ? 0 : 1;
+  parallel_ranges(n, threads, [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) mask[i] = state[i] == kUnscanned ? 0 : 1;
+  });
   // 2b. Dark fluid at the log-compression floor is exact zeros too. An
   // unswept region lies beside or beyond the scan; a zero region with data
   // on both sides of it along the beam lies inside the scan (fluid between
@@ -182,26 +184,38 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
   // both hold, there is no unscanned region.
   if (rep.unscanned_regions > 0) {
     const int axis = std::clamp(params.beam_axis, 0, 2);
-    const std::size_t stride = axis == 0 ? 1 : axis == 1 ? d[0] : d[0] * d[1];
     const std::size_t len = d[axis];
-    // Per beam line: the first and last nonzero sample.
+    // Per beam line: the first and last nonzero sample. With s the beam
+    // axis's stride, voxel i lies on line (i % s) + (i / (s len)) s at
+    // position (i / s) % len; walked by planes, both come without a division
+    // (three integer divisions per voxel: the mask took 0.37-0.39 s at 256^3
+    // before, 0.33 s after).
     std::vector<std::uint32_t> first(n / len, std::uint32_t(len)), last(n / len, 0);
-    auto line_of = [&](std::size_t i) { return (i % stride) + (i / (stride * len)) * stride; };
+    const std::size_t nx = d[0], ny = d[1];
+    // Calls f(i, line, pos) for the voxels of planes [z0, z1) in memory order.
+    auto each_voxel = [&](std::size_t z0, std::size_t z1, auto&& f) {
+      for (std::size_t z = z0; z < z1; ++z)
+        for (std::size_t y = 0; y < ny; ++y) {
+          const std::size_t row = (z * ny + y) * nx;
+          for (std::size_t x = 0; x < nx; ++x) {
+            const std::size_t line = axis == 0 ? y + ny * z : axis == 1 ? x + nx * z : x + nx * y;
+            const std::size_t pos = axis == 0 ? x : axis == 1 ? y : z;
+            f(row + x, line, std::uint32_t(pos));
+          }
+        }
+    };
     {
-      // Per range of voxels its own first/last, merged (min and max: exact).
-      const int parts = range_count(n, threads);
+      // Per range of planes its own first/last, merged (min and max: exact).
+      const int parts = range_count(d[2], threads);
       const auto nparts = static_cast<std::size_t>(parts);
       std::vector<std::vector<std::uint32_t>> pf(nparts), pl(nparts);
-      parallel_ranges_indexed(n, threads, [&](int k, std::size_t i0, std::size_t i1) {
+      parallel_ranges_indexed(d[2], threads, [&](int k, std::size_t z0, std::size_t z1) {
         std::vector<std::uint32_t>& f = pf[std::size_t(k)];
         std::vector<std::uint32_t>& l_ = pl[std::size_t(k)];
         f.assign(n / len, std::uint32_t(len)), l_.assign(n / len, 0);
-        for (std::size_t i = i0; i < i1; ++i)
-          if (v.data[i] != 0.0f) {
-            const std::size_t l = line_of(i);
-            const auto pos = std::uint32_t((i / stride) % len);
-            f[l] = std::min(f[l], pos), l_[l] = std::max(l_[l], pos);
-          }
+        each_voxel(z0, z1, [&](std::size_t i, std::size_t l, std::uint32_t pos) {
+          if (v.data[i] != 0.0f) f[l] = std::min(f[l], pos), l_[l] = std::max(l_[l], pos);
+        });
       });
       for (int k = 0; k < parts; ++k)
         for (std::size_t l = 0; l < first.size(); ++l)
@@ -209,17 +223,15 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
     }
     std::size_t enclosed = 0, total = 0;
     {
-      const int parts = range_count(n, threads);
+      const int parts = range_count(d[2], threads);
       const auto nparts = static_cast<std::size_t>(parts);
       std::vector<std::size_t> pe(nparts, 0), pt(nparts, 0);
-      parallel_ranges_indexed(n, threads, [&](int k, std::size_t i0, std::size_t i1) {
-        for (std::size_t i = i0; i < i1; ++i) {
-          if (state[i] != kUnscanned) continue;
+      parallel_ranges_indexed(d[2], threads, [&](int k, std::size_t z0, std::size_t z1) {
+        each_voxel(z0, z1, [&](std::size_t i, std::size_t l, std::uint32_t pos) {
+          if (state[i] != kUnscanned) return;
           ++pt[std::size_t(k)];
-          const std::size_t l = line_of(i);
-          const auto pos = std::uint32_t((i / stride) % len);
           pe[std::size_t(k)] += first[l] < pos && pos < last[l];
-        }
+        });
       });
       for (int k = 0; k < parts; ++k) enclosed += pe[std::size_t(k)], total += pt[std::size_t(k)];
     }

@@ -11,6 +11,8 @@
 #include <stdexcept>
 #include <memory>
 #include <thread>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace softshell {
@@ -119,6 +121,31 @@ float kth_smallest_where(std::size_t n, std::size_t k, int threads, Value value)
   std::nth_element(in_bucket.begin(), in_bucket.begin() + long(k - below), in_bucket.end());
   return in_bucket[k - below];
 }
+
+// A std::vector whose resize leaves new floats (or other trivial types)
+// uninitialised, so the threads that fill it are the first to touch its pages
+// (see UninitArray). For results handed on as vectors.
+template <class T, class A = std::allocator<T>>
+class DefaultInitAllocator : public A {
+  using traits = std::allocator_traits<A>;
+
+ public:
+  template <class U>
+  struct rebind {
+    using other = DefaultInitAllocator<U, typename traits::template rebind_alloc<U>>;
+  };
+  using A::A;
+  template <class U>
+  void construct(U* p) noexcept(std::is_nothrow_default_constructible<U>::value) {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    traits::construct(static_cast<A&>(*this), p, std::forward<Args>(args)...);
+  }
+};
+template <class T>
+using HostVector = std::vector<T, DefaultInitAllocator<T>>;
 
 // An array whose pages are first touched by whoever writes each element
 // first: std::vector's value-initialisation touches them all on the calling

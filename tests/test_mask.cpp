@@ -418,6 +418,20 @@ TEST(Mask, DarkFluidAtTheCompressionFloorIsNotUnscanned) {
   along_x.beam_axis = 0;
   EXPECT_GT(count_unscanned(scanned_mask(fluid, along_x, &r)), 12u * 40 * 40);
   EXPECT_FALSE(r.rejected);
+  // A box that is no cube, the slab across y: fluid along a beam in y (data
+  // on both sides), unswept along z (the beam lines run inside the slab).
+  Volume across_y = speckle_volume({36, 40, 44}, test::seed() + 5);
+  for (std::size_t z = 0; z < 44; ++z)
+    for (std::size_t y = 14; y < 26; ++y)
+      for (std::size_t x = 0; x < 36; ++x) across_y.at(x, y, z) = 0;
+  MaskParams along_y;
+  along_y.beam_axis = 1;
+  EXPECT_EQ(count_unscanned(scanned_mask(across_y, along_y, &r)), 0u);
+  EXPECT_TRUE(r.rejected);
+  EXPECT_GT(r.enclosed_share, 0.9);
+  EXPECT_GE(count_unscanned(scanned_mask(across_y, MaskParams{}, &r)), 12u * 36 * 44);
+  EXPECT_FALSE(r.rejected);
+  EXPECT_LT(r.enclosed_share, 0.01);
 }
 
 TEST(Mask, PhantomsHaveNoUnscannedRegion) {
@@ -955,7 +969,7 @@ TEST(HostThreads, MaskNearFieldFillAndIsoAreTheSameForAnyThreadCount) {
   ASSERT_TRUE(one.nr.found);
   ASSERT_GT(one.ir.crests, 0u);
   ASSERT_EQ(one.ir.field.size(), v.voxels());
-  auto same_floats = [](const std::vector<float>& a, const std::vector<float>& b) {
+  auto same_floats = [](const auto& a, const auto& b) {
     return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
   };
   for (int threads : {2, 3, 7}) {

@@ -617,7 +617,7 @@ int run_classify(const ClassifyOptions& given_options) {
   }
   double iso = 0;
   std::string iso_text;
-  std::vector<float> iso_field;  // the local rule's isovalue per voxel (file units)
+  HostVector<float> iso_field;  // the local rule's isovalue per voxel (file units)
   if (given_iso) {
     iso = *given_iso;
   } else {
@@ -653,7 +653,7 @@ int run_classify(const ClassifyOptions& given_options) {
   // isovalue on data whose brightness no longer drifts (host/auto_iso.hpp).
   if (!iso_field.empty()) {
     in = level_isovalue(in, iso_field, iso);
-    std::vector<float>().swap(iso_field);  // not held through the solve (4 bytes per voxel)
+    HostVector<float>().swap(iso_field);  // not held through the solve (4 bytes per voxel)
   }
   // The bone cue (host/bone_cue.hpp): on the data the classifier sees.
   std::shared_ptr<const std::vector<float>> cue;
