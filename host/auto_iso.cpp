@@ -124,6 +124,28 @@ __attribute__((target_clones("avx2", "default"))) void row_gradients(
   }
 }
 
+// One row of the isovalue field, trilinear from the four coarse rows around
+// it (x0, x1, tx per voxel; ty, tz for the row), mapped back to file units and
+// clamped: the per-voxel expressions as they were, vectorised (gathers) in
+// the AVX2 build, the same bits.
+__attribute__((target_clones("avx2", "default"))) void field_row(float* __restrict out, std::size_t nx, const float* r00,
+                                                              const float* r10, const float* r01, const float* r11,
+                                                              const std::uint32_t* x0s, const std::uint32_t* x1s,
+                                                              const float* txs, float ty, float tz, double local_iso,
+                                                              double spread, double lo, double hi) {
+  for (std::size_t x = 0; x < nx; ++x) {
+    const std::uint32_t x0 = x0s[x], x1 = x1s[x];
+    const float tx = txs[x];
+    const float a00 = r00[x0] + tx * (r00[x1] - r00[x0]);
+    const float a10 = r10[x0] + tx * (r10[x1] - r10[x0]);
+    const float a01 = r01[x0] + tx * (r01[x1] - r01[x0]);
+    const float a11 = r11[x0] + tx * (r11[x1] - r11[x0]);
+    const float b0 = a00 + ty * (a10 - a00), b1 = a01 + ty * (a11 - a01);
+    const double t = double(b0 + tz * (b1 - b0));
+    out[x] = float(std::clamp(local_iso + spread * t, lo, hi));
+  }
+}
+
 }  // namespace
 
 float kth_nonnegative(const float* g, std::size_t n, std::size_t k, int threads) {
@@ -186,10 +208,6 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     const double sigma_vox = std::max(1.0, params.sigma_mm / v.spacing[axis]);
     blur_axis(num.data(), mask ? den.data() : nullptr, d, axis, gaussian_weights(sigma_vox, 3.0), threads);
   }
-  if (mask)
-    over_voxels([&](std::size_t i0, std::size_t i1) {
-      for (std::size_t i = i0; i < i1; ++i) num[i] = den[i] > 1e-6f ? num[i] / den[i] : 0.0f;
-    });
 
   // Voxels that count: inside, scanned with their six neighbours.
   const std::size_t sx = 1, sy = d[0], sz = d[0] * d[1];
@@ -201,11 +219,15 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   double lo = std::numeric_limits<double>::infinity(), hi = -lo;
   std::size_t used = 0;
   {
-    // Per plane: min, max, count (exact, in any order).
+    // Per plane: v~ normalised, then (interior planes) the usable voxels'
+    // min, max and count (exact, in any order) while the plane is in cache.
     std::vector<double> plo(d[2], lo), phi(d[2], hi);
     std::vector<std::size_t> pused(d[2], 0);
-    over_planes([&](std::size_t z0, std::size_t z1) {
-      for (std::size_t z = z0; z < z1; ++z)
+    parallel_ranges(d[2], threads, [&](std::size_t z0, std::size_t z1) {
+      for (std::size_t z = z0; z < z1; ++z) {
+        if (mask)
+          for (std::size_t i = z * sz; i < (z + 1) * sz; ++i) num[i] = den[i] > 1e-6f ? num[i] / den[i] : 0.0f;
+        if (z == 0 || z + 1 == d[2]) continue;
         for (std::size_t y = 1; y + 1 < d[1]; ++y)
           for (std::size_t x = 1; x + 1 < d[0]; ++x) {
             const std::size_t i = v.index(x, y, z);
@@ -213,6 +235,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
             plo[z] = std::min(plo[z], double(num[i])), phi[z] = std::max(phi[z], double(num[i]));
             ++pused[z];
           }
+      }
     });
     for (std::size_t z = 0; z < d[2]; ++z) lo = std::min(lo, plo[z]), hi = std::max(hi, phi[z]), used += pused[z];
   }
@@ -426,9 +449,13 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
       };
       // The x weights once, and a voxel row's four coarse rows once per row:
       // the same values and operations as per voxel.
-      std::vector<std::size_t> wx0(d[0]), wx1(d[0]);
+      std::vector<std::uint32_t> wx0(d[0]), wx1(d[0]);
       std::vector<float> wtx(d[0]);
-      for (std::size_t x = 0; x < d[0]; ++x) weights(0, x, wx0[x], wx1[x], wtx[x]);
+      for (std::size_t x = 0; x < d[0]; ++x) {
+        std::size_t c0, c1;
+        weights(0, x, c0, c1, wtx[x]);
+        wx0[x] = std::uint32_t(c0), wx1[x] = std::uint32_t(c1);
+      }
       parallel_ranges(d[2], threads, [&](std::size_t za, std::size_t zb) {
       for (std::size_t z = za; z < zb; ++z) {
         std::size_t z0, z1;
@@ -442,18 +469,8 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
           const float* r10 = coarse.data() + dc[0] * (y1 + dc[1] * z0);
           const float* r01 = coarse.data() + dc[0] * (y0 + dc[1] * z1);
           const float* r11 = coarse.data() + dc[0] * (y1 + dc[1] * z1);
-          float* out = field.data() + d[0] * (y + d[1] * z);
-          for (std::size_t x = 0; x < d[0]; ++x) {
-            const std::size_t x0 = wx0[x], x1 = wx1[x];
-            const float tx = wtx[x];
-            const float a00 = r00[x0] + tx * (r00[x1] - r00[x0]);
-            const float a10 = r10[x0] + tx * (r10[x1] - r10[x0]);
-            const float a01 = r01[x0] + tx * (r01[x1] - r01[x0]);
-            const float a11 = r11[x0] + tx * (r11[x1] - r11[x0]);
-            const float b0 = a00 + ty * (a10 - a00), b1 = a01 + ty * (a11 - a01);
-            const double t = double(b0 + tz * (b1 - b0));
-            out[x] = float(std::clamp(local_iso + spread * t, lo_local, hi_local));
-          }
+          field_row(field.data() + d[0] * (y + d[1] * z), d[0], r00, r10, r01, r11, wx0.data(), wx1.data(), wtx.data(),
+                    ty, tz, local_iso, spread, lo_local, hi_local);
         }
       }
       });
