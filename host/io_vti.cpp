@@ -303,7 +303,9 @@ VtiInfo open_vti(const std::string& path) {
     const unsigned long long o = std::strtoull(off.c_str(), &end, 10);
     if (off.empty() || *end != '\0' || errno == ERANGE || off[0] == '-') throw input_error(path, "offset=\"" + shown(off) + "\"");
     v.offset = o;
-    if (v.appended + v.offset > t.size()) throw input_error(path, "data truncated: offset " + off + " lies past the end of the file");
+    // Compared without adding: an offset near 2^64 wrapped the sum past the check (found by fuzz_vti).
+    if (v.appended > t.size() || v.offset > t.size() - v.appended)
+      throw input_error(path, "data truncated: offset " + off + " lies past the end of the file");
   } else if (v.compressed && v.format == "ascii") {
     v.compressed = false;  // ascii arrays are never compressed
   }

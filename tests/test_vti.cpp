@@ -218,5 +218,15 @@ TEST_F(Vti, ReproHugeBlockIsRefusedAtOnce) {
   EXPECT_LT(r.max_rss_kb, 300 * 1024) << "the promised size was allocated";
 }
 
+TEST_F(Vti, ReproAppendedOffsetNear2To64IsPastTheEnd) {
+  // Found by fuzz_vti: offset="...18446744073709551615" wrapped appended +
+  // offset past the end-of-file check, and the reader formed a pointer
+  // 2^64 - 1 bytes on (UBSan: pointer overflow).
+  const std::string repro = std::string(SOFTSHELL_SOURCE_DIR) + "/tests/data/repro/vti_appended_offset_2e64.vti";
+  write("offset.vti", test::slurp(repro));
+  const test::RunResult r = run({"info", file("offset.vti")});
+  expect_one_line_error(r, {"offset.vti", "data truncated", "lies past the end of the file"});
+}
+
 }  // namespace
 }  // namespace softshell
