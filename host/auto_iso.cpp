@@ -12,7 +12,6 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
-#include <memory>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
@@ -108,7 +107,6 @@ void blur_axis(float* a, float* b, const Dims3& d, int axis, const std::vector<f
   }
 }
 
-
 // For x in [0, len) of a row of v~ (c: its first voxel; sy, sz: the strides):
 // g[x] = |central-difference gradient| (h2: twice the spacings) and bin[x] =
 // the histogram bin of c[x] (lo, width, bins), in double as the per-voxel
@@ -195,7 +193,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   // first written by the threads that use them (a page's first touch costs a
   // fault, 2 ms per 4 MB on this kind of VM: a serial zero-fill of the four
   // 256^3 arrays took 0.15 s).
-  UninitArray<float> num(n), den(mask ? n : 0);
+  HostVector<float> num(n), den(mask ? n : 0);
   over_voxels([&](std::size_t i0, std::size_t i1) {
     if (mask) {
       for (std::size_t i = i0; i < i1; ++i) {
@@ -253,7 +251,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   // |grad v~| per usable voxel (-1 elsewhere), for both rules.
   const double hx = v.spacing[0], hy = v.spacing[1], hz = v.spacing[2];
   // den is not needed any more: with a mask its storage holds gfield.
-  UninitArray<float> own_gfield(mask ? 0 : n);
+  HostVector<float> own_gfield(mask ? 0 : n);
   float* const gfield = mask ? den.data() : own_gfield.data();
   over_voxels([&](std::size_t i0, std::size_t i1) { std::fill(gfield + i0, gfield + i1, -1.0f); });
   {
@@ -336,7 +334,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   // down, is found once and kept (255: not yet). Two threads may find the
   // same step at once and store the same byte: relaxed atomic accesses.
   constexpr std::uint8_t kUnknown = 255, kStay = 26;
-  UninitArray<std::uint8_t> step_up(n), step_down(params.rule == AutoIsoRule::Local ? n : 0);
+  HostVector<std::uint8_t> step_up(n), step_down(params.rule == AutoIsoRule::Local ? n : 0);
   over_voxels([&](std::size_t i0, std::size_t i1) {
     std::fill(step_up.data() + i0, step_up.data() + i1, kUnknown);
     if (step_down.size()) std::fill(step_down.data() + i0, step_down.data() + i1, kUnknown);

@@ -475,7 +475,7 @@ void filter_rows(float* out, const float* src, const std::uint8_t* mask, std::si
 // columns are rows. Split by z-planes or y-rows, the result does not depend
 // on the thread count. (Along x it ran voxel by voxel, with a branch per tap:
 // 0.4 s of the near field's 1.3 s at 256^3; now the same bits in a fraction.)
-UninitArray<float> lowpass_across_beam(const Volume& v, const std::vector<std::uint8_t>* scanned, int ax, double sigma_mm,
+HostVector<float> lowpass_across_beam(const Volume& v, const std::vector<std::uint8_t>* scanned, int ax, double sigma_mm,
                                        int threads) {
   const Dims3& d = v.dims;
   const std::size_t n = v.voxels();
@@ -483,7 +483,7 @@ UninitArray<float> lowpass_across_beam(const Volume& v, const std::vector<std::u
   const std::uint8_t* mask = scanned ? scanned->data() : nullptr;
   const std::size_t nx = d[0], ny = d[1], nz = d[2];
   threads = host_threads(threads);
-  UninitArray<float> a(n), b(n);
+  HostVector<float> a(n), b(n);
   const float* src = v.data.data();
   float* dst = a.data();
   for (const int axis : {u_ax, w_ax}) {
@@ -556,7 +556,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     if (report) *report = rep;
     return band;
   }
-  const UninitArray<float> lp = lowpass_across_beam(v, scanned, ax, params.sigma_mm, threads);
+  const HostVector<float> lp = lowpass_across_beam(v, scanned, ax, params.sigma_mm, threads);
   // Skin line per beam line (its first scanned voxel), samples per depth bin.
   auto voxel = [&](std::size_t a, std::size_t b, std::size_t z) {
     return a * stride[u_ax] + b * stride[w_ax] + z * stride[ax];
@@ -681,7 +681,7 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
   const double h = v.spacing[ax];
   if (d[ax] < 8 || !(h > 0)) return done();
   threads = host_threads(threads);
-  const UninitArray<float> lp = lowpass_across_beam(v, scanned, ax, params.sigma_mm, threads);
+  const HostVector<float> lp = lowpass_across_beam(v, scanned, ax, params.sigma_mm, threads);
   const auto is_scanned = [&](std::size_t i) { return !scanned || (*scanned)[i] != 0; };
   // lo (median) and hi (99th percentile) of the scanned samples.
   const std::size_t count = scanned ? std::size_t(std::count_if(scanned->begin(), scanned->end(),

@@ -77,7 +77,7 @@ int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int 
 // is sum w_k v_k / sum w_k over the scanned taps inside the volume (the
 // sample itself where none is), in double, the terms in tap order. The near
 // field and the reverberation rule read it. The same for any thread count.
-UninitArray<float> lowpass_across_beam(const Volume& v, const std::vector<std::uint8_t>* scanned, int beam_axis,
+HostVector<float> lowpass_across_beam(const Volume& v, const std::vector<std::uint8_t>* scanned, int beam_axis,
                                        double sigma_mm, int threads = 0);
 
 // The bright layered near field under the probe (skin, fat, muscle: an

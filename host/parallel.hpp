@@ -122,9 +122,12 @@ float kth_smallest_where(std::size_t n, std::size_t k, int threads, Value value)
   return in_bucket[k - below];
 }
 
-// A std::vector whose resize leaves new floats (or other trivial types)
-// uninitialised, so the threads that fill it are the first to touch its pages
-// (see UninitArray). For results handed on as vectors.
+// A std::vector whose constructor and resize leave new floats (or other
+// trivial types) uninitialised, so the threads that fill it are the first to
+// touch its pages: std::vector's value-initialisation touches them all on the
+// calling thread (a page's first touch costs a fault, about 2 ms per 4 MB on
+// this kind of VM, 36 ms for a 256^3 float array) before the threads that
+// fill it in parallel start.
 template <class T, class A = std::allocator<T>>
 class DefaultInitAllocator : public A {
   using traits = std::allocator_traits<A>;
@@ -147,25 +150,5 @@ class DefaultInitAllocator : public A {
 template <class T>
 using HostVector = std::vector<T, DefaultInitAllocator<T>>;
 
-// An array whose pages are first touched by whoever writes each element
-// first: std::vector's value-initialisation touches them all on the calling
-// thread (a page's first touch costs a fault, about 2 ms per 4 MB on this
-// kind of VM, 36 ms for a 256^3 float array), before the threads that fill
-// it in parallel start.
-template <class T>
-class UninitArray {
- public:
-  UninitArray() = default;
-  explicit UninitArray(std::size_t n) : data_(n ? new T[n] : nullptr), size_(n) {}
-  T& operator[](std::size_t i) { return data_[i]; }
-  const T& operator[](std::size_t i) const { return data_[i]; }
-  T* data() { return data_.get(); }
-  const T* data() const { return data_.get(); }
-  std::size_t size() const { return size_; }
-
- private:
-  std::unique_ptr<T[]> data_;
-  std::size_t size_ = 0;
-};
 
 }  // namespace softshell

@@ -834,7 +834,7 @@ TEST(NearField, LowpassAcrossTheBeamIsTheNormalisedSumPerVoxel) {
         ref.swap(next);
       }
       for (const int threads : {1, 3}) {
-        const UninitArray<float> got = lowpass_across_beam(v, scanned, beam, sigma_mm, threads);
+        const HostVector<float> got = lowpass_across_beam(v, scanned, beam, sigma_mm, threads);
         std::size_t differ = 0;
         for (std::size_t i = 0; i < v.voxels(); ++i) differ += got[i] != ref[i];
         EXPECT_EQ(differ, 0u) << "beam axis " << beam << (masked ? ", masked" : "") << ", threads " << threads;
