@@ -250,6 +250,7 @@ struct SliceSums {
   std::size_t censored = 0;
   double drawn_u = 0, near_u = 0, normal_w = 0, normal_wangle = 0, mass = 0, near_mass = 0, max_u = 0;
   std::vector<double> peaks, widths;  // facing surface voxels in index order; widths of the measured ones
+  std::vector<double> visible_peaks;  // the peaks of the visible ones (with a shadow volume)
 };
 
 void validate(const Volume& opacity, const Volume& truth, const MetricsParams& p) {
@@ -445,6 +446,7 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
                                     double(z) * g.h[2] - d * nrm[2]};
             const ProfileResult r = profile(u, g, pg, foot, nrm, peak_floor);
             s.peaks.push_back(r.peak);
+            if (p.shadow_db && p.shadow_db->data[i] < float(p.visible_db)) s.visible_peaks.push_back(r.peak);
             if (r.measured) s.widths.push_back(r.width_mm);
             if (r.censored) ++s.censored;
           }
@@ -460,8 +462,9 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
     t.near_mass += s.near_mass;
     t.max_u = std::max(t.max_u, s.max_u);
     t.peaks.insert(t.peaks.end(), s.peaks.begin(), s.peaks.end());
+    t.visible_peaks.insert(t.visible_peaks.end(), s.visible_peaks.begin(), s.visible_peaks.end());
     t.widths.insert(t.widths.end(), s.widths.begin(), s.widths.end());
-    s.peaks = {}, s.widths = {};
+    s.peaks = {}, s.widths = {}, s.visible_peaks = {};
     t.splats += s.splats;
     t.opaque += s.opaque;
     t.facing += s.facing;
@@ -491,6 +494,7 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
   m.normal_error_deg = t.normal_w > 0 ? t.normal_wangle / t.normal_w : 0.0;
   m.mass_precision = t.mass > 0 ? t.near_mass / t.mass : 0.0;
   m.surface_peak = median(std::move(t.peaks)) / p.u_ind;
+  if (!t.visible_peaks.empty()) m.surface_peak_visible = median(std::move(t.visible_peaks)) / p.u_ind;
   m.thickness_points = t.widths.size();
   m.thickness_censored = t.censored;
   m.shell_thickness_mm = median(std::move(t.widths));
@@ -600,6 +604,7 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
   const auto f1 = [](double a, double b) { return a + b > 0 ? 2 * a * b / (a + b) : 0.0; };
   m.f1 = f1(m.precision, m.recall);
   m.f1_mass = f1(m.mass_precision, m.recall);
+  if (!std::isnan(m.recall_visible)) m.f1_visible = f1(m.precision, m.recall_visible);
   return m;
 }
 
@@ -620,6 +625,8 @@ std::string metrics_json(const Metrics& m, const MetricsParams& p) {
     << ", \"spurious_voxels\": " << m.spurious_voxels << ", \"mass_precision\": " << json_number(m.mass_precision)
     << ", \"f1\": " << json_number(m.f1) << ", \"f1_mass\": " << json_number(m.f1_mass)
     << ", \"surface_peak\": " << json_number(m.surface_peak)
+    << ", \"surface_peak_visible\": " << json_number(m.surface_peak_visible)
+    << ", \"f1_visible\": " << json_number(m.f1_visible)
     << ", \"shell_thickness_mm\": " << json_number(m.shell_thickness_mm)
     << ", \"thickness_points\": " << m.thickness_points << ", \"thickness_censored\": " << m.thickness_censored
     << ", \"blobs6\": " << m.blobs6 << ", \"components6\": " << m.components6

@@ -55,6 +55,10 @@ struct Metrics {
   // full acoustic shadow); NaN (JSON null) without it, or when none is visible.
   double recall_visible = std::numeric_limits<double>::quiet_NaN();
   std::size_t visible_surface_voxels = 0;
+  // The same restriction for surface_peak and f1 (2 precision recall_visible /
+  // (precision + recall_visible)); NaN exactly when recall_visible is.
+  double surface_peak_visible = std::numeric_limits<double>::quiet_NaN();
+  double f1_visible = std::numeric_limits<double>::quiet_NaN();
   std::size_t normal_voxels = 0;    // drawn voxels near a true surface that entered normal_error_deg
   std::size_t spurious_voxels = 0;  // drawn voxels in spurious blobs
 

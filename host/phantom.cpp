@@ -351,7 +351,7 @@ std::string phantom_json(const PhantomParams& params, const Phantom& p) {
     if (phys)
       j << "  \"shadow_db\": \"shadow_db.nrrd\",\n"
         << "  \"shadow_db_meaning\": \"two-way loss (dB) beyond what the TGC restores: > 0 in acoustic shadows, < 0 "
-           "below fluid, 0 outside the scanned region\",\n";
+           "below fluid, 1000 outside the scanned region (nothing there can be seen)\",\n";
     j << "  \"labels\": \"labels.nrrd\",\n"
       << "  \"label_values\": {\"0\": \"fluid / background\", \"1\": \"object (sdf < 0)\", \"2\": \"near-field "
          "layers\", \"3\": \"outside the scanned region (grey 0)\"},\n"

@@ -532,13 +532,16 @@ __kernel void phantom_scan_convert(__global const float* restrict grey, __global
   store_lanes_b(out + idx, TO_UCHAR(SEL(img.inside, clampf(rint(val), 0.0f, 255.0f), (VF)(0.0f))), count);
   /* Shadow: the two-way loss to the voxel beyond what the TGC restores (the
    * reference tissue's attenuation over its depth): > 0 in shadows, < 0 where
-   * the beam crossed fluid (enhancement); 0 outside the scanned region. */
+   * the beam crossed fluid (enhancement); UNSCANNED_LOSS_DB outside the
+   * scanned region (no beam went there, so nothing there can be seen: this is
+   * what evaluate's recall_visible reads from the volume; finite, so that
+   * every tool reads the file). */
   const VF l00 = mixf(gather(loss, base), gather(loss, base + 1), tu);
   const VF l10 = mixf(gather(loss, base + sv), gather(loss, base + sv + 1), tu);
   const VF l01 = mixf(gather(loss, base + sw), gather(loss, base + sw + 1), tu);
   const VF l11 = mixf(gather(loss, base + sw + sv), gather(loss, base + sw + sv + 1), tu);
   const VF lost = mixf(mixf(l00, l10, tv), mixf(l01, l11, tv), tw) - P[PS_ATT_REF] * img.d;
-  store_lanes(shadow + idx, SEL(img.inside, lost, (VF)(0.0f)), count);
+  store_lanes(shadow + idx, SEL(img.inside, lost, (VF)(UNSCANNED_LOSS_DB)), count);
 
   const BeamPos truth = beam_pos(P, bg, x, (VF)(y), (VF)(z));
   VI band = (VI)(0);

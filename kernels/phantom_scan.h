@@ -53,4 +53,8 @@
 #define PS_ATT_REF 71    /* the reference (soft) tissue's two-way attenuation, dB/mm: what the TGC restores */
 #define PS_COUNT 72
 
+/* shadow_db outside the scanned region: no beam went there, nothing there can
+ * be seen (a finite stand-in for an infinite loss). */
+#define UNSCANNED_LOSS_DB 1000.0f
+
 #endif

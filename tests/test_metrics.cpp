@@ -234,6 +234,15 @@ TEST(MetricsVisible, RecallVisibleCountsOnlySurfacesOutOfTheShadow) {
   EXPECT_GT(m.visible_surface_voxels, m.facing_surface_voxels / 3);
   EXPECT_GT(m.recall_visible, 0.99);  // every visible surface voxel is drawn
   EXPECT_LT(m.recall, 0.6);           // the shadowed half is not
+  // The same restriction for f1 and surface_peak: the visible half peaks as
+  // the whole shell would, the shadowed half (at 0) is left out of the median.
+  EXPECT_TRUE(std::isnan(plain.f1_visible));
+  EXPECT_TRUE(std::isnan(plain.surface_peak_visible));
+  EXPECT_NEAR(m.f1_visible, 2 * m.precision * m.recall_visible / (m.precision + m.recall_visible), 1e-12);
+  EXPECT_GT(m.f1_visible, m.f1);
+  const Metrics whole = evaluate_opacity(u, sdf, p);
+  EXPECT_LT(m.surface_peak, 0.5 * whole.surface_peak);  // most facing voxels unpeaked
+  EXPECT_NEAR(m.surface_peak_visible, whole.surface_peak, 0.05);
   // The shadowed half drawn instead: nothing visible is recalled (at a
   // tolerance of 0 voxels; at 2 the seam's neighbours count).
   Volume right = u;
@@ -249,6 +258,8 @@ TEST(MetricsVisible, RecallVisibleCountsOnlySurfacesOutOfTheShadow) {
   const Metrics none = evaluate_opacity(left, sdf, p);
   EXPECT_EQ(none.visible_surface_voxels, 0u);
   EXPECT_TRUE(std::isnan(none.recall_visible));
+  EXPECT_TRUE(std::isnan(none.f1_visible));
+  EXPECT_TRUE(std::isnan(none.surface_peak_visible));
   p.shadow_db = &below20;
   const Metrics all = evaluate_opacity(left, sdf, p);
   EXPECT_EQ(all.visible_surface_voxels, all.facing_surface_voxels);
@@ -903,10 +914,14 @@ TEST_F(CliEvaluate, RecallVisibleFromTheShadowBesideTheTruthOrGiven) {
   EXPECT_EQ(j["visible_surface_voxels"], std::vector<double>{double(m.visible_surface_voxels)});
   EXPECT_EQ(j["visible_db"], std::vector<double>{20.0});
   EXPECT_EQ(j["recall"], std::vector<double>{1.0});
+  EXPECT_NEAR(j["f1_visible"].at(0), m.f1_visible, 1e-9);
+  EXPECT_NEAR(j["surface_peak_visible"].at(0), m.surface_peak_visible, 1e-9);
   // --shadow none turns it off; --shadow FILE and --visible-db are used.
   r = run({"evaluate", file("u.nrrd"), file("truth_sdf.nrrd"), "--json", "--shadow", "none"});
   ASSERT_NO_THROW(j = parse_flat_json(r.out)) << r.out;
   EXPECT_TRUE(std::isnan(j["recall_visible"].at(0)));
+  EXPECT_TRUE(std::isnan(j["f1_visible"].at(0)));
+  EXPECT_TRUE(std::isnan(j["surface_peak_visible"].at(0)));
   write_volume(file("other.nrrd"), half_shadow(sdf, 50.0f));
   r = run({"evaluate", file("u.nrrd"), file("truth_sdf.nrrd"), "--json", "--shadow", file("other.nrrd"),
            "--visible-db", "60"});
@@ -930,7 +945,7 @@ TEST_F(CliEvaluate, TableNamesEveryMetric) {
   for (const char* word : {"precision", "recall", "spurious_blobs", "components", "normal_error_deg",
                            "percent_opaque", "splats", "facing_surface_voxels", "24x24x24", "1.0000",
                            "mass_precision", "f1_mass", "surface_peak", "shell_thickness_mm", "blobs6",
-                           "blob6_voxel_share", "components6", "u > 0.050"})
+                           "blob6_voxel_share", "components6", "u > 0.050", "f1_visible", "surface_peak_visible"})
     EXPECT_NE(r.out.find(word), std::string::npos) << word << " not in:\n" << r.out;
 }
 

@@ -185,9 +185,12 @@ int run_evaluate(EvaluateOptions o) {
                                                           " of a true surface"},
       {"f1", fixed(m.f1, 4), "2 precision recall / (precision + recall)"},
       {"f1_mass", fixed(m.f1_mass, 4), "the same with mass_precision"},
+      {"f1_visible", p.shadow_db ? fixed(m.f1_visible, 4) : std::string("-"), "the same with recall_visible"},
       {"surface_peak", fixed(m.surface_peak, 4),
        "median over the facing surface voxels of max u across the surface (within the tolerance) / u_ind " +
            fixed(p.u_ind, 3)},
+      {"surface_peak_visible", p.shadow_db ? fixed(m.surface_peak_visible, 4) : std::string("-"),
+       "the same over the visible ones (those of recall_visible)"},
       {"shell_thickness_mm", fixed(m.shell_thickness_mm, 3),
        "median full width at half maximum of u along the true normal, over " + std::to_string(m.thickness_points) +
            " points (" + std::to_string(m.thickness_censored) + " wider than the +-" + fixed(m.profile_radius_mm, 1) +
