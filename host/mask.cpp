@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 
 #include "error.hpp"
@@ -614,7 +615,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     if (report) *report = rep;
     return band;
   }
-  auto median = [](std::vector<float>& x) {
+  auto median = [](auto& x) {
     if (x.empty()) return std::nan("");
     std::nth_element(x.begin(), x.begin() + long(x.size() / 2), x.end());
     return double(x[x.size() / 2]);
@@ -623,33 +624,173 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   for (std::size_t b = 0; b < bins; ++b) P[b] = median(at_depth[b]);
   const auto top_bins = std::size_t(std::ceil(params.top_mm / 0.5));
   double top = -1e300, below = 1e300;
-  std::size_t top_at = 0;
   for (std::size_t b = 0; b < bins && b < top_bins; ++b)
-    if (!std::isnan(P[b]) && P[b] > top) top = P[b], top_at = b;
+    if (!std::isnan(P[b]) && P[b] > top) top = P[b];
   for (std::size_t b = top_bins; b < bins; ++b)
     if (!std::isnan(P[b])) below = std::min(below, P[b]);
   rep.top = top, rep.below = below;
-  // A band: the top at least min_ratio brighter than below it, relative to
-  // the top (log-compressed grey levels: a few dB of contrast are not a band).
-  if (top > 0 && below < 1e300 && top - below > params.min_ratio * top) {
-    // The bottom: where P falls below halfway and stays there for
-    // stay_mm (a layered band -- skin, fat, muscle -- dips in between).
-    const double half = 0.5 * (top + below);
-    const auto stay = std::size_t(std::ceil(params.stay_mm / 0.5));
-    std::size_t b = top_at;
-    for (; b < bins; ++b) {
-      std::size_t k = b;
-      while (k < bins && k < b + stay && !(P[k] >= half)) ++k;
-      if (k == std::min(bins, b + stay)) break;
+  if (!(below < 1e300)) {
+    if (report) *report = rep;
+    return band;
+  }
+  // Per beam line (docs/real-data.md, "The near field"): the line's own top,
+  // T (the brightest of its first top_mm), and, when T is at least min_ratio
+  // brighter than `below` (relative to T), the band's bottom on this line:
+  // where the line falls below halfway between T and `below` and stays there
+  // for stay_mm (a layered band dips at the fat), within search_mm. A line
+  // that never falls (bright all the way) has no band. The profile above,
+  // over all lines, sets only `below`: on a fan whose top the volume's top
+  // face cuts, or on a volume probe whose cap is a small part of the top,
+  // most lines enter the scan below the band, and their median hid it.
+  //
+  // The lines' samples by depth below their skin line, A[l K + k] (NaN where
+  // unscanned or past the volume), then averaged across the beam over
+  // profile_mm either way (a separable box over the lines, per depth): one
+  // line's maximum over a few speckle samples is biased bright, and the
+  // local mean is not.
+  const auto K = std::size_t(std::ceil(params.search_mm / hz));
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  std::vector<float> A(lines * K, nan);
+  parallel_ranges(d[w_ax], threads, [&](std::size_t b0, std::size_t b1) {
+    for (std::size_t z = 0; z < d[ax]; ++z)
+      for (std::size_t bb = b0; bb < b1; ++bb)
+        for (std::size_t a = 0; a < d[u_ax]; ++a) {
+          const std::size_t l = a + bb * d[u_ax];
+          if (skin[l] < 0 || long(z) < skin[l] || std::size_t(long(z) - skin[l]) >= K) continue;
+          const std::size_t i = voxel(a, bb, z);
+          if (scanned && !(*scanned)[i]) continue;
+          A[l * K + std::size_t(long(z) - skin[l])] = lp[i];
+        }
+  });
+  const auto box_across = [&](int lat, double h_lat) {
+    const std::size_t n_along = lat == 0 ? d[u_ax] : d[w_ax], n_other = lat == 0 ? d[w_ax] : d[u_ax];
+    const long r = std::max(0L, long(std::lround(params.profile_mm / h_lat)));
+    std::vector<float> out(A.size(), nan);
+    parallel_ranges(n_other, threads, [&](std::size_t o0, std::size_t o1) {
+      for (std::size_t o = o0; o < o1; ++o) {
+        const auto line = [&](long t) { return lat == 0 ? std::size_t(t) + o * d[u_ax] : o + std::size_t(t) * d[u_ax]; };
+        for (std::size_t k = 0; k < K; ++k) {
+          double sum = 0;
+          long count = 0;
+          const auto add = [&](long t, int sign) {
+            if (t < 0 || t >= long(n_along)) return;
+            const float x = A[line(t) * K + k];
+            if (!std::isnan(x)) sum += sign * double(x), count += sign;
+          };
+          for (long t = 0; t < r && t < long(n_along); ++t) add(t, 1);
+          for (long t = 0; t < long(n_along); ++t) {
+            add(t + r, 1);
+            add(t - r - 1, -1);
+            if (!std::isnan(A[line(t) * K + k]) && count > 0) out[line(t) * K + k] = float(sum / double(count));
+          }
+        }
+      }
+    });
+    A.swap(out);
+  };
+  const auto top_k = std::size_t(std::ceil(params.top_mm / hz));
+  // The line's own top before the mean across: the median of its first
+  // top_mm. A line is a candidate only when this is bright too, so that the
+  // mean across does not carry a band past its lateral edge (where the
+  // volume's top face cuts a fan's band) onto dark lines beside it.
+  std::vector<float> own_top(lines, nan);
+  parallel_ranges(lines, threads, [&](std::size_t l0, std::size_t l1) {
+    std::vector<float> x;
+    for (std::size_t l = l0; l < l1; ++l) {
+      x.clear();
+      for (std::size_t k = 0; k < top_k && k < K; ++k)
+        if (!std::isnan(A[l * K + k])) x.push_back(A[l * K + k]);
+      if (!x.empty()) own_top[l] = float(median(x));
     }
+  });
+  box_across(0, v.spacing[u_ax]);
+  box_across(1, v.spacing[w_ax]);
+  std::vector<float> ltop(lines, -std::numeric_limits<float>::infinity());
+  std::vector<long> ltop_at(lines, -1), lbottom(lines, 0), run(lines, -1);
+  const auto bright = [&](double t) { return t - below > params.min_ratio * t; };
+  const auto candidate = [&](std::size_t l) {
+    return ltop_at[l] >= 0 && bright(double(ltop[l])) && !std::isnan(own_top[l]) && bright(double(own_top[l]));
+  };
+  parallel_ranges(lines, threads, [&](std::size_t l0, std::size_t l1) {
+    for (std::size_t l = l0; l < l1; ++l) {
+      const float* x = &A[l * K];
+      for (std::size_t k = 0; k < top_k && k < K; ++k)
+        if (!std::isnan(x[k]) && x[k] > ltop[l]) ltop[l] = x[k], ltop_at[l] = long(k);
+      if (!candidate(l)) continue;
+      const double half = 0.5 * (double(ltop[l]) + below);
+      for (std::size_t k = std::size_t(ltop_at[l]); k < K; ++k) {
+        if (std::isnan(x[k])) continue;
+        if (double(x[k]) >= half) {
+          run[l] = -1;
+          continue;
+        }
+        if (run[l] < 0) run[l] = long(k);
+        if (double(long(k) - run[l] + 1) * hz >= params.stay_mm) {
+          lbottom[l] = run[l];
+          break;
+        }
+      }
+    }
+  });
+  // A line that fell below halfway and ended (or left the search window)
+  // before stay_mm: its band ends where it fell.
+  for (std::size_t l = 0; l < lines; ++l)
+    if (candidate(l) && lbottom[l] == 0 && run[l] > 0) lbottom[l] = run[l];
+  // The band is a layer across the probe: its bottom varies slowly across the
+  // lines. A separable median over smooth_mm either way across the beam (over
+  // the lines with a skin line; 0 where a line has no band) keeps that and
+  // drops single lines that speckle or an object under the band carried
+  // deeper (or cut short).
+  std::vector<double> bottom_mm(lines, -1.0);
+  for (std::size_t l = 0; l < lines; ++l)
+    if (skin[l] >= 0) bottom_mm[l] = double(lbottom[l]) * hz;
+  const auto median_along = [&](int axis_lat, std::size_t n_along, std::size_t n_other, double h_lat) {
+    const long r = std::max(1L, long(std::lround(params.smooth_mm / h_lat)));
+    std::vector<double> out(bottom_mm);
+    parallel_ranges(n_other, threads, [&](std::size_t o0, std::size_t o1) {
+      std::vector<double> win;
+      for (std::size_t o = o0; o < o1; ++o)
+        for (std::size_t t = 0; t < n_along; ++t) {
+          const auto line = [&](std::size_t s) { return axis_lat == 0 ? s + o * d[u_ax] : o + s * d[u_ax]; };
+          if (bottom_mm[line(t)] < 0) continue;
+          win.clear();
+          // Symmetric about t, also at the volume's sides (a one-sided window
+          // there would carry the inner lines' value out to the edge).
+          const long rt = std::min({r, long(t), long(n_along) - 1 - long(t)});
+          for (long s = long(t) - rt; s <= long(t) + rt; ++s)
+            if (bottom_mm[line(std::size_t(s))] >= 0) win.push_back(bottom_mm[line(std::size_t(s))]);
+          std::nth_element(win.begin(), win.begin() + long(win.size() / 2), win.end());
+          out[line(t)] = win[win.size() / 2];
+        }
+    });
+    bottom_mm.swap(out);
+  };
+  median_along(0, d[u_ax], d[w_ax], v.spacing[u_ax]);
+  median_along(1, d[w_ax], d[u_ax], v.spacing[w_ax]);
+  std::size_t with_skin = 0, band_lines = 0;
+  std::vector<double> depths, tops;
+  for (std::size_t l = 0; l < lines; ++l) {
+    if (skin[l] < 0) continue;
+    ++with_skin;
+    if (bottom_mm[l] > 0) {
+      ++band_lines;
+      depths.push_back(bottom_mm[l] + params.margin_mm);
+      if (ltop_at[l] >= 0) tops.push_back(double(ltop[l]));
+    }
+  }
+  if (band_lines > 0 && double(band_lines) >= params.min_lines * double(with_skin)) {
     rep.found = true;
-    rep.depth_mm = double(b) * 0.5 + params.margin_mm;
+    rep.lines = band_lines;
+    rep.depth_mm = median(depths);
+    if (!tops.empty()) rep.top = median(tops);
     for (std::size_t bb = 0; bb < d[w_ax]; ++bb)
       for (std::size_t a = 0; a < d[u_ax]; ++a) {
-        const long s0 = skin[a + bb * d[u_ax]];
-        if (s0 < 0) continue;
+        const std::size_t l = a + bb * d[u_ax];
+        const long s0 = skin[l];
+        if (s0 < 0 || !(bottom_mm[l] > 0)) continue;
+        const double bottom = bottom_mm[l] + params.margin_mm;
         for (std::size_t z = std::size_t(s0); z < d[ax]; ++z) {
-          if (double(long(z) - s0) * hz >= rep.depth_mm) break;
+          if (double(long(z) - s0) * hz >= bottom) break;
           band[voxel(a, bb, z)] = 1;
           ++rep.voxels;
         }
@@ -770,6 +911,12 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
   rep.echo = Q[0], rep.copy1 = Q[s1], rep.trough = Q[t1], rep.spacing_mm = double(s1) * h;
   const double rise = Q[0] - Q[t1];
   if (!(rise > 0) || Q[s1] - Q[t1] < params.min_copy * rise) return done();
+  // Between an echo and its first copy the line goes dark: what lies under a
+  // strong specular reflector is in its shadow. Bright texture under the
+  // first echo (the inside of an object) has bumps of any spacing but no
+  // such gap (randomised face 106: trough 0.43 of the way from the echo down
+  // to the median, the flat reflector of IMLiF 0.81).
+  if (rise < params.min_gap * (Q[0] - lo)) return done();
   const auto lo2 = std::size_t(std::lround(double(s1) * (2.0 - params.tolerance)));
   const auto hi2 = std::min(Q.size() - 1, std::size_t(std::lround(double(s1) * (2.0 + params.tolerance))));
   if (lo2 <= s1 + 1 || lo2 > hi2) return done();

@@ -83,13 +83,15 @@ HostVector<float> lowpass_across_beam(const Volume& v, const std::vector<std::ui
 // The bright layered near field under the probe (skin, fat, muscle: an
 // occluder, not the object; docs/real-data.md, "The near field"). Along the
 // beam (params.axis, or the data's own, beam_axis_of), depth is counted
-// from each beam line's first scanned voxel (the skin line). P(d), the median over the columns of the lowpassed data at
-// depth d (0.5 mm steps), is compared between the top (the brightest of its
-// first top_mm) and below it (the darkest from top_mm to search_mm): when
-// the top is brighter by more than min_ratio of its own level, the band
-// reaches down to where P first falls below halfway
-// between the two, plus margin_mm. Returns 1 for voxels in the band, all 0
-// when there is none.
+// from each beam line's first scanned voxel (the skin line). `below`: the
+// darkest of P(d), the median over the lines of the lowpassed data at depth
+// d (0.5 mm steps), from top_mm to search_mm. Per line, its top T (the
+// brightest of its first top_mm): when T is brighter than `below` by more
+// than min_ratio of T, the line's band reaches down to where it falls below
+// halfway between the two and stays there for stay_mm. The lines' bottoms
+// are smoothed by a separable median over smooth_mm across the beam, and the
+// band is each line's bottom plus margin_mm, when at least min_lines of the
+// lines have one. Returns 1 for voxels in the band, all 0 when there is none.
 // Reverberations of a strong flat reflector (docs/real-data.md,
 // "Reverberations"): a specular echo bounces between the reflector and the
 // probe (or within a plate), and the scan shows fainter copies of it at equal
@@ -99,8 +101,10 @@ HostVector<float> lowpass_across_beam(const Volume& v, const std::vector<std::ui
 // voxels; then its crest within 1 mm) aligns the line; Q(s), the median over
 // the aligned lines s below their echo, is the echo train. Reverberation: Q
 // has a copy at s1 in [min_spacing_mm, max_spacing_mm] that rises above the
-// trough before it by min_copy of the echo's own rise, and a second, fainter
-// copy within tolerance s1 of 2 s1 rising by min_second. Then, in every line
+// trough before it by min_copy of the echo's own rise, a trough that falls
+// at least min_gap of the way from the echo down to lo (under a strong
+// reflector lies its shadow), and a second, fainter copy within tolerance s1
+// of 2 s1 rising by min_second. Then, in every line
 // with a first strong echo, the voxels below it from where its lower flank
 // falls to halfway between the echo and that trough are the reverberation
 // region (held at u = 0 like the near field).
@@ -108,6 +112,7 @@ struct ReverbParams {
   double strong = 0.5;
   double min_spacing_mm = 1.0, max_spacing_mm = 15.0;
   double min_copy = 0.3, min_second = 0.15;
+  double min_gap = 0.6;  // the trough before the first copy: at least this share of the way from the echo to lo
   double tolerance = 0.2;
   double sigma_mm = 1.0;  // lowpass across the beam, as the near field's
 };
@@ -128,10 +133,13 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
 struct NearFieldParams {
   double top_mm = 3.0, search_mm = 25.0, margin_mm = 1.0;
   double stay_mm = 3.0;    // the band ends where the profile stays below halfway this long
-  double min_ratio = 0.5;  // the top brighter than below it by this share of the top
+  double min_ratio = 0.3;  // the top brighter than below it by this share of the top
   double sigma_mm = 1.0;   // lowpass across the beam of the profile's samples
   int axis = -1;           // beam axis (0 x, 1 y, 2 z); -1: beam_axis_of the data
   double max_share = 0.5;  // a "band" holding more of the scanned voxels is the object, not a near field
+  double profile_mm = 2.0; // the lines' samples: mean over this far either way across the beam, per depth
+  double smooth_mm = 5.0;  // the lines' band bottoms: median over this far either way across the beam
+  double min_lines = 0.05; // a band: on at least this share of the beam lines (with a skin line)
   int threads = 0;         // host threads (0: every core); the band is the same for any count
   bool band = true;        // remove_near_field: the band (false: only the reverberations, if reverb)
   bool reverb = true;      // remove_near_field: also the reverberations of a flat reflector (below)
@@ -140,7 +148,8 @@ struct NearFieldParams {
 struct NearFieldReport {
   int axis = 2;                 // the beam axis used
   bool found = false;
-  double depth_mm = 0;          // band bottom below the skin line, margin included
+  double depth_mm = 0;          // band bottom below the skin line, margin included (median over its lines)
+  std::size_t lines = 0;        // beam lines with a band
   double top = 0, below = 0;    // P at the top and below it (file units)
   std::size_t voxels = 0;       // voxels in the band
   bool too_deep = false;        // a band was found but held more than max_share of the scanned voxels: kept

@@ -225,6 +225,81 @@ TEST(NearField, BeamAxisFromTheSpeckleGrain) {
   EXPECT_EQ(band[v.index(20, 40, 15)], 0);
 }
 
+// Speckle-like samples (grain finer along z, the beam, than across it) of a
+// mean given per voxel position in mm: mean(x, y, z).
+template <class Mean>
+Volume speckled(Dims3 dims, double h, Mean mean, std::uint64_t seed) {
+  Volume v(dims, {h, h, h}, ScalarType::UInt8);
+  std::uniform_real_distribution<double> U(0.6, 1.4);
+  for (std::size_t z = 0; z < dims[2]; ++z)
+    for (std::size_t y = 0; y < dims[1]; ++y)
+      for (std::size_t x = 0; x < dims[0]; ++x) {
+        std::mt19937_64 cell(seed ^ (z * 1000003 + (y / 3) * 7919 + (x / 3) * 104729));
+        const double m = mean(double(x) * h, double(y) * h, double(z) * h);
+        v.at(x, y, z) = float(std::clamp(std::round(m * U(cell)), 1.0, 255.0));
+      }
+  return v;
+}
+
+TEST(NearField, ABandUnderPartOfTheProbeIsFoundOnItsOwnLines) {
+  // The cap of a volume probe, as the volume's top face cuts a fan: the
+  // layered band (skin, fat, muscle; 7 mm) lies under the lines within 7 mm
+  // of the middle only, the other lines enter dark fluid at the top. At every
+  // depth most lines are dark, so a median over all of them shows no band;
+  // per line (and smoothed across the lines) it is found where it is, to its
+  // bottom, and nowhere else.
+  const double h = 0.5;
+  const auto cap = [](double x, double y) { return std::hypot(x - 12.0, y - 12.0) < 7.0; };
+  const Volume v = speckled({48, 48, 60}, h,
+                            [&](double x, double y, double z) {
+                              if (!cap(x, y)) return 30.0;
+                              return z < 2.0 ? 220.0 : z < 4.0 ? 150.0 : z < 7.0 ? 210.0 : 30.0;
+                            },
+                            test::seed() + 5);
+  NearFieldReport r;
+  const auto band = near_field_band(v, nullptr, NearFieldParams{}, &r);
+  ASSERT_TRUE(r.found);
+  EXPECT_NEAR(r.depth_mm, 7.0 + NearFieldParams{}.margin_mm, 1.0);
+  EXPECT_EQ(band[v.index(24, 24, 2)], 1);
+  EXPECT_EQ(band[v.index(24, 24, 12)], 1);  // the muscle, below the fat's dip
+  EXPECT_EQ(band[v.index(24, 24, 24)], 0);
+  std::size_t outside = 0, inside_lines = 0, inside_deep = 0;
+  for (std::size_t y = 0; y < 48; ++y)
+    for (std::size_t x = 0; x < 48; ++x) {
+      const double r_mm = std::hypot(double(x) * h - 12.0, double(y) * h - 12.0);
+      for (std::size_t z = 0; z < 60; ++z)
+        if (band[v.index(x, y, z)] && r_mm > 9.0) ++outside;
+      if (r_mm < 5.0) {
+        ++inside_lines;
+        if (band[v.index(x, y, 13)]) ++inside_deep;  // 6.5 mm: still the band
+      }
+    }
+  EXPECT_EQ(outside, 0u);
+  EXPECT_EQ(inside_deep, inside_lines);
+}
+
+TEST(NearField, AnObjectUnderTheBandOnAFewLinesKeepsItsTop) {
+  // A bright object touching the band's bottom under a few lines (a 4 mm wide
+  // column from 7 mm down): on those lines the data never falls below
+  // halfway, but the band's bottom is a median over 5 mm across the lines,
+  // so the object's top stays.
+  const double h = 0.5;
+  const Volume v = speckled({48, 48, 60}, h,
+                            [](double x, double y, double z) {
+                              if (z < 7.0) return z < 2.0 ? 220.0 : z < 4.0 ? 150.0 : 210.0;
+                              if (std::fabs(x - 12.0) < 2.0 && std::fabs(y - 12.0) < 2.0) return 200.0;
+                              return 30.0;
+                            },
+                            test::seed() + 6);
+  NearFieldReport r;
+  const auto band = near_field_band(v, nullptr, NearFieldParams{}, &r);
+  ASSERT_TRUE(r.found);
+  EXPECT_NEAR(r.depth_mm, 7.0 + NearFieldParams{}.margin_mm, 1.0);
+  // 11 mm below the skin in the object's middle: not the band.
+  EXPECT_EQ(band[v.index(24, 24, 22)], 0);
+  EXPECT_EQ(band[v.index(24, 24, 2)], 1);
+}
+
 // ---- reverberations and small volumes -------------------------------------------------------------------
 
 // A curvilinear (fan) scan of a flat reflector in water, beam along y,
@@ -293,6 +368,42 @@ TEST(Reverb, EquallySpacedCopiesOfAFlatReflectorAreFoundBelowItsEcho) {
   m = mask;
   EXPECT_FALSE(remove_near_field(v, m, keep).reverb.found);
   EXPECT_EQ(m, mask);
+}
+
+TEST(Reverb, BrightTextureUnderAnObjectsFirstEchoIsNoReverberation) {
+  // A bright object in dark fluid (most of the volume): its top echo, then
+  // its textured inside, brighter layers every 3 mm (each 0.9 of the one
+  // above) over a bright floor.
+  // The echo "repeats" at equal spacing, as a reverberation would, but the
+  // line never goes dark after the echo: no shadow under it, so no
+  // reflector whose ghosts these could be (randomised face 106 lost its
+  // head to this). The same layers over a dark gap are a reverberation.
+  const double h = 0.2;
+  for (bool gap : {false, true}) {
+    SCOPED_TRACE(gap ? "dark gap" : "bright inside");
+    const Volume v = speckled({40, 40, 150}, h,
+                              [&](double x, double y, double z) {
+                                const bool object = std::fabs(x - 4.0) < 2.5 && std::fabs(y - 4.0) < 2.5;
+                                if (!object || z < 4.0) return 20.0;
+                                if (z < 4.6) return 240.0;
+                                const double s = std::fmod(z - 4.0, 3.0);
+                                if (s < 0.6) return 240.0 * std::pow(0.9, std::floor((z - 4.0) / 3.0));
+                                return gap ? 25.0 : 140.0;
+                              },
+                              test::seed() + 23);
+    ReverbReport r;
+    reverberation_region(v, nullptr, 2, ReverbParams{}, &r);
+    EXPECT_EQ(r.found, gap) << "echo " << r.echo << " trough " << r.trough << " copy " << r.copy1 << " second "
+                            << r.copy2 << " spacing " << r.spacing_mm;
+    // Without the gap rule both are taken for a reverberation (the copies
+    // themselves are there either way).
+    ReverbParams no_gap;
+    no_gap.min_gap = 0;
+    reverberation_region(v, nullptr, 2, no_gap, &r);
+    EXPECT_TRUE(r.found) << "echo " << r.echo << " trough " << r.trough << " copy " << r.copy1 << " second "
+                         << r.copy2 << " spacing " << r.spacing_mm << " lines " << r.lines;
+    EXPECT_NEAR(r.spacing_mm, 3.0, 0.4);
+  }
 }
 
 TEST(Reverb, ALoneEchoABoneShadowOrANearFieldIsNoReverberation) {
