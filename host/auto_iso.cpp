@@ -120,7 +120,12 @@ __attribute__((target_clones("avx2", "default"))) void row_gradients(
   for (std::size_t x = 0; x < len; ++x) {
     const double gx = (xp[x] - xm[x]) / h2x, gy = (yp[x] - ym[x]) / h2y, gz = (zp[x] - zm[x]) / h2z;
     g[x] = float(std::sqrt(gx * gx + gy * gy + gz * gz));
-    bin[x] = std::clamp(int((c[x] - lo) / width), 0, bins - 1);
+    // Clamped before the conversion: the row's unusable voxels (outside the
+    // mask) may lie far outside [lo, hi], and a float beyond int's range
+    // converted to int is undefined (found by fuzz_classify). fmax/fmin take
+    // a NaN to the other operand. For every finite value the same bin as
+    // clamping the converted int.
+    bin[x] = int(std::fmax(0.0, std::fmin(double(bins - 1), (c[x] - lo) / width)));
   }
 }
 

@@ -754,6 +754,39 @@ TEST(IsoAuto, MaskedSweepFindsTheRealBoundary) {
   EXPECT_LT(local, 20 + 0.9 * 170);
 }
 
+TEST(IsoAuto, UnscannedSamplesFarOutsideTheRangeTakeNoPart) {
+  // Float data: fluid (20) over tissue (180), and a slab the mask calls
+  // unscanned holding values far outside the scanned range (1e30, -1e30,
+  // NaN-free). They take no part in the isovalue: every rule gives what it
+  // gives with zeros there. (fuzz_classify found their histogram bin formed
+  // by converting a float beyond int's range: undefined behaviour;
+  // tests/data/repro/classify_autoiso_bin_beyond_int.bin.)
+  Volume v({40, 32, 32}, {0.5, 0.5, 0.5}, ScalarType::Float32);
+  std::mt19937_64 rng(test::seed() + 3);
+  std::normal_distribution<double> noise(0.0, 8.0);
+  for (std::size_t z = 0; z < 32; ++z)
+    for (std::size_t y = 0; y < 32; ++y)
+      for (std::size_t x = 0; x < 40; ++x) v.at(x, y, z) = float((z < 16 ? 20 : 180) + noise(rng));
+  std::vector<std::uint8_t> mask(v.voxels(), 1);
+  for (std::size_t z = 0; z < 32; ++z)
+    for (std::size_t y = 0; y < 32; ++y)
+      for (std::size_t x = 0; x < 10; ++x) mask[v.index(x, y, z)] = 0;
+  for (AutoIsoRule rule : {AutoIsoRule::Local, AutoIsoRule::Edge, AutoIsoRule::EchoRidge}) {
+    AutoIsoParams p;
+    p.rule = rule;
+    std::vector<double> isos;
+    for (float fill : {0.0f, 1e30f, -1e30f}) {
+      Volume w = v;
+      for (std::size_t i = 0; i < w.voxels(); ++i)
+        if (!mask[i]) w.data[i] = fill;
+      isos.push_back(auto_iso(w, &mask, p));
+    }
+    EXPECT_TRUE(std::isfinite(isos[0]));
+    EXPECT_EQ(isos[1], isos[0]) << int(rule);
+    EXPECT_EQ(isos[2], isos[0]) << int(rule);
+  }
+}
+
 TEST(IsoAuto, LocalFieldFollowsABrightnessDriftAlongTheBeam) {
   // Two boundaries, fluid (20) over tissue (180) at z = 12 and tissue over
   // fluid at z = 36, under a gain that rises by 60 grey levels from the top

@@ -369,7 +369,7 @@ TEST(RobustRepro, EveryReproFileIsCovered) {
       "fifo.mhd",          "fifo.nhdr",         "metres_spacing_64.nrrd", "nan_voxel.nrrd", "spacing_1e-3.nrrd",
       "stdin.nhdr",        "teem_leak.nhdr",    "teem_overread_list.nhdr", "nrrd_nul_in_field_name.nrrd",
       "classify_converged_nan.bin",  // fuzz inputs: FuzzRegression.ReproInputsGetDocumentedAnswers
-      "classify_iso_field_inf_1.bin", "classify_iso_field_inf_2.bin",
+      "classify_iso_field_inf_1.bin", "classify_iso_field_inf_2.bin", "classify_autoiso_bin_beyond_int.bin",
       "nrrd_space_units_open_quote.nrrd", "nrrd_space_units_too_many.nrrd",  // Robust.ReproTeemErrorPaths
       "nrrd_space_units_cr_in_quote.nrrd", "nrrd_dimension_without_space.nrrd", "nrrd_long_unparsable_line.nrrd",
       "vti_zlib_last_block_4g.vti",  // tests/test_vti.cpp: Vti.ReproHugeBlockIsRefusedAtOnce
