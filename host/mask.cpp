@@ -558,58 +558,58 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     return band;
   }
   const HostVector<float> lp = lowpass_across_beam(v, scanned, ax, params.sigma_mm, threads);
-  // Skin line per beam line (its first scanned voxel), samples per depth bin.
+  // Skin line per beam line (its first scanned voxel).
   auto voxel = [&](std::size_t a, std::size_t b, std::size_t z) {
     return a * stride[u_ax] + b * stride[w_ax] + z * stride[ax];
   };
   const std::size_t lines = d[u_ax] * d[w_ax];
   std::vector<long> skin(lines, -1);
-  std::vector<std::vector<float>> at_depth(bins);
-  std::size_t all = 0;
   {
     // In memory order (z-planes over threads): the skin line of every beam
-    // line (its first scanned voxel, the minimum depth: exact), then the
-    // samples per depth bin, per range of planes, joined (the medians below
-    // do not depend on the order of a bin's samples).
+    // line (its first scanned voxel, the minimum depth: exact).
     const std::size_t nx = d[0], ny = d[1], nz = d[2];
-    // Every scanned voxel of planes [z0, z1) in memory order, with its beam
-    // line and depth index: f(i, l, depth).
-    auto each_scanned = [&](std::size_t z0, std::size_t z1, auto&& f) {
+    const int parts = range_count(nz, threads);
+    std::vector<std::vector<long>> pskin(static_cast<std::size_t>(parts), std::vector<long>(lines, -1));
+    parallel_ranges_indexed(nz, threads, [&](int k, std::size_t z0, std::size_t z1) {
+      std::vector<long>& sk = pskin[std::size_t(k)];
       for (std::size_t z = z0; z < z1; ++z)
         for (std::size_t y = 0; y < ny; ++y)
           for (std::size_t x = 0; x < nx; ++x) {
             const std::size_t i = (z * ny + y) * nx + x;
             if (scanned && !(*scanned)[i]) continue;
             const std::size_t c[3] = {x, y, z};
-            f(i, c[u_ax] + c[w_ax] * d[u_ax], long(c[ax]));
+            const std::size_t l = c[u_ax] + c[w_ax] * d[u_ax];
+            if (sk[l] < 0 || long(c[ax]) < sk[l]) sk[l] = long(c[ax]);
           }
-    };
-    const int parts = range_count(nz, threads);
-    std::vector<std::vector<long>> pskin(static_cast<std::size_t>(parts), std::vector<long>(lines, -1));
-    parallel_ranges_indexed(nz, threads, [&](int k, std::size_t z0, std::size_t z1) {
-      std::vector<long>& sk = pskin[std::size_t(k)];
-      each_scanned(z0, z1, [&](std::size_t, std::size_t l, long depth) {
-        if (sk[l] < 0 || depth < sk[l]) sk[l] = depth;
-      });
     });
     for (const auto& sk : pskin)
       for (std::size_t l = 0; l < lines; ++l)
         if (sk[l] >= 0 && (skin[l] < 0 || sk[l] < skin[l])) skin[l] = sk[l];
-    std::vector<std::vector<std::vector<float>>> pbins(static_cast<std::size_t>(parts), std::vector<std::vector<float>>(bins));
+  }
+  // The lines' samples by depth below their skin line, A[l K + k] (NaN where
+  // unscanned or past the volume): deep enough for the profile's depth bins
+  // (0.5 mm each, `bins` of them), which reach past search_mm. One pass over
+  // the volume serves the profile below and the per-line band after it.
+  const auto K = std::size_t(std::ceil(0.5 * double(bins) / hz)) + 1;
+  const auto K_search = std::min(K, std::size_t(std::ceil(params.search_mm / hz)));
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  std::vector<float> A(lines * K, nan);
+  std::size_t all = 0;  // scanned voxels
+  {
+    const int parts = range_count(d[w_ax], threads);
     std::vector<std::size_t> pall(static_cast<std::size_t>(parts), 0);
-    parallel_ranges_indexed(nz, threads, [&](int k, std::size_t z0, std::size_t z1) {
-      auto& pb = pbins[std::size_t(k)];
-      each_scanned(z0, z1, [&](std::size_t i, std::size_t l, long depth) {
-        const auto bin = std::size_t(double(depth - skin[l]) * hz / 0.5);
-        if (bin < bins) pb[bin].push_back(lp[i]);
-        ++pall[std::size_t(k)];
-      });
+    parallel_ranges_indexed(d[w_ax], threads, [&](int part, std::size_t b0, std::size_t b1) {
+      for (std::size_t z = 0; z < d[ax]; ++z)
+        for (std::size_t bb = b0; bb < b1; ++bb)
+          for (std::size_t a = 0; a < d[u_ax]; ++a) {
+            const std::size_t l = a + bb * d[u_ax];
+            const std::size_t i = voxel(a, bb, z);
+            if (scanned && !(*scanned)[i]) continue;
+            ++pall[std::size_t(part)];
+            if (long(z) - skin[l] < long(K)) A[l * K + std::size_t(long(z) - skin[l])] = lp[i];
+          }
     });
-    for (int k = 0; k < parts; ++k) {
-      all += pall[std::size_t(k)];
-      for (std::size_t b = 0; b < bins; ++b)
-        at_depth[b].insert(at_depth[b].end(), pbins[std::size_t(k)][b].begin(), pbins[std::size_t(k)][b].end());
-    }
+    for (std::size_t c : pall) all += c;
   }
   if (all < 100) {
     if (report) *report = rep;
@@ -620,8 +620,17 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     std::nth_element(x.begin(), x.begin() + long(x.size() / 2), x.end());
     return double(x[x.size() / 2]);
   };
+  // P(d): the median over the lines of their samples in each depth bin.
   std::vector<double> P(bins);
-  for (std::size_t b = 0; b < bins; ++b) P[b] = median(at_depth[b]);
+  {
+    std::vector<std::vector<float>> at_depth(bins);
+    for (std::size_t l = 0; l < lines; ++l)
+      for (std::size_t k = 0; k < K; ++k) {
+        const auto bin = std::size_t(double(k) * hz / 0.5);
+        if (bin < bins && !std::isnan(A[l * K + k])) at_depth[bin].push_back(A[l * K + k]);
+      }
+    for (std::size_t b = 0; b < bins; ++b) P[b] = median(at_depth[b]);
+  }
   const auto top_bins = std::size_t(std::ceil(params.top_mm / 0.5));
   double top = -1e300, below = 1e300;
   for (std::size_t b = 0; b < bins && b < top_bins; ++b)
@@ -643,25 +652,10 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   // face cuts, or on a volume probe whose cap is a small part of the top,
   // most lines enter the scan below the band, and their median hid it.
   //
-  // The lines' samples by depth below their skin line, A[l K + k] (NaN where
-  // unscanned or past the volume), then averaged across the beam over
+  // The lines' samples (A, to search_mm) are averaged across the beam over
   // profile_mm either way (a separable box over the lines, per depth): one
   // line's maximum over a few speckle samples is biased bright, and the
   // local mean is not.
-  const auto K = std::size_t(std::ceil(params.search_mm / hz));
-  const float nan = std::numeric_limits<float>::quiet_NaN();
-  std::vector<float> A(lines * K, nan);
-  parallel_ranges(d[w_ax], threads, [&](std::size_t b0, std::size_t b1) {
-    for (std::size_t z = 0; z < d[ax]; ++z)
-      for (std::size_t bb = b0; bb < b1; ++bb)
-        for (std::size_t a = 0; a < d[u_ax]; ++a) {
-          const std::size_t l = a + bb * d[u_ax];
-          if (skin[l] < 0 || long(z) < skin[l] || std::size_t(long(z) - skin[l]) >= K) continue;
-          const std::size_t i = voxel(a, bb, z);
-          if (scanned && !(*scanned)[i]) continue;
-          A[l * K + std::size_t(long(z) - skin[l])] = lp[i];
-        }
-  });
   const auto box_across = [&](int lat, double h_lat) {
     const std::size_t n_along = lat == 0 ? d[u_ax] : d[w_ax], n_other = lat == 0 ? d[w_ax] : d[u_ax];
     const long r = std::max(0L, long(std::lround(params.profile_mm / h_lat)));
@@ -669,7 +663,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     parallel_ranges(n_other, threads, [&](std::size_t o0, std::size_t o1) {
       for (std::size_t o = o0; o < o1; ++o) {
         const auto line = [&](long t) { return lat == 0 ? std::size_t(t) + o * d[u_ax] : o + std::size_t(t) * d[u_ax]; };
-        for (std::size_t k = 0; k < K; ++k) {
+        for (std::size_t k = 0; k < K_search; ++k) {
           double sum = 0;
           long count = 0;
           const auto add = [&](long t, int sign) {
@@ -698,7 +692,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     std::vector<float> x;
     for (std::size_t l = l0; l < l1; ++l) {
       x.clear();
-      for (std::size_t k = 0; k < top_k && k < K; ++k)
+      for (std::size_t k = 0; k < top_k && k < K_search; ++k)
         if (!std::isnan(A[l * K + k])) x.push_back(A[l * K + k]);
       if (!x.empty()) own_top[l] = float(median(x));
     }
@@ -714,11 +708,11 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   parallel_ranges(lines, threads, [&](std::size_t l0, std::size_t l1) {
     for (std::size_t l = l0; l < l1; ++l) {
       const float* x = &A[l * K];
-      for (std::size_t k = 0; k < top_k && k < K; ++k)
+      for (std::size_t k = 0; k < top_k && k < K_search; ++k)
         if (!std::isnan(x[k]) && x[k] > ltop[l]) ltop[l] = x[k], ltop_at[l] = long(k);
       if (!candidate(l)) continue;
       const double half = 0.5 * (double(ltop[l]) + below);
-      for (std::size_t k = std::size_t(ltop_at[l]); k < K; ++k) {
+      for (std::size_t k = std::size_t(ltop_at[l]); k < K_search; ++k) {
         if (std::isnan(x[k])) continue;
         if (double(x[k]) >= half) {
           run[l] = -1;
