@@ -20,6 +20,7 @@
 #include "auto_iso.hpp"
 #include "error.hpp"
 #include "metrics.hpp"
+#include "param_keys.hpp"
 #include "phantom.hpp"
 #include "variational.hpp"
 
@@ -36,17 +37,7 @@ std::vector<std::string> split(const std::string& s, char sep) {
 }
 
 void set_param(VariationalParams& p, const std::string& key, double v) {
-  if (key == "alpha") p.alpha = v;
-  else if (key == "beta") p.beta = v;
-  else if (key == "gamma") p.gamma = v;
-  else if (key == "omega") p.omega = v;
-  else if (key == "delta") p.delta = v;
-  else if (key == "epsilon") p.epsilon = v;
-  else if (key == "u_ind") p.u_ind = v;
-  else if (key == "sigma") p.sigma_mm = v;
-  else if (key == "grad_sigma") p.grad_sigma_mm = v;
-  else if (key == "kappa") p.kappa = v;
-  else throw InputError("unknown parameter " + key);
+  if (!set_variational_param(p, key, v)) throw InputError("unknown parameter " + key);
 }
 
 struct Mean {

@@ -11,7 +11,8 @@
 //                          [--tolerance-mm MM] [--set key=value,...]
 //
 // --set overrides the classifier's constants for a sweep on training seeds
-// (iso_fraction, shell, beta, kappa, sharpen_barrier, ...: apply_override).
+// (iso_fraction, shell, beta, kappa, sharpen_barrier, ...: apply_override
+// and bench/param_keys.hpp).
 // Baselines (each at one fixed setting for every test case, in the file's
 // own grey levels, as a user would set a threshold once):
 //   levoy-raw     Levoy's classifier on the raw volume: iso
@@ -34,6 +35,7 @@
 #include "levoy.hpp"
 #include "mask.hpp"
 #include "metrics.hpp"
+#include "param_keys.hpp"
 #include "phantom.hpp"
 #include "variational.hpp"
 
@@ -76,10 +78,6 @@ Volume median3(const Volume& v) {
   return out;
 }
 
-// As `softshell classify IN --iso auto -o U` does (host/cli/cmd_classify.cpp):
-// the automatic mask, the near field removed, the local isovalue field
-// levelled out, the defaults.
-// The bone cue as `--bone-cue MODE` (host/bone_cue.hpp), with `cue`'s constants.
 // --set key=value,...: the variational classifier's and the automatic
 // isovalue's constants, for sweeps on training seeds (the defaults otherwise).
 std::vector<std::pair<std::string, double>> g_overrides;
@@ -87,21 +85,14 @@ std::vector<std::pair<std::string, double>> g_overrides;
 bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIsoParams& ap) {
   if (k == "iso_fraction") ap.local_fraction = x;
   else if (k == "iso_field_sigma") ap.field_sigma_mm = x;
-  else if (k == "shell") p.thickness_mm = x;
-  else if (k == "beta") p.beta = x;
-  else if (k == "kappa") p.kappa = x;
-  else if (k == "sigma") p.sigma_mm = x;
-  else if (k == "grad_sigma") p.grad_sigma_mm = x;
-  else if (k == "edge_share") p.edge_share = x;
-  else if (k == "edge_power") p.edge_power = x;
-  else if (k == "profile_power") p.profile_power = x;
-  else if (k == "sharpen") p.sharpen_iterations = int(x);
-  else if (k == "sharpen_lambda") p.sharpen_lambda = x;
-  else if (k == "sharpen_barrier") p.sharpen_barrier = x;
-  else return false;
+  else return set_variational_param(p, k, x);
   return true;
 }
 
+// As `softshell classify IN --iso auto -o U` does (host/cli/cmd_classify.cpp):
+// the automatic mask, the near field removed, the local isovalue field
+// levelled out, the defaults.
+// The bone cue as `--bone-cue MODE` (host/bone_cue.hpp), with `cue`'s constants.
 Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveReport* rep, BoneCueMode mode,
                         BoneCueParams cue, BoneCueReport* cue_report) {
   MaskReport mr;
@@ -243,9 +234,8 @@ int main(int argc, char** argv) {
     } else {
       std::fprintf(stderr, "usage: softshell_study_shells [--train S,S..] [--test S,S..] [--shapes face,spine] "
                            "[--size N] [--physics NAME] [--tolerance-mm MM] [--variational-only] "
-                           "[--set iso_fraction=..,shell=..,beta=..,kappa=..,sigma=..,grad_sigma=..,edge_share=..,"
-                           "edge_power=..,profile_power=..,sharpen=..,sharpen_lambda=..,sharpen_barrier=..,"
-                           "iso_field_sigma=..] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..]\n");
+                           "[--set iso_fraction=..,iso_field_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
+                           "... (bench/param_keys.hpp)] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..]\n");
       return 2;
     }
   }
