@@ -568,8 +568,14 @@ void decode_image(const std::string& file, const gdcm::Image& img, std::size_t p
   const double slope = img.GetSlope(), intercept = img.GetIntercept();
   const bool rescale = mono && (slope != 1.0 || intercept != 0.0) && std::isfinite(slope) && std::isfinite(intercept);
   if (rescaled) *rescaled = rescale;
-  const double top = pi == gdcm::PhotometricInterpretation::MONOCHROME1
-                         ? (scalar_type_is_integer(*type) ? std::ldexp(1.0, int(pf.GetBitsStored())) - 1.0 : 0.0)
+  // MONOCHROME1 (white is low) is mirrored within the stored range, so the
+  // samples stay the stored type's: top - v with top = 2^bits - 1 unsigned,
+  // -1 for a signed type ([-2^(bits-1), 2^(bits-1) - 1] onto itself; 2^bits
+  // - 1 there gave 128..383 for int8, which no int8 file holds: found by
+  // fuzz_dicom, tests/data/repro/dicom_signed_monochrome1.dcm).
+  const bool is_signed = *type == ScalarType::Int8 || *type == ScalarType::Int16 || *type == ScalarType::Int32;
+  const double top = pi == gdcm::PhotometricInterpretation::MONOCHROME1 && scalar_type_is_integer(*type)
+                         ? (is_signed ? -1.0 : std::ldexp(1.0, int(pf.GetBitsStored())) - 1.0)
                          : 0.0;
   for (std::size_t i = 0; i < pixels; ++i) {
     double v;

@@ -374,7 +374,8 @@ TEST(RobustRepro, EveryReproFileIsCovered) {
       "nrrd_space_units_cr_in_quote.nrrd", "nrrd_dimension_without_space.nrrd", "nrrd_long_unparsable_line.nrrd",
       "vti_zlib_last_block_4g.vti",  // tests/test_vti.cpp: Vti.ReproHugeBlockIsRefusedAtOnce
       "vti_appended_offset_2e64.vti",  // tests/test_vti.cpp: Vti.ReproAppendedOffsetNear2To64IsPastTheEnd
-      "dicom_huge_element_length.dcm", "dicom_gdcm_assert.dcm"};  // Robust.ReproDicomDamage
+      "dicom_huge_element_length.dcm", "dicom_gdcm_assert.dcm",  // Robust.ReproDicomDamage
+      "dicom_signed_monochrome1.dcm"};  // FuzzRegression.ReproInputsGetDocumentedAnswers
   for (const auto& e : fs::directory_iterator(repro(""))) {
     const std::string name = e.path().filename().string();
     EXPECT_NE(std::find(covered.begin(), covered.end(), name), covered.end()) << name << " has no regression test";
