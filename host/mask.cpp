@@ -540,6 +540,95 @@ HostVector<float> lowpass_across_beam(const Volume& v, const std::vector<std::ui
   return b;
 }
 
+namespace {
+
+// The band's echo layer (docs/real-data.md, "The near field's echo"): the
+// band's interfaces (skin, fat, fascia) reverberate between themselves and
+// the probe, and the scan shows a fainter copy of the band's deepest
+// interface at about twice its depth, under the dark gap below the band: a
+// layer that follows the skin line as the band does, not a surface. Each
+// band line is read (the data lowpassed across the beam, as for the band)
+// at depths scaled by its own band bottom, t = depth / bottom (a wavy
+// band's copy is as wavy, twice as deep), and E(t), the median over the
+// band lines' scanned samples, is the band's echo profile. A layer: E's
+// highest point at t_peak in [echo_from, echo_to] rising above the lowest
+// point between the band and it (the gap, from t = 1) by at least
+// echo_rise of the band's top over that gap. Then, in every band line, the
+// voxels from where E rises above halfway between the gap and the peak to
+// where it falls below it again, margin_mm either way, join the band.
+template <class Voxel>
+void echo_layer(const HostVector<float>& lp, const std::vector<long>& skin,
+                const std::vector<double>& bottom_mm, NearFieldReport& rep, std::vector<std::uint8_t>& band,
+                const Voxel& voxel, const std::vector<std::uint8_t>* scanned, std::size_t n_u, std::size_t n_w,
+                std::size_t n_ax, double hz, const NearFieldParams& params, int threads) {
+  const std::size_t lines = n_u * n_w;
+  std::vector<std::size_t> band_lines;
+  for (std::size_t l = 0; l < lines; ++l)
+    if (skin[l] >= 0 && bottom_mm[l] > 0) band_lines.push_back(l);
+  if (band_lines.empty() || !(rep.top > 0)) return;
+  // E(t) in steps of dt (0.5 mm at the band's median depth), t from 1 to echo_to.
+  const double B = rep.depth_mm - params.margin_mm;
+  if (!(B > 0)) return;
+  const double dt = 0.5 / B;
+  const auto steps = std::size_t(std::floor((params.echo_to - 1.0) / dt)) + 1;
+  std::vector<double> E(steps, std::nan(""));
+  parallel_ranges(steps, threads, [&](std::size_t s0, std::size_t s1) {
+    std::vector<float> x;
+    for (std::size_t s = s0; s < s1; ++s) {
+      const double t = 1.0 + double(s) * dt;
+      x.clear();
+      for (std::size_t l : band_lines) {
+        const long z = skin[l] + std::lround(t * bottom_mm[l] / hz);
+        if (z >= 0 && std::size_t(z) < n_ax) {
+          const std::size_t i = voxel(l % n_u, l / n_u, std::size_t(z));
+          if (!scanned || (*scanned)[i]) x.push_back(lp[i]);
+        }
+      }
+      // Only where most band lines still have samples at this depth.
+      if (x.size() * 2 < band_lines.size()) continue;
+      std::nth_element(x.begin(), x.begin() + long(x.size() / 2), x.end());
+      E[s] = x[x.size() / 2];
+    }
+  });
+  std::size_t peak = steps;
+  for (std::size_t s = 0; s < steps; ++s) {
+    const double t = 1.0 + double(s) * dt;
+    if (t < params.echo_from || std::isnan(E[s])) continue;
+    if (peak == steps || E[s] > E[peak]) peak = s;
+  }
+  if (peak == steps) return;
+  std::size_t gap = 0;
+  bool any = false;
+  for (std::size_t s = 0; s < peak; ++s)
+    if (!std::isnan(E[s]) && (!any || E[s] < E[gap])) gap = s, any = true;
+  if (!any) return;
+  const double rise = E[peak] - E[gap];
+  if (!(rise >= params.echo_rise * (rep.top - E[gap])) || !(rise > 0)) return;
+  // The layer's extent in t: halfway between the gap and the peak.
+  const double half = E[gap] + 0.5 * rise;
+  std::size_t lo = peak, hi = peak;
+  while (lo > gap && !std::isnan(E[lo - 1]) && E[lo - 1] >= half) --lo;
+  while (hi + 1 < steps && !std::isnan(E[hi + 1]) && E[hi + 1] >= half) ++hi;
+  rep.echo.found = true;
+  rep.echo.from = 1.0 + double(lo) * dt, rep.echo.to = 1.0 + double(hi) * dt;
+  rep.echo.peak = 1.0 + double(peak) * dt;
+  rep.echo.gap = E[gap], rep.echo.level = E[peak];
+  for (std::size_t l : band_lines) {
+    const std::size_t a = l % n_u, bb = l / n_u;
+    const double from = rep.echo.from * bottom_mm[l] - params.margin_mm;
+    const double to = rep.echo.to * bottom_mm[l] + params.margin_mm;
+    for (std::size_t z = std::size_t(skin[l]); z < n_ax; ++z) {
+      const double depth = double(long(z) - skin[l]) * hz;
+      if (depth >= to) break;
+      if (depth < from) continue;
+      std::uint8_t& b = band[voxel(a, bb, z)];
+      if (!b) b = 1, ++rep.echo.voxels, ++rep.voxels;
+    }
+  }
+}
+
+}  // namespace
+
 std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std::uint8_t>* scanned,
                                           const NearFieldParams& params, NearFieldReport* report) {
   const Dims3& d = v.dims;
@@ -789,6 +878,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
           ++rep.voxels;
         }
       }
+    if (params.echo_layer) echo_layer(lp, skin, bottom_mm, rep, band, voxel, scanned, d[u_ax], d[w_ax], d[ax], hz, params, threads);
     // On a small or shallow volume the "band" may be most of it: that is
     // the object (removing it would leave nothing to classify), not an
     // occluder above it.

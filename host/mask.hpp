@@ -41,7 +41,7 @@ namespace softshell {
 //     many faces: the PLUS reconstructions reach only 0-2 faces so, with
 //     their dim edge rim, so it cannot tell them apart.
 struct MaskParams {
-  double min_fraction = 0.01;
+  double min_fraction = 0.001;
   int beam_axis = 2;          // the beam's axis (x 0, y 1, z 2)
   double max_enclosed = 0.05;
   int min_faces = 0;
@@ -143,6 +143,11 @@ struct NearFieldParams {
   int threads = 0;         // host threads (0: every core); the band is the same for any count
   bool band = true;        // remove_near_field: the band (false: only the reverberations, if reverb)
   bool reverb = true;      // remove_near_field: also the reverberations of a flat reflector (below)
+  // The band's echo layer (near_field_band): a copy of the band's deepest
+  // interface looked for at echo_from ... echo_to x each line's band depth,
+  // rising above the gap under the band by echo_rise of the band's top.
+  bool echo_layer = true;
+  double echo_from = 1.2, echo_to = 2.4, echo_rise = 0.1;
   ReverbParams reverb_params;
 };
 struct NearFieldReport {
@@ -154,6 +159,12 @@ struct NearFieldReport {
   std::size_t voxels = 0;       // voxels in the band
   bool too_deep = false;        // a band was found but held more than max_share of the scanned voxels: kept
   ReverbReport reverb;          // remove_near_field with params.reverb
+  struct Echo {
+    bool found = false;
+    double from = 0, to = 0, peak = 0;  // the layer, in units of each line's band depth
+    double gap = 0, level = 0;          // the echo profile at the gap and at the peak (file units)
+    std::size_t voxels = 0;             // voxels it added to the band
+  } echo;                       // the band's echo layer (params.echo_layer)
 };
 std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std::uint8_t>* scanned,
                                           const NearFieldParams& params = {}, NearFieldReport* report = nullptr);

@@ -585,11 +585,14 @@ int run_classify(const ClassifyOptions& given_options) {
     const NearFieldReport nf = remove_near_field(in, mask.scanned, np);
     beam_axis = nf.axis;
     std::ostringstream t;
-    if (nf.found)
+    if (nf.found) {
       t << "; near field removed: the first " << std::fixed << std::setprecision(1) << nf.depth_mm
         << " mm below the skin line along " << "xyz"[nf.axis] << " (" << nf.voxels << " voxels, median " << std::setprecision(0) << nf.top
         << " over " << nf.below << " below; --near-field keep to draw it)";
-    else if (nf.too_deep)
+      if (nf.echo.found)
+        t << ", with its echo at " << std::setprecision(2) << nf.echo.from << "-" << nf.echo.to
+          << " x the band's depth (" << nf.echo.voxels << " of those voxels)";
+    } else if (nf.too_deep)
       t << "; near field kept: the bright band (" << std::fixed << std::setprecision(1) << nf.depth_mm
         << " mm along " << "xyz"[nf.axis] << ") would be more than half of the scanned voxels";
     else if (o.near_field == "remove")
@@ -729,7 +732,8 @@ void add_classify_command(CLI::App& app, Action& action) {
       ->type_name("auto|on|off");
   sub->add_option("--near-field", o->near_field,
                   "remove: the bright layered band under the probe (skin, fat, muscle) is found from the depth "
-                  "profile and held at u = 0 like unscanned voxels; keep: classify it like the rest")
+                  "profile and held at u = 0 like unscanned voxels, with its echo (a fainter copy of the band's "
+                  "deepest layer at about twice its depth) when there is one; keep: classify it like the rest")
       ->capture_default_str()
       ->type_name("remove|keep")
       ->check(one_of({"remove", "keep"}));
