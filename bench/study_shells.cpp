@@ -12,7 +12,10 @@
 //
 // --set overrides the classifier's constants for a sweep on training seeds
 // (iso_fraction, shell, beta, kappa, sharpen_barrier, ...: apply_override
-// and bench/param_keys.hpp).
+// and bench/param_keys.hpp). --shadow-walls off compares without the walls'
+// weights (host/shadow_walls.hpp; on, as classify's default), --walls
+// beam_cos=..,reach=..,smooth=..,sigma=..,gap=.. sets their constants and
+// --wall-ref weighted|data the reference edge gradient with them.
 // Baselines (each at one fixed setting for every test case, in the file's
 // own grey levels, as a user would set a threshold once):
 //   levoy-raw     Levoy's classifier on the raw volume: iso
@@ -31,6 +34,7 @@
 
 #include "auto_iso.hpp"
 #include "bone_cue.hpp"
+#include "shadow_walls.hpp"
 #include "error.hpp"
 #include "levoy.hpp"
 #include "mask.hpp"
@@ -78,6 +82,12 @@ Volume median3(const Volume& v) {
   return out;
 }
 
+// --shadow-walls on|off (host/shadow_walls.hpp) and its constants (--walls
+// key=value,...), the reference edge gradient with walls alone (--wall-ref).
+bool g_shadow_walls = true;
+std::vector<std::pair<std::string, double>> g_wall_overrides;
+VariationalParams::EdgeReference g_wall_reference = VariationalParams::EdgeReference::Weighted;
+
 // --set key=value,...: the variational classifier's and the automatic
 // isovalue's constants, for sweeps on training seeds (the defaults otherwise).
 std::vector<std::pair<std::string, double>> g_overrides;
@@ -115,6 +125,22 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   p.v_iso = lv.data.intensity_map().to_unit(lv.iso);
   cue.axis = nf.axis;
   p.edge_weight = bone_cue_weights(lv.data, mp, mode, cue, cue_report);
+  if (g_shadow_walls) {
+    ShadowWallParams wp = shadow_wall_params(p, nf.axis);
+    for (const auto& [k, x] : g_wall_overrides) {
+      if (k == "beam_cos") wp.beam_cos = x;
+      else if (k == "reach") wp.reach_mm = x;
+      else if (k == "smooth") wp.smooth_mm = x;
+      else if (k == "sigma") wp.sigma_mm = x;
+      else if (k == "gap") wp.gap_mm = x;
+    }
+    ShadowWallReport wr;
+    auto walls = std::make_shared<const std::vector<float>>(shadow_wall_weight(rt, lv.data, mp, lv.iso, wp, &wr));
+    std::fprintf(stderr, "  shadow walls: %.3f of the scanned voxels in shadow, %.3f weighted below 1/2\n", wr.shadow_share,
+                 wr.wall_share);
+    if (!p.edge_weight) p.edge_reference = g_wall_reference;
+    p.edge_weight = combine_edge_weights(p.edge_weight, walls);
+  }
   *iso_out = lv.iso;
   return classify_variational(rt, lv.data, p, SolverParams{}, rep, nullptr, mp);
 }
@@ -208,7 +234,32 @@ int main(int argc, char** argv) {
         g_overrides.emplace_back(kv.substr(0, eq), std::stod(kv.substr(eq + 1)));
       }
     }
-    else if (a == "--cue") {
+    else if (a == "--shadow-walls") {
+      const std::string m = next();
+      if (m != "on" && m != "off") {
+        std::fprintf(stderr, "softshell_study_shells: --shadow-walls takes on or off\n");
+        return 2;
+      }
+      g_shadow_walls = m == "on";
+    } else if (a == "--wall-ref") {
+      const std::string m = next();
+      if (m == "weighted") g_wall_reference = VariationalParams::EdgeReference::Weighted;
+      else if (m == "data") g_wall_reference = VariationalParams::EdgeReference::Data;
+      else {
+        std::fprintf(stderr, "softshell_study_shells: --wall-ref takes weighted or data\n");
+        return 2;
+      }
+    } else if (a == "--walls") {
+      for (const std::string& kv : split(next(), ',')) {
+        const std::size_t eq = kv.find('=');
+        const std::string k = kv.substr(0, eq);
+        if (eq == std::string::npos || (k != "beam_cos" && k != "reach" && k != "smooth" && k != "sigma" && k != "gap")) {
+          std::fprintf(stderr, "softshell_study_shells: unknown --walls key %s\n", k.c_str());
+          return 2;
+        }
+        g_wall_overrides.emplace_back(k, std::stod(kv.substr(eq + 1)));
+      }
+    } else if (a == "--cue") {
       // key=value,... : the bone cue's constants (tuning on training seeds)
       for (const std::string& kv : split(next(), ',')) {
         const std::size_t eq = kv.find('=');
@@ -235,7 +286,8 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "usage: softshell_study_shells [--train S,S..] [--test S,S..] [--shapes face,spine] "
                            "[--size N] [--physics NAME] [--tolerance-mm MM] [--variational-only] "
                            "[--set iso_fraction=..,iso_field_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
-                           "... (bench/param_keys.hpp)] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..]\n");
+                           "... (bench/param_keys.hpp)] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..] "
+                           "[--shadow-walls on|off] [--walls beam_cos=..,reach=..,smooth=..,sigma=..,gap=..] [--wall-ref weighted|data]\n");
       return 2;
     }
   }

@@ -28,6 +28,7 @@
 #include "io.hpp"
 #include "levoy.hpp"
 #include "mask.hpp"
+#include "shadow_walls.hpp"
 #include "variational.hpp"
 
 namespace softshell::fuzz {
@@ -434,6 +435,15 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
       const IntensityMap map = v.intensity_map();
       p.v_iso = map.to_unit(iso);
       check_normalised_iso(p.v_iso, std::to_string(iso), map.describe());
+      if (near_field && !p.literal()) {
+        // classify's default: the walls of acoustic shadows weighted down
+        // (with the near field's removal, the other default occluder step).
+        const std::vector<float> w = shadow_wall_weight(runtime(), v, m, iso, shadow_wall_params(p, 2));
+        for (float x : w)
+          if (!(x >= 0.0f && x <= 1.0f)) fail("shadow wall weight outside [0, 1]");
+        p.edge_weight = std::make_shared<const std::vector<float>>(w);
+        p.edge_reference = VariationalParams::EdgeReference::Weighted;
+      }
       SolveReport rep;
       const Volume u = classify_variational(runtime(), v, p, sp, &rep, nullptr, m);
       if (rep.converged) check_opacity(u, v);  // not converged: the CLI writes nothing (exit 3)

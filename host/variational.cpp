@@ -207,7 +207,14 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
     Runtime::set_args(kg, dvg, dmask, grad2, grid_);
     rt.enqueue_3d(kg, grid_);
     std::vector<float> g2 = download<float>(rt, grad2, n);
-    if (p.edge_weight) {
+    if (p.edge_weight && p.edge_reference == VariationalParams::EdgeReference::Weighted) {
+      // The strongest edges that remain once weighted (the shadow walls).
+      if (p.edge_weight->size() != n) throw std::invalid_argument("edge weight size differs from the volume");
+      const std::vector<float>& w = *p.edge_weight;
+      for (std::size_t i = 0; i < n; ++i)
+        if (g2[i] >= 0) g2[i] *= w[i] * w[i];
+      resolved_.g_ref = reference_edge_gradient(g2, p.edge_share);
+    } else if (p.edge_weight && p.edge_reference == VariationalParams::EdgeReference::Cue) {
       // With the bone cue the reference is the cued edges' own: the median
       // weighted |grad v| of the voxels whose weight is at least 1/2 (the
       // bone echoes are weaker edges than the shadows' walls).

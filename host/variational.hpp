@@ -73,6 +73,13 @@ struct VariationalParams {
   // sharpening's edge gate), so edges without an acoustic shadow beneath
   // them pull u toward u_ind less. Null: off (w = 1). One entry per voxel.
   std::shared_ptr<const std::vector<float>> edge_weight;
+  // Where the reference edge gradient g_ref comes from when edge_weight is
+  // given: Cue, the bone cue's rule (the median weighted |grad v| of the
+  // voxels weighted at least 1/2: the cued bone echoes); Weighted, the top
+  // edge_share of the weighted |grad v| (the shadow walls' weights: the
+  // strongest edges that remain); Data, the data's own (unweighted).
+  enum class EdgeReference { Cue, Weighted, Data };
+  EdgeReference edge_reference = EdgeReference::Cue;
   ClassifyCoeffs coeffs() const;
   // The paper's functional exactly (no lowpassed |grad v|, no kappa, no
   // shell terms) with the weights chosen for it by the earlier study.

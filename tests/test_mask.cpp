@@ -1305,6 +1305,48 @@ TEST_F(CliMask, NearFieldIsRemovedByDefaultAndKeptOnRequest) {
   EXPECT_LT(cued_max, 0.2f) << "the cue draws no flat bright layer";
 }
 
+TEST_F(CliMask, ShadowWallsAreWeightedDownByDefaultAndKeptOnRequest) {
+  // Tissue (150) with a bright bar (240) 8-10 mm deep under 4 mm of the
+  // probe and its shadow (20) below (host/shadow_walls.hpp): at the isovalue
+  // 85 the shadow's sides are boundaries; by default they are not drawn from
+  // 6 mm below the bar down, with --shadow-walls keep they are.
+  const double h = 0.5;
+  // Speckle grain finer along z than across, so z is found as the beam.
+  Volume v({48, 48, 64}, {h, h, h}, ScalarType::UInt8);
+  std::uniform_real_distribution<double> U(0.6, 1.4);
+  for (std::size_t z = 0; z < 64; ++z)
+    for (std::size_t y = 0; y < 48; ++y)
+      for (std::size_t x = 0; x < 48; ++x) {
+        std::mt19937_64 cell(test::seed() ^ (z * 1000003 + (y / 2) * 7919 + (x / 2) * 104729));
+        const double xm = double(x) * h, zm = double(z) * h;
+        const double m = xm >= 10.0 && xm < 14.0 ? (zm < 8.0 ? 150.0 : zm < 10.0 ? 240.0 : 20.0) : 150.0;
+        v.at(x, y, z) = float(std::min(255.0, std::round(m * U(cell))));
+      }
+  write_volume(file("bar.nrrd"), v);
+  const test::RunResult r = run({"classify", file("bar.nrrd"), "--iso", "85", "-o", file("u.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("shadow walls:"), std::string::npos) << r.out;
+  const test::RunResult k = run({"classify", file("bar.nrrd"), "--iso", "85", "--shadow-walls", "keep", "-o", file("k.nrrd")});
+  ASSERT_EQ(k.status, 0) << k.err;
+  EXPECT_EQ(k.out.find("shadow walls:"), std::string::npos) << k.out;
+  const Volume u = read_volume(file("u.nrrd")), uk = read_volume(file("k.nrrd"));
+  // The left wall (x about 10 mm) at depths 18-28 mm: the largest u across it.
+  const auto wall_max = [&](const Volume& o) {
+    float m = 0;
+    for (std::size_t z = 36; z < 56; ++z)
+      for (std::size_t x = 16; x < 24; ++x) m = std::max(m, o.at(x, 24, z));
+    return m;
+  };
+  EXPECT_GT(wall_max(uk), 0.5f) << "kept: the shadow's side is a boundary at the isovalue";
+  EXPECT_LT(wall_max(u), 0.2f) << "by default the shadow's side is not drawn";
+  // The shadow's top (the bar's lower side, 10 mm deep) is drawn.
+  float top = 0;
+  for (std::size_t z = 18; z < 24; ++z) top = std::max(top, u.at(24, 24, z));
+  EXPECT_GT(top, 0.5f);
+  expect_one_line_error(run({"classify", file("bar.nrrd"), "--iso", "85", "--shadow-walls", "hide", "-o", file("x.nrrd")}),
+                        {"--shadow-walls", "remove or keep"});
+}
+
 TEST_F(CliMask, FlatReflectorInAFanIsOnePlaneNotItsGhostsOrTheFanEdge) {
   // The synthetic IMLiF: with the defaults the shell lies on the reflector's
   // top (the water/reflector boundary), not on the reverberation ghosts below

@@ -10,6 +10,7 @@
 
 #include "auto_iso.hpp"
 #include "bone_cue.hpp"
+#include "shadow_walls.hpp"
 #include "error.hpp"
 #include "io.hpp"
 #include "filter.hpp"
@@ -111,7 +112,14 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   BoneCueParams bp;
   bp.axis = nf.axis;
   BoneCueReport br;
-  in.params.edge_weight = bone_cue_weights(in.data, mask, bone_cue, bp, &br);
+  // The walls of acoustic shadows weighted down, as classify does by default
+  // (host/shadow_walls.hpp); not with the paper's functional.
+  ShadowWallReport wr;
+  if (!(weights && weights->literal())) {
+    const ShadowWallParams wp = shadow_wall_params(in.params, nf.axis);
+    in.walls = std::make_shared<const std::vector<float>>(shadow_wall_weight(rt, in.data, mask, in.iso, wp, &wr));
+  }
+  set_edge_weights(in, bone_cue_weights(in.data, mask, bone_cue, bp, &br));
   in.u = reclassify(rt, in, in.params, nullptr, &in.report);  // keeps in.classifier
   in.classified = true;
   std::ostringstream note;
@@ -119,9 +127,18 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
        << std::setprecision(4) << in.iso << (iso_text == "auto" ? " (auto)" : "") << ", " << in.report.cycles
        << " iterations, relative residual " << std::scientific << std::setprecision(2)
        << (in.report.residuals.empty() ? 0.0 : in.report.residuals.back())
-       << (in.report.converged ? "" : " (NOT converged)") << ", bone cue " << (br.on ? "on" : "off");
+       << (in.report.converged ? "" : " (NOT converged)") << ", bone cue " << (br.on ? "on" : "off")
+       << ", shadow walls " << (in.walls ? "weighted down" : "kept");
   in.note = note.str();
   return in;
+}
+
+void set_edge_weights(OpacityInput& in, std::shared_ptr<const std::vector<float>> cue) {
+  // With the bone cue the reference edge gradient is the cued edges' (its
+  // rule); with the walls alone, the strongest edges that remain.
+  in.params.edge_reference =
+      cue ? VariationalParams::EdgeReference::Cue : VariationalParams::EdgeReference::Weighted;
+  in.params.edge_weight = combine_edge_weights(std::move(cue), in.walls);
 }
 
 bool set_bone_cue(OpacityInput& in, BoneCueMode mode) {
@@ -129,7 +146,7 @@ bool set_bone_cue(OpacityInput& in, BoneCueMode mode) {
   BoneCueParams bp;
   bp.axis = in.beam_axis;
   BoneCueReport br;
-  in.params.edge_weight = bone_cue_weights(in.data, in.mask.empty() ? nullptr : &in.mask, mode, bp, &br);
+  set_edge_weights(in, bone_cue_weights(in.data, in.mask.empty() ? nullptr : &in.mask, mode, bp, &br));
   in.bone_cue = mode;
   return br.on;
 }

@@ -49,7 +49,15 @@ struct OpacityInput {
   std::size_t frame = 0;
   int beam_axis = 2;                 // when classified: the beam axis the near-field step found
   BoneCueMode bone_cue = BoneCueMode::Off;
+  // When classified: the shadow walls' edge weights (host/shadow_walls.hpp),
+  // null with the paper's functional; combined with the bone cue's.
+  std::shared_ptr<const std::vector<float>> walls;
 };
+
+// in.params.edge_weight: the bone cue's weights `cue` (may be null) times
+// the shadow walls' (in.walls), with the reference edge gradient that goes
+// with them.
+void set_edge_weights(OpacityInput& in, std::shared_ptr<const std::vector<float>> cue);
 
 // Reads `path` and returns its opacity (see above). `iso` is "auto" or a
 // number in the file's units. Throws InputError for a file that is not a

@@ -1089,7 +1089,8 @@ class ViewerApp {
       const bool on = set_bone_cue(input_, mode);
       VariationalParams q = edit_ ? *edit_ : input_.params;
       q.edge_weight = input_.params.edge_weight;
-      if (edit_) edit_->edge_weight = q.edge_weight;
+      q.edge_reference = input_.params.edge_reference;
+      if (edit_) edit_->edge_weight = q.edge_weight, edit_->edge_reference = q.edge_reference;
       status_ = std::string("preset ") + p.name + ": bone cue " + (on ? "on" : "off") + ", re-solving";
       start_solve(q);
     }

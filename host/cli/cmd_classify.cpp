@@ -23,6 +23,7 @@
 #include "metrics.hpp"
 #include "memory_need.hpp"
 #include "bone_cue.hpp"
+#include "shadow_walls.hpp"
 #include "filter.hpp"
 #include "variational.hpp"
 #include "text.hpp"
@@ -40,6 +41,7 @@ struct ClassifyOptions {
   std::vector<std::string> files;   // a sequence given as files (expand_input_files); empty otherwise
   std::string per_frame;            // --per-frame-files PATTERN
   std::string bone_cue = "off";  // docs/parameters.md: off by default (it lost bone on a real sweep)
+  std::string shadow_walls = "remove";  // host/shadow_walls.hpp: weighted down by default
   double thickness = 1.0;
   double iso_fraction = AutoIsoParams().local_fraction, iso_field_sigma = AutoIsoParams().field_sigma_mm;
   std::optional<double> sigma;  // unset: 1 mm for variational, 0 (raw) for levoy
@@ -223,10 +225,12 @@ int run_levoy(const ClassifyOptions& o, Runtime& rt, const Volume& in, double is
 
 int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, double iso, const std::string& iso_text,
                     const std::string& iso_warning, const DataMask& mask, Clock::time_point t0,
-                    std::shared_ptr<const std::vector<float>> bone_cue, const std::string& bone_cue_text) {
+                    std::shared_ptr<const std::vector<float>> bone_cue, const std::string& bone_cue_text,
+                    bool walls_only) {
   const IntensityMap map = in.intensity_map();
   VariationalParams p = variational_params(o);
   p.edge_weight = std::move(bone_cue);
+  if (walls_only) p.edge_reference = VariationalParams::EdgeReference::Weighted;
   p.v_iso = map.to_unit(iso);
   check_normalised_iso(p.v_iso, format_iso(iso), map.describe());
   std::cerr << iso_warning;
@@ -661,6 +665,7 @@ int run_classify(const ClassifyOptions& given_options) {
   // The bone cue (host/bone_cue.hpp): on the data the classifier sees.
   std::shared_ptr<const std::vector<float>> cue;
   std::string cue_text = "off";
+  bool walls_only = false;  // the edge weight is the shadow walls' alone
   if (variational && cue_mode != BoneCueMode::Off) {
     step.emplace("bone cue");
     const std::vector<std::uint8_t>* sc = mask.scanned.empty() ? nullptr : &mask.scanned;
@@ -678,9 +683,26 @@ int run_classify(const ClassifyOptions& given_options) {
   } else if (variational) {
     cue_text = o.literal && o.bone_cue == "auto" ? "off (--literal)" : "off";
   }
+  // The walls of acoustic shadows (host/shadow_walls.hpp): their edges
+  // weighted down, like the bone cue's.
+  if (variational && !o.literal && o.shadow_walls == "remove") {
+    step.emplace("shadow walls");
+    const ShadowWallParams wp = shadow_wall_params(
+        variational_params(o), beam_axis >= 0 ? beam_axis : beam_axis_of(in, mask.scanned.empty() ? nullptr : &mask.scanned));
+    ShadowWallReport wr;
+    auto walls = std::make_shared<const std::vector<float>>(
+        shadow_wall_weight(rt, in, mask.scanned.empty() ? nullptr : &mask.scanned, iso, wp, &wr));
+    std::ostringstream t;
+    t << std::fixed << std::setprecision(1) << "; shadow walls: " << 100 * wr.shadow_share
+      << " % of the scanned voxels in shadow, edges weighted down on " << 100 * wr.wall_share << " %";
+    cue_text += t.str();
+    walls_only = !cue;
+    cue = combine_edge_weights(cue, walls);
+  }
   step.reset();
   return o.method == "levoy" ? run_levoy(o, rt, in, iso, iso_text, iso_warning, mask, t0)
-                             : run_variational(o, rt, in, iso, iso_text, iso_warning, mask, t0, std::move(cue), cue_text);
+                             : run_variational(o, rt, in, iso, iso_text, iso_warning, mask, t0, std::move(cue), cue_text,
+                                               walls_only);
 }
 
 }  // namespace
@@ -730,6 +752,13 @@ void add_classify_command(CLI::App& app, Action& action) {
                   "(docs/parameters.md)")
       ->capture_default_str()
       ->type_name("auto|on|off");
+  sub->add_option("--shadow-walls", o->shadow_walls,
+                  "remove: the edges of acoustic shadows' sides (across the beam, a shadow on their dark side: dark, "
+                  "under something bright further up the beam) are weighted down like the bone cue's; keep: drawn "
+                  "like any edge (host/shadow_walls.hpp)")
+      ->capture_default_str()
+      ->type_name("remove|keep")
+      ->check(one_of({"remove", "keep"}));
   sub->add_option("--near-field", o->near_field,
                   "remove: the bright layered band under the probe (skin, fat, muscle) is found from the depth "
                   "profile and held at u = 0 like unscanned voxels, with its echo (a fainter copy of the band's "

@@ -1,0 +1,60 @@
+// Shadow walls (docs/numerics.md, "Shadow walls"; issue 12): under a bright
+// occluder (bone, a calcified or dense layer) ultrasound leaves an acoustic
+// shadow, a dark column along the beam whose sides are strong edges across
+// the beam. Those sides are no tissue boundary: on the randomised spines they
+// were most of what the classifier drew (docs/parameters.md). Per voxel the
+// weight is 1 - (smoothed) "wall": an edge whose gradient lies across the
+// beam and whose dark side, a short step down the gradient, is in shadow --
+// below the isovalue, some way below a voxel above the isovalue further up
+// its beam line -- while its bright side, the same step up, is not, and is
+// above the isovalue (where the classifier would draw the edge). It multiplies the classifier's edge strength like the bone cue's
+// (VariationalParams::edge_weight) but leaves the reference edge gradient the
+// data's own. The side of an object seen in fluid is no wall (the fluid
+// beside it has nothing bright above it), nor is a bone's top (its gradient
+// lies along the beam).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "cl_runtime.hpp"
+#include "variational.hpp"
+#include "volume.hpp"
+
+namespace softshell {
+
+struct ShadowWallParams {
+  int axis = 2;                // the beam axis (0 x, 1 y, 2 z); depth grows with the index
+  double sigma_mm = 1.5;       // the data lowpassed for the shadow test
+  double grad_sigma_mm = 1.5;  // ... and for the edges' direction (as --grad-sigma; one lowpass when equal)
+  double beam_cos = 0.5;       // an edge across the beam: |cos(grad, beam)| below this
+  double reach_mm = 1.5;       // the dark side is probed this far down the gradient
+  double smooth_mm = 0.5;      // the wall indicator's lowpass before the weight is taken
+  double gap_mm = 6.0;         // shadow only this far below the deepest bright voxel above
+};
+
+// The constants for a classification with `p`: both lowpasses are p's
+// gradient lowpass (grad_sigma_mm; sigma_mm when that is 0), and the lengths
+// above (given for sigma 1 mm) scale with p.sigma_mm, so a small volume's
+// shrunken lowpasses, or sigmas given in another unit, shrink them too.
+ShadowWallParams shadow_wall_params(const VariationalParams& p, int axis);
+
+struct ShadowWallReport {
+  double shadow_share = 0;  // of the scanned voxels, in shadow
+  double wall_share = 0;    // of the scanned voxels, weight below 1/2
+};
+
+// The weights (one per voxel, in [0, 1]) for the data the classifier sees
+// (unscanned samples filled, levelled) at isovalue `iso` (its units);
+// `scanned` (optional, 1 = scanned): only scanned voxels occlude or lie in
+// shadow. The lowpasses run on `rt`'s device.
+std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::vector<std::uint8_t>* scanned,
+                                      double iso, const ShadowWallParams& params = {},
+                                      ShadowWallReport* report = nullptr);
+
+// Two per-voxel weights as one (their product); either may be null.
+std::shared_ptr<const std::vector<float>> combine_edge_weights(std::shared_ptr<const std::vector<float>> a,
+                                                               std::shared_ptr<const std::vector<float>> b);
+
+}  // namespace softshell

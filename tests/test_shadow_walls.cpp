@@ -1,0 +1,158 @@
+// Shadow walls (host/shadow_walls.hpp): known answers on synthetic scenes --
+// the sides of a shadow under a bright bar are weighted down below the gap
+// and nowhere else, an object in fluid keeps every edge, unscanned voxels
+// neither occlude nor shade -- the parameters' scaling, the product of two
+// weights, and classify's switch (drawn with keep, not with remove).
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "shadow_walls.hpp"
+#include "test_support.hpp"
+#include "variational.hpp"
+
+namespace softshell {
+namespace {
+
+constexpr double kH = 0.5;  // mm
+
+// Speckle-like samples (a factor 0.85-1.15, grain 2 voxels across the beam)
+// of mean(x, y, z) in mm, beam along z.
+template <class Mean>
+Volume scene(Dims3 dims, Mean mean, std::uint64_t seed) {
+  Volume v(dims, {kH, kH, kH}, ScalarType::UInt8);
+  std::uniform_real_distribution<double> U(0.85, 1.15);
+  for (std::size_t z = 0; z < dims[2]; ++z)
+    for (std::size_t y = 0; y < dims[1]; ++y)
+      for (std::size_t x = 0; x < dims[0]; ++x) {
+        std::mt19937_64 cell(seed ^ (z * 1000003 + (y / 2) * 7919 + (x / 2) * 104729));
+        v.at(x, y, z) = float(std::clamp(std::round(mean(double(x) * kH, double(y) * kH, double(z) * kH) * U(cell)), 1.0, 255.0));
+      }
+  return v;
+}
+
+// Tissue (150) with a bright bar (240) 8-10 mm deep under x in [10, 14) mm
+// (along y), and its shadow (20) below it to the bottom.
+Volume bar_over_shadow(std::uint64_t seed) {
+  return scene({48, 24, 64},
+               [](double x, double, double z) {
+                 if (x >= 10.0 && x < 14.0) return z < 8.0 ? 150.0 : z < 10.0 ? 240.0 : 20.0;
+                 return 150.0;
+               },
+               seed);
+}
+
+float at_mm(const std::vector<float>& w, const Volume& v, double x, double y, double z) {
+  return w[v.index(std::size_t(std::lround(x / kH)), std::size_t(std::lround(y / kH)), std::size_t(std::lround(z / kH)))];
+}
+
+TEST(ShadowWalls, TheSidesOfAShadowAreWeightedDownBelowTheGapAndNothingElse) {
+  const Volume v = bar_over_shadow(test::seed());
+  ShadowWallReport r;
+  const std::vector<float> w = shadow_wall_weight(test::runtime(), v, nullptr, 85.0, ShadowWallParams{}, &r);
+  ASSERT_EQ(w.size(), v.voxels());
+  // The shadow: 4 mm of 24 across x, from 6 mm below the bar (16 mm) down
+  // to 32 mm: 1/6 x 1/2 of the voxels.
+  EXPECT_NEAR(r.shadow_share, (4.0 / 24.0) * (16.0 / 32.0), 0.02);
+  for (double z : {18.0, 24.0, 30.0}) {
+    EXPECT_LT(at_mm(w, v, 10.0, 6.0, z), 0.5f) << "left wall at " << z << " mm";
+    EXPECT_LT(at_mm(w, v, 13.5, 6.0, z), 0.5f) << "right wall at " << z << " mm";
+    EXPECT_FLOAT_EQ(at_mm(w, v, 20.0, 6.0, z), 1.0f) << "tissue away from the shadow";
+    EXPECT_FLOAT_EQ(at_mm(w, v, 4.0, 6.0, z), 1.0f) << "tissue away from the shadow";
+  }
+  // The bar's top (an edge along the beam) and the shadow's first 6 mm.
+  EXPECT_FLOAT_EQ(at_mm(w, v, 12.0, 6.0, 7.5), 1.0f);
+  EXPECT_GT(at_mm(w, v, 10.0, 6.0, 12.0), 0.99f);
+  EXPECT_GT(r.wall_share, 0.0);
+  // A larger gap moves where the walls start.
+  ShadowWallParams deep;
+  deep.gap_mm = 16.0;
+  const std::vector<float> wd = shadow_wall_weight(test::runtime(), v, nullptr, 85.0, deep);
+  EXPECT_GT(at_mm(wd, v, 10.0, 6.0, 18.0), 0.99f);
+  EXPECT_LT(at_mm(wd, v, 10.0, 6.0, 30.0), 0.5f);
+}
+
+TEST(ShadowWalls, AnObjectInFluidKeepsEveryEdge) {
+  // A bright block (150) in dark fluid (20): its sides have fluid beside
+  // them with nothing bright above; the fluid under it is "shadow", but the
+  // block's bottom is an edge along the beam and the fluid's own speckle
+  // edges have shadow on both sides. No weight below 1.
+  const Volume v = scene({48, 24, 64},
+                         [](double x, double, double z) {
+                           return x >= 8.0 && x < 16.0 && z >= 8.0 && z < 16.0 ? 150.0 : 20.0;
+                         },
+                         test::seed() + 1);
+  ShadowWallReport r;
+  const std::vector<float> w = shadow_wall_weight(test::runtime(), v, nullptr, 85.0, ShadowWallParams{}, &r);
+  EXPECT_GT(r.shadow_share, 0.05);  // the fluid under the block, 6 mm below it
+  const auto lo = std::min_element(w.begin(), w.end());
+  const std::size_t i = std::size_t(lo - w.begin());
+  EXPECT_GT(*lo, 0.99f) << "at " << i % 48 << " " << (i / 48) % 24 << " " << i / (48 * 24);
+}
+
+TEST(ShadowWalls, UnscannedVoxelsNeitherOccludeNorShade) {
+  // The bar and the tissue above it unscanned: nothing occludes the dark
+  // column, which is then no shadow.
+  // (Their samples continue the dark column, as fill_unscanned would.)
+  Volume v = bar_over_shadow(test::seed() + 2);
+  std::vector<std::uint8_t> scanned(v.voxels(), 1);
+  for (std::size_t z = 0; z < 20; ++z)
+    for (std::size_t y = 0; y < v.dims[1]; ++y)
+      for (std::size_t x = 20; x < 28; ++x) scanned[v.index(x, y, z)] = 0, v.at(x, y, z) = 20;
+  ShadowWallReport r;
+  const std::vector<float> w = shadow_wall_weight(test::runtime(), v, &scanned, 85.0, ShadowWallParams{}, &r);
+  EXPECT_EQ(r.shadow_share, 0.0);
+  EXPECT_GT(*std::min_element(w.begin(), w.end()), 0.99f);
+  EXPECT_THROW(shadow_wall_weight(test::runtime(), v, &scanned, 85.0, ShadowWallParams{.axis = 3}), std::invalid_argument);
+  scanned.resize(5);
+  EXPECT_THROW(shadow_wall_weight(test::runtime(), v, &scanned, 85.0), std::invalid_argument);
+}
+
+TEST(ShadowWalls, TheBeamAxisIsHonoured) {
+  // The same scene with the beam along y (the volume's axes swapped): the
+  // walls are found with axis 1, not with axis 2.
+  const Volume z_beam = bar_over_shadow(test::seed() + 3);
+  Volume v({z_beam.dims[0], z_beam.dims[2], z_beam.dims[1]}, z_beam.spacing, ScalarType::UInt8);
+  for (std::size_t z = 0; z < z_beam.dims[2]; ++z)
+    for (std::size_t y = 0; y < z_beam.dims[1]; ++y)
+      for (std::size_t x = 0; x < z_beam.dims[0]; ++x) v.at(x, z, y) = z_beam.at(x, y, z);
+  ShadowWallParams p;
+  p.axis = 1;
+  const std::vector<float> w = shadow_wall_weight(test::runtime(), v, nullptr, 85.0, p);
+  EXPECT_LT(w[v.index(20, 48, 12)], 0.5f);  // x 10 mm, depth 24 mm, y 6 mm
+  p.axis = 2;
+  ShadowWallReport r;
+  shadow_wall_weight(test::runtime(), v, nullptr, 85.0, p, &r);
+  EXPECT_LT(r.wall_share, 0.002);
+}
+
+TEST(ShadowWalls, ParametersFollowTheClassifiersLowpass) {
+  VariationalParams p;
+  const ShadowWallParams d = shadow_wall_params(p, 1);
+  EXPECT_EQ(d.axis, 1);
+  EXPECT_EQ(d.sigma_mm, p.grad_sigma_mm);
+  EXPECT_EQ(d.grad_sigma_mm, p.grad_sigma_mm);
+  EXPECT_EQ(d.reach_mm, ShadowWallParams{}.reach_mm);
+  p.sigma_mm = 0.5, p.grad_sigma_mm = 0;
+  const ShadowWallParams s = shadow_wall_params(p, 2);
+  EXPECT_EQ(s.sigma_mm, 0.5);
+  EXPECT_DOUBLE_EQ(s.gap_mm, 0.5 * ShadowWallParams{}.gap_mm);
+  EXPECT_DOUBLE_EQ(s.reach_mm, 0.5 * ShadowWallParams{}.reach_mm);
+  EXPECT_DOUBLE_EQ(s.smooth_mm, 0.5 * ShadowWallParams{}.smooth_mm);
+}
+
+TEST(ShadowWalls, CombinedWeightsAreTheProduct) {
+  auto a = std::make_shared<const std::vector<float>>(std::vector<float>{1.0f, 0.5f, 0.0f});
+  auto b = std::make_shared<const std::vector<float>>(std::vector<float>{0.5f, 0.5f, 1.0f});
+  EXPECT_EQ(combine_edge_weights(nullptr, nullptr), nullptr);
+  EXPECT_EQ(combine_edge_weights(a, nullptr), a);
+  EXPECT_EQ(combine_edge_weights(nullptr, b), b);
+  const auto c = combine_edge_weights(a, b);
+  EXPECT_EQ(*c, (std::vector<float>{0.5f, 0.25f, 0.0f}));
+  EXPECT_THROW(combine_edge_weights(a, std::make_shared<const std::vector<float>>(2, 1.0f)), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace softshell
