@@ -30,8 +30,8 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
   const float level = float(iso);
   const double h_ax = v.spacing[std::size_t(ax)];
   {
-    // Line l of voxel i: its coordinates across the beam; the rows of the
-    // outer loops below are split over threads, each thread owning its lines.
+    // A line is indexed by its voxels' coordinates across the beam; the
+    // outer loops' rows are split over threads so that each owns its lines.
     const std::size_t nx = d[0], ny = d[1], nz = d[2];
     std::vector<long> last_bright(n / d[std::size_t(ax)], -1);
     const auto visit = [&](std::size_t i, std::size_t line, std::size_t depth) {
@@ -61,11 +61,10 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
       });
     }
   }
-  // 2. Walls: edges of the gradient lowpass across the beam whose dark side
-  // (reach_mm down the gradient, trilinear in the shadow indicator) is in
-  // shadow.
-  // The edges' lowpass: the shadow test's when the two sigmas agree (the
-  // default), else its own.
+  // 2. Walls: edges of the gradient lowpass (the shadow test's when the two
+  // sigmas agree, the default) across the beam, between a shadow on their
+  // dark side and no shadow on their bright side (reach_mm down and up the
+  // gradient, trilinear in the shadow indicator).
   std::optional<Volume> own_vg;
   if (params.grad_sigma_mm != params.sigma_mm) own_vg = lowpass_volume(rt, v, {params.grad_sigma_mm, 3.0});
   const Volume& vg = own_vg ? *own_vg : vs;
