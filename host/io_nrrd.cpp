@@ -186,6 +186,22 @@ HeaderScan scan_header(const std::string& path) {
   bool have_dimension = false, block_size = false;
   std::string type;
   int space_dim = 0;  // from "space" or "space dimension" (0: none yet)
+  int dimension = 0;  // from "dimension"
+  // Complete quoted strings in a field's value ("\"" inside one is a quote,
+  // as Teem reads it); -1 when a quote is not closed or text lies between.
+  const auto quoted_count = [](const std::string& value) {
+    int count = 0;
+    std::size_t i = 0;
+    for (;;) {
+      while (i < value.size() && (value[i] == ' ' || value[i] == '\t')) ++i;
+      if (i == value.size()) return count;
+      if (value[i] != '"') return -1;
+      std::size_t close = i + 1;
+      while (close < value.size() && !(value[close] == '"' && value[close - 1] != '\\')) ++close;
+      if (close >= value.size()) return -1;
+      ++count, i = close + 1;
+    }
+  };
   for (int n = 2; next_line(); ++n) {
     if (n > kMaxHeaderLines) throw input_error(path, "header longer than 100000 lines");
     if (line.empty()) break;  // end of the header
@@ -234,7 +250,7 @@ HeaderScan scan_header(const std::string& path) {
                                   "') is longer than " + std::to_string(kMaxFieldLine) + " characters");
     static const char* const kPerAxis[] = {"sizes", "spacings", "thicknesses", "axismins", "axismaxs", "centers",
                                            "centerings", "labels", "units", "kinds", "spacedirections"};
-    if (key == "dimension") have_dimension = true;
+    if (key == "dimension") have_dimension = true, dimension = std::atoi(trim(line.substr(colon + 1)).c_str());
     if (key == "blocksize") block_size = true;
     if (key == "type") type = trim(line.substr(colon + 1));
     if (!have_dimension && std::find(std::begin(kPerAxis), std::end(kPerAxis), key) != std::end(kPerAxis))
@@ -248,19 +264,18 @@ HeaderScan scan_header(const std::string& path) {
     // than the space has (found by garbling softshell's own headers); one
     // complete quoted unit per world axis, checked here.
     if (key == "spaceunits" && space_dim > 0) {
-      const std::string value = line.substr(colon + 1);
-      int units = 0;
-      std::size_t i = 0;
-      bool well_formed = true;
-      while (well_formed) {
-        while (i < value.size() && (value[i] == ' ' || value[i] == '\t')) ++i;
-        if (i == value.size()) break;
-        const std::size_t close = value[i] == '"' ? value.find('"', i + 1) : std::string::npos;
-        if (close == std::string::npos) well_formed = false;
-        else ++units, i = close + 1;
-      }
-      if (!well_formed || units > space_dim)
+      const int units = quoted_count(line.substr(colon + 1));
+      if (units < 0 || units > space_dim)
         throw input_error(path, "space units: expected one quoted unit per world axis (" + std::to_string(space_dim) +
+                                    "), e.g. \"mm\" \"mm\" \"mm\"");
+    }
+    // "units" and "labels", one quoted string per axis: Teem leaks on an
+    // unterminated quote there too (found by fuzz_nrrd in CI's smoke run,
+    // 2026-11-26), and on a count other than the dimension.
+    if ((key == "units" || key == "labels") && dimension > 0) {
+      const int strings = quoted_count(line.substr(colon + 1));
+      if (strings != dimension)
+        throw input_error(path, key + ": expected one quoted string per axis (" + std::to_string(dimension) +
                                     "), e.g. \"mm\" \"mm\" \"mm\"");
     }
     if (key != "datafile") continue;

@@ -327,6 +327,18 @@ TEST_F(Robust, ReproTeemErrorPaths) {
                         {"space units: expected one quoted unit per world axis (3)"});
   expect_one_line_error(run({"info", repro("nrrd_space_units_too_many.nrrd")}),
                         {"space units: expected one quoted unit per world axis (3)"});
+  // Per-axis "units" with an unterminated quote: Teem leaks there too (found by fuzz_nrrd in
+  // CI's 30 s smoke run, 2026-11-26); "labels" is parsed the same way. Escaped quotes inside a
+  // string are Teem's, and the exact count per axis is what Teem asks too.
+  expect_one_line_error(run({"info", repro("nrrd_units_open_quote.nrrd")}),
+                        {"units: expected one quoted string per axis (3)"});
+  const std::string head = "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\n";
+  const std::string body = "encoding: raw\n\n12345678";
+  expect_one_line_error(run({"info", write("l.nrrd", head + "labels: \"x\" \"y\" \"z\n" + body)}),
+                        {"labels: expected one quoted string per axis (3)"});
+  expect_one_line_error(run({"info", write("u2.nrrd", head + "units: \"mm\" \"mm\"\n" + body)}),
+                        {"units: expected one quoted string per axis (3)"});
+  EXPECT_EQ(run({"info", write("u3.nrrd", head + "units: \"m\\\"m\" \"mm\" \"mm\"\n" + body)}).status, 0);
   // "dimension:" without the space after the colon is no field to Teem: the per-axis fields
   // that follow come before any dimension (found by a 2.4 M-execution run of fuzz_nrrd).
   // (Since the long-line fix below it is refused one line earlier: "dimension:<bytes>" is no field.)
@@ -372,6 +384,7 @@ TEST(RobustRepro, EveryReproFileIsCovered) {
       "classify_iso_field_inf_1.bin", "classify_iso_field_inf_2.bin", "classify_autoiso_bin_beyond_int.bin",
       "nrrd_space_units_open_quote.nrrd", "nrrd_space_units_too_many.nrrd",  // Robust.ReproTeemErrorPaths
       "nrrd_space_units_cr_in_quote.nrrd", "nrrd_dimension_without_space.nrrd", "nrrd_long_unparsable_line.nrrd",
+      "nrrd_units_open_quote.nrrd",
       "vti_zlib_last_block_4g.vti",  // tests/test_vti.cpp: Vti.ReproHugeBlockIsRefusedAtOnce
       "vti_appended_offset_2e64.vti",  // tests/test_vti.cpp: Vti.ReproAppendedOffsetNear2To64IsPastTheEnd
       "dicom_huge_element_length.dcm", "dicom_gdcm_assert.dcm",  // Robust.ReproDicomDamage
