@@ -11,8 +11,8 @@
 //                          [--tolerance-mm MM] [--set key=value,...]
 //
 // --set overrides the classifier's constants for a sweep on training seeds
-// (iso_fraction, shell, beta, kappa, sharpen_barrier, ...: apply_override
-// and bench/param_keys.hpp). --shadow-walls off compares without the walls'
+// (iso_fraction, shell, beta, kappa, sharpen_barrier, near_min_ratio, ...:
+// apply_override and bench/param_keys.hpp). --shadow-walls off compares without the walls'
 // weights (host/shadow_walls.hpp; on, as classify's default), --walls
 // beam_cos=..,reach=..,smooth=..,sigma=..,gap=.. sets their constants and
 // --wall-ref weighted|data the reference edge gradient with them.
@@ -92,8 +92,11 @@ VariationalParams::EdgeReference g_wall_reference = VariationalParams::EdgeRefer
 // isovalue's constants, for sweeps on training seeds (the defaults otherwise).
 std::vector<std::pair<std::string, double>> g_overrides;
 
-bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIsoParams& ap) {
-  if (k == "iso_fraction") ap.local_fraction = x;
+// near_min_ratio and near_stay: the near-field band's constants.
+bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIsoParams& ap, NearFieldParams& nf) {
+  if (k == "near_min_ratio") nf.min_ratio = x;
+  else if (k == "near_stay") nf.stay_mm = x;
+  else if (k == "iso_fraction") ap.local_fraction = x;
   else if (k == "iso_field_sigma") ap.field_sigma_mm = x;
   else return set_variational_param(p, k, x);
   return true;
@@ -108,7 +111,11 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   MaskReport mr;
   std::vector<std::uint8_t> mask = scanned_mask(in, MaskParams{}, &mr);
   if (mr.unscanned == 0) mask.clear();
-  const NearFieldReport nf = remove_near_field(in, mask);
+  AutoIsoParams ap;
+  VariationalParams p;
+  NearFieldParams np;
+  for (const auto& [k, x] : g_overrides) apply_override(k, x, p, ap, np);
+  const NearFieldReport nf = remove_near_field(in, mask, np);
   std::fprintf(stderr, "  near field %s (%.1f mm), reverberation %s\n", nf.found ? "removed" : "none", nf.depth_mm,
                nf.reverb.found ? "removed" : "none");
   const std::vector<std::uint8_t>* mp = mask.empty() ? nullptr : &mask;
@@ -116,9 +123,6 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   // A small volume's length scales shrink with it (1 for every phantom of
   // the family: they are 55 mm across or more).
   const double scale = small_volume_scale(in.dims, in.spacing, kSmallVolumeMm);
-  AutoIsoParams ap;
-  VariationalParams p;
-  for (const auto& [k, x] : g_overrides) apply_override(k, x, p, ap);
   ap.sigma_mm *= scale, ap.field_sigma_mm *= scale;
   const LevelledVolume lv = auto_iso_levelled(in, mp, mp ? &filled : nullptr, ap);
   scale_length_scales(p, scale);
@@ -227,7 +231,8 @@ int main(int argc, char** argv) {
         const std::size_t eq = kv.find('=');
         VariationalParams vp;
         AutoIsoParams ap;
-        if (eq == std::string::npos || !apply_override(kv.substr(0, eq), 0.0, vp, ap)) {
+        NearFieldParams np;
+        if (eq == std::string::npos || !apply_override(kv.substr(0, eq), 0.0, vp, ap, np)) {
           std::fprintf(stderr, "softshell_study_shells: unknown --set key %s\n", kv.substr(0, eq).c_str());
           return 2;
         }
