@@ -88,6 +88,17 @@ bool g_shadow_walls = true;
 std::vector<std::pair<std::string, double>> g_wall_overrides;
 VariationalParams::EdgeReference g_wall_reference = VariationalParams::EdgeReference::Weighted;
 
+// Sets the --walls constant `k` of wp to x; false for a name that is none of them.
+bool set_wall_param(ShadowWallParams& wp, const std::string& k, double x) {
+  if (k == "beam_cos") wp.beam_cos = x;
+  else if (k == "reach") wp.reach_mm = x;
+  else if (k == "smooth") wp.smooth_mm = x;
+  else if (k == "sigma") wp.sigma_mm = x;
+  else if (k == "gap") wp.gap_mm = x;
+  else return false;
+  return true;
+}
+
 // --set key=value,...: the variational classifier's and the automatic
 // isovalue's constants, for sweeps on training seeds (the defaults otherwise).
 std::vector<std::pair<std::string, double>> g_overrides;
@@ -131,19 +142,14 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   p.edge_weight = bone_cue_weights(lv.data, mp, mode, cue, cue_report);
   if (g_shadow_walls) {
     ShadowWallParams wp = shadow_wall_params(p, nf.axis);
-    for (const auto& [k, x] : g_wall_overrides) {
-      if (k == "beam_cos") wp.beam_cos = x;
-      else if (k == "reach") wp.reach_mm = x;
-      else if (k == "smooth") wp.smooth_mm = x;
-      else if (k == "sigma") wp.sigma_mm = x;
-      else if (k == "gap") wp.gap_mm = x;
-    }
+    for (const auto& [k, x] : g_wall_overrides) set_wall_param(wp, k, x);
     ShadowWallReport wr;
     auto walls = std::make_shared<const std::vector<float>>(shadow_wall_weight(rt, lv.data, mp, lv.iso, wp, &wr));
     std::fprintf(stderr, "  shadow walls: %.3f of the scanned voxels in shadow, %.3f weighted below 1/2\n", wr.shadow_share,
                  wr.wall_share);
-    if (!p.edge_weight) p.edge_reference = g_wall_reference;
-    p.edge_weight = combine_edge_weights(p.edge_weight, walls);
+    const bool cued = p.edge_weight != nullptr;
+    set_edge_weights(p, p.edge_weight, std::move(walls));
+    if (!cued) p.edge_reference = g_wall_reference;  // --wall-ref data: the comparison in docs/parameters.md
   }
   *iso_out = lv.iso;
   return classify_variational(rt, lv.data, p, SolverParams{}, rep, nullptr, mp);
@@ -258,7 +264,8 @@ int main(int argc, char** argv) {
       for (const std::string& kv : split(next(), ',')) {
         const std::size_t eq = kv.find('=');
         const std::string k = kv.substr(0, eq);
-        if (eq == std::string::npos || (k != "beam_cos" && k != "reach" && k != "smooth" && k != "sigma" && k != "gap")) {
+        ShadowWallParams check;
+        if (eq == std::string::npos || !set_wall_param(check, k, 0.0)) {
           std::fprintf(stderr, "softshell_study_shells: unknown --walls key %s\n", k.c_str());
           return 2;
         }

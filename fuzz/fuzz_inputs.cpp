@@ -438,11 +438,11 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
       if (near_field && !p.literal()) {
         // classify's default: the walls of acoustic shadows weighted down
         // (with the near field's removal, the other default occluder step).
-        const std::vector<float> w = shadow_wall_weight(runtime(), v, m, iso, shadow_wall_params(p, 2));
-        for (float x : w)
+        auto w = std::make_shared<const std::vector<float>>(
+            shadow_wall_weight(runtime(), v, m, iso, shadow_wall_params(p, 2)));
+        for (float x : *w)
           if (!(x >= 0.0f && x <= 1.0f)) fail("shadow wall weight outside [0, 1]");
-        p.edge_weight = std::make_shared<const std::vector<float>>(w);
-        p.edge_reference = VariationalParams::EdgeReference::Weighted;
+        set_edge_weights(p, nullptr, std::move(w));
       }
       SolveReport rep;
       const Volume u = classify_variational(runtime(), v, p, sp, &rep, nullptr, m);

@@ -155,4 +155,10 @@ std::shared_ptr<const std::vector<float>> combine_edge_weights(std::shared_ptr<c
   return out;
 }
 
+void set_edge_weights(VariationalParams& p, std::shared_ptr<const std::vector<float>> cue,
+                      std::shared_ptr<const std::vector<float>> walls) {
+  p.edge_reference = cue ? VariationalParams::EdgeReference::Cue : VariationalParams::EdgeReference::Weighted;
+  p.edge_weight = combine_edge_weights(std::move(cue), std::move(walls));
+}
+
 }  // namespace softshell

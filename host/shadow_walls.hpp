@@ -57,4 +57,12 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
 std::shared_ptr<const std::vector<float>> combine_edge_weights(std::shared_ptr<const std::vector<float>> a,
                                                                std::shared_ptr<const std::vector<float>> b);
 
+// p.edge_weight: the bone cue's weights `cue` times the shadow walls'
+// `walls` (either may be null), and p.edge_reference to go with them: the
+// cue's rule when the cue is on, else the walls' (the strongest weighted
+// edges). The one rule classify, the viewer, the study and the fuzz
+// harness share.
+void set_edge_weights(VariationalParams& p, std::shared_ptr<const std::vector<float>> cue,
+                      std::shared_ptr<const std::vector<float>> walls);
+
 }  // namespace softshell

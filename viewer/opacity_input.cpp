@@ -119,7 +119,7 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
     const ShadowWallParams wp = shadow_wall_params(in.params, nf.axis);
     in.walls = std::make_shared<const std::vector<float>>(shadow_wall_weight(rt, in.data, mask, in.iso, wp, &wr));
   }
-  set_edge_weights(in, bone_cue_weights(in.data, mask, bone_cue, bp, &br));
+  set_edge_weights(in.params, bone_cue_weights(in.data, mask, bone_cue, bp, &br), in.walls);
   in.u = reclassify(rt, in, in.params, nullptr, &in.report);  // keeps in.classifier
   in.classified = true;
   std::ostringstream note;
@@ -133,20 +133,13 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   return in;
 }
 
-void set_edge_weights(OpacityInput& in, std::shared_ptr<const std::vector<float>> cue) {
-  // With the bone cue the reference edge gradient is the cued edges' (its
-  // rule); with the walls alone, the strongest edges that remain.
-  in.params.edge_reference =
-      cue ? VariationalParams::EdgeReference::Cue : VariationalParams::EdgeReference::Weighted;
-  in.params.edge_weight = combine_edge_weights(std::move(cue), in.walls);
-}
-
 bool set_bone_cue(OpacityInput& in, BoneCueMode mode) {
   if (!in.classified) return false;
   BoneCueParams bp;
   bp.axis = in.beam_axis;
   BoneCueReport br;
-  set_edge_weights(in, bone_cue_weights(in.data, in.mask.empty() ? nullptr : &in.mask, mode, bp, &br));
+  set_edge_weights(in.params, bone_cue_weights(in.data, in.mask.empty() ? nullptr : &in.mask, mode, bp, &br),
+                   in.walls);
   in.bone_cue = mode;
   return br.on;
 }

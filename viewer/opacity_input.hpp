@@ -54,11 +54,6 @@ struct OpacityInput {
   std::shared_ptr<const std::vector<float>> walls;
 };
 
-// in.params.edge_weight: the bone cue's weights `cue` (may be null) times
-// the shadow walls' (in.walls), with the reference edge gradient that goes
-// with them.
-void set_edge_weights(OpacityInput& in, std::shared_ptr<const std::vector<float>> cue);
-
 // Reads `path` and returns its opacity (see above). `iso` is "auto" or a
 // number in the file's units. Throws InputError for a file that is not a
 // volume, and for an opacity volume with values outside [0, 1] forced by

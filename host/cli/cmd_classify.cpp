@@ -225,12 +225,11 @@ int run_levoy(const ClassifyOptions& o, Runtime& rt, const Volume& in, double is
 
 int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, double iso, const std::string& iso_text,
                     const std::string& iso_warning, const DataMask& mask, Clock::time_point t0,
-                    std::shared_ptr<const std::vector<float>> bone_cue, const std::string& bone_cue_text,
-                    bool walls_only) {
+                    std::shared_ptr<const std::vector<float>> bone_cue, std::shared_ptr<const std::vector<float>> walls,
+                    const std::string& bone_cue_text) {
   const IntensityMap map = in.intensity_map();
   VariationalParams p = variational_params(o);
-  p.edge_weight = std::move(bone_cue);
-  if (walls_only) p.edge_reference = VariationalParams::EdgeReference::Weighted;
+  set_edge_weights(p, std::move(bone_cue), std::move(walls));
   p.v_iso = map.to_unit(iso);
   check_normalised_iso(p.v_iso, format_iso(iso), map.describe());
   std::cerr << iso_warning;
@@ -663,14 +662,18 @@ int run_classify(const ClassifyOptions& given_options) {
     HostVector<float>().swap(iso_field);  // not held through the solve (4 bytes per voxel)
   }
   // The bone cue (host/bone_cue.hpp): on the data the classifier sees.
-  std::shared_ptr<const std::vector<float>> cue;
+  std::shared_ptr<const std::vector<float>> cue, walls;
   std::string cue_text = "off";
-  bool walls_only = false;  // the edge weight is the shadow walls' alone
+  const std::vector<std::uint8_t>* sc = mask.scanned.empty() ? nullptr : &mask.scanned;
+  // The beam axis both take: the near-field step's, else the data's own (one pass, when first asked).
+  const auto beam_axis_now = [&] {
+    if (beam_axis < 0) beam_axis = beam_axis_of(in, sc);
+    return beam_axis;
+  };
   if (variational && cue_mode != BoneCueMode::Off) {
     step.emplace("bone cue");
-    const std::vector<std::uint8_t>* sc = mask.scanned.empty() ? nullptr : &mask.scanned;
     BoneCueParams bp;
-    bp.axis = beam_axis >= 0 ? beam_axis : beam_axis_of(in, sc);
+    bp.axis = beam_axis_now();
     BoneCueReport br;
     cue = bone_cue_weights(in, sc, cue_mode, bp, &br);
     std::ostringstream t;
@@ -687,22 +690,18 @@ int run_classify(const ClassifyOptions& given_options) {
   // weighted down, like the bone cue's.
   if (variational && !o.literal && o.shadow_walls == "remove") {
     step.emplace("shadow walls");
-    const ShadowWallParams wp = shadow_wall_params(
-        variational_params(o), beam_axis >= 0 ? beam_axis : beam_axis_of(in, mask.scanned.empty() ? nullptr : &mask.scanned));
+    const ShadowWallParams wp = shadow_wall_params(variational_params(o), beam_axis_now());
     ShadowWallReport wr;
-    auto walls = std::make_shared<const std::vector<float>>(
-        shadow_wall_weight(rt, in, mask.scanned.empty() ? nullptr : &mask.scanned, iso, wp, &wr));
+    walls = std::make_shared<const std::vector<float>>(shadow_wall_weight(rt, in, sc, iso, wp, &wr));
     std::ostringstream t;
     t << std::fixed << std::setprecision(1) << "; shadow walls: " << 100 * wr.shadow_share
       << " % of the scanned voxels in shadow, edges weighted down on " << 100 * wr.wall_share << " %";
     cue_text += t.str();
-    walls_only = !cue;
-    cue = combine_edge_weights(cue, walls);
   }
   step.reset();
   return o.method == "levoy" ? run_levoy(o, rt, in, iso, iso_text, iso_warning, mask, t0)
-                             : run_variational(o, rt, in, iso, iso_text, iso_warning, mask, t0, std::move(cue), cue_text,
-                                               walls_only);
+                             : run_variational(o, rt, in, iso, iso_text, iso_warning, mask, t0, std::move(cue),
+                                               std::move(walls), cue_text);
 }
 
 }  // namespace
