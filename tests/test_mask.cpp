@@ -229,21 +229,7 @@ TEST(NearField, BeamAxisFromTheSpeckleGrain) {
   EXPECT_EQ(band[v.index(20, 40, 15)], 0);
 }
 
-// Speckle-like samples (grain finer along z, the beam, than across it) of a
-// mean given per voxel position in mm: mean(x, y, z).
-template <class Mean>
-Volume speckled(Dims3 dims, double h, Mean mean, std::uint64_t seed) {
-  Volume v(dims, {h, h, h}, ScalarType::UInt8);
-  std::uniform_real_distribution<double> U(0.6, 1.4);
-  for (std::size_t z = 0; z < dims[2]; ++z)
-    for (std::size_t y = 0; y < dims[1]; ++y)
-      for (std::size_t x = 0; x < dims[0]; ++x) {
-        std::mt19937_64 cell(seed ^ (z * 1000003 + (y / 3) * 7919 + (x / 3) * 104729));
-        const double m = mean(double(x) * h, double(y) * h, double(z) * h);
-        v.at(x, y, z) = float(std::clamp(std::round(m * U(cell)), 1.0, 255.0));
-      }
-  return v;
-}
+using test::speckled;  // tests/test_support.hpp
 
 TEST(NearField, ABandUnderPartOfTheProbeIsFoundOnItsOwnLines) {
   // The cap of a volume probe, as the volume's top face cuts a fan: the
@@ -1312,16 +1298,11 @@ TEST_F(CliMask, ShadowWallsAreWeightedDownByDefaultAndKeptOnRequest) {
   // 6 mm below the bar down, with --shadow-walls keep they are.
   const double h = 0.5;
   // Speckle grain finer along z than across, so z is found as the beam.
-  Volume v({48, 48, 64}, {h, h, h}, ScalarType::UInt8);
-  std::uniform_real_distribution<double> U(0.6, 1.4);
-  for (std::size_t z = 0; z < 64; ++z)
-    for (std::size_t y = 0; y < 48; ++y)
-      for (std::size_t x = 0; x < 48; ++x) {
-        std::mt19937_64 cell(test::seed() ^ (z * 1000003 + (y / 2) * 7919 + (x / 2) * 104729));
-        const double xm = double(x) * h, zm = double(z) * h;
-        const double m = xm >= 10.0 && xm < 14.0 ? (zm < 8.0 ? 150.0 : zm < 10.0 ? 240.0 : 20.0) : 150.0;
-        v.at(x, y, z) = float(std::min(255.0, std::round(m * U(cell))));
-      }
+  const Volume v = speckled({48, 48, 64}, h,
+                            [](double xm, double, double zm) {
+                              return xm >= 10.0 && xm < 14.0 ? (zm < 8.0 ? 150.0 : zm < 10.0 ? 240.0 : 20.0) : 150.0;
+                            },
+                            test::seed(), 0.6, 1.4, 2);
   write_volume(file("bar.nrrd"), v);
   const test::RunResult r = run({"classify", file("bar.nrrd"), "--iso", "85", "-o", file("u.nrrd")});
   ASSERT_EQ(r.status, 0) << r.err;

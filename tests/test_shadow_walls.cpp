@@ -18,19 +18,11 @@ namespace {
 
 constexpr double kH = 0.5;  // mm
 
-// Speckle-like samples (a factor 0.85-1.15, grain 2 voxels across the beam)
-// of mean(x, y, z) in mm, beam along z.
+// Speckle-like samples (test::speckled) of a factor 0.85-1.15, grain 2
+// voxels across the beam (z).
 template <class Mean>
 Volume scene(Dims3 dims, Mean mean, std::uint64_t seed) {
-  Volume v(dims, {kH, kH, kH}, ScalarType::UInt8);
-  std::uniform_real_distribution<double> U(0.85, 1.15);
-  for (std::size_t z = 0; z < dims[2]; ++z)
-    for (std::size_t y = 0; y < dims[1]; ++y)
-      for (std::size_t x = 0; x < dims[0]; ++x) {
-        std::mt19937_64 cell(seed ^ (z * 1000003 + (y / 2) * 7919 + (x / 2) * 104729));
-        v.at(x, y, z) = float(std::clamp(std::round(mean(double(x) * kH, double(y) * kH, double(z) * kH) * U(cell)), 1.0, 255.0));
-      }
-  return v;
+  return test::speckled(dims, kH, mean, seed, 0.85, 1.15, 2);
 }
 
 // Tissue (150) with a bright bar (240) 8-10 mm deep under x in [10, 14) mm

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
@@ -41,6 +42,26 @@ std::uint64_t seed();
 
 // A volume of uniform random samples in [lo, hi).
 Volume random_volume(Dims3 dims, Vec3d spacing, std::uint64_t seed, float lo = 0.0f, float hi = 1.0f);
+
+// Speckle-like uint8 samples of a mean given per voxel position in mm,
+// mean(x, y, z), on voxels of h mm: each sample is the mean times a uniform
+// factor in [lo, hi), one factor per cell of `grain` x `grain` voxels across
+// z and one voxel along it (the grain finest along z, the beam, as in
+// ultrasound), rounded and clamped to [1, 255].
+template <class Mean>
+Volume speckled(Dims3 dims, double h, Mean mean, std::uint64_t seed, double lo = 0.6, double hi = 1.4,
+                std::size_t grain = 3) {
+  Volume v(dims, {h, h, h}, ScalarType::UInt8);
+  std::uniform_real_distribution<double> U(lo, hi);
+  for (std::size_t z = 0; z < dims[2]; ++z)
+    for (std::size_t y = 0; y < dims[1]; ++y)
+      for (std::size_t x = 0; x < dims[0]; ++x) {
+        std::mt19937_64 cell(seed ^ (z * 1000003 + (y / grain) * 7919 + (x / grain) * 104729));
+        const double m = mean(double(x) * h, double(y) * h, double(z) * h);
+        v.at(x, y, z) = float(std::clamp(std::round(m * U(cell)), 1.0, 255.0));
+      }
+  return v;
+}
 
 // A soft spherical shell as a float opacity volume: n^3 voxels of 0.8 mm,
 // u = max(0, 1 - |d - 0.3 n| / 1.5) with d the distance in voxels from the
