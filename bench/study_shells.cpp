@@ -103,9 +103,14 @@ bool set_wall_param(ShadowWallParams& wp, const std::string& k, double x) {
 // isovalue's constants, for sweeps on training seeds (the defaults otherwise).
 std::vector<std::pair<std::string, double>> g_overrides;
 
-// near_min_ratio and near_stay: the near-field band's constants.
+// near_min_ratio, near_faint_ratio, near_speckle_sds and near_stay: the
+// near-field band's constants.
 bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIsoParams& ap, NearFieldParams& nf) {
   if (k == "near_min_ratio") nf.min_ratio = x;
+  else if (k == "near_faint_ratio") nf.faint_ratio = x;
+  else if (k == "near_speckle_sds") nf.speckle_sds = x;
+  else if (k == "near_faint_lines") nf.faint_lines = x;
+  else if (k == "near_layer_gap") nf.layer_gap_mm = x;
   else if (k == "near_stay") nf.stay_mm = x;
   else if (k == "iso_fraction") ap.local_fraction = x;
   else if (k == "iso_field_sigma") ap.field_sigma_mm = x;

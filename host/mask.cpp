@@ -683,6 +683,10 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   const auto K_search = std::min(K, std::size_t(std::ceil(params.search_mm / hz)));
   const float nan = std::numeric_limits<float>::quiet_NaN();
   std::vector<float> A(lines * K, nan);
+  // The speckle's own spread (below): each scanned sample's departure from
+  // the lowpass, at depths top_mm ... search_mm below the skin line.
+  const auto top_k = std::size_t(std::ceil(params.top_mm / hz));
+  std::vector<float> R(lines * K, nan);
   std::size_t all = 0;  // scanned voxels
   {
     const int parts = range_count(d[w_ax], threads);
@@ -695,7 +699,11 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
             const std::size_t i = voxel(a, bb, z);
             if (scanned && !(*scanned)[i]) continue;
             ++pall[std::size_t(part)];
-            if (long(z) - skin[l] < long(K)) A[l * K + std::size_t(long(z) - skin[l])] = lp[i];
+            const long k = long(z) - skin[l];
+            if (k < long(K)) {
+              A[l * K + std::size_t(k)] = lp[i];
+              if (k >= long(top_k) && k < long(K_search)) R[l * K + std::size_t(k)] = v.data[i] - lp[i];
+            }
           }
     });
     for (std::size_t c : pall) all += c;
@@ -730,6 +738,24 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   if (!(below < 1e300)) {
     if (report) *report = rep;
     return band;
+  }
+  // The speckle's spread: 1.4826 x the median absolute deviation of the
+  // residuals R (a robust standard deviation: the objects' edges in R are
+  // few). A faint band (brighter than `below` by faint_ratio of its top but
+  // not by min_ratio) counts when it stands out of the speckle by
+  // speckle_sds of it: on bright tissue (grey levels near the top of the
+  // range) a saturated band can never be min_ratio brighter.
+  {
+    std::vector<float> r;
+    r.reserve(lines * (K_search > top_k ? K_search - top_k : 0));
+    for (float x : R)
+      if (!std::isnan(x)) r.push_back(x);
+    std::vector<float>().swap(R);
+    if (r.size() >= 100) {
+      const double m = median(r);
+      for (float& x : r) x = float(std::fabs(double(x) - m));
+      rep.speckle_sd = 1.4826 * median(r);
+    }
   }
   // Per beam line (docs/real-data.md, "The near field"): the line's own top,
   // T (the brightest of its first top_mm), and, when T is at least min_ratio
@@ -771,7 +797,6 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     });
     A.swap(out);
   };
-  const auto top_k = std::size_t(std::ceil(params.top_mm / hz));
   // The line's own top before the mean across: the median of its first
   // top_mm. A line is a candidate only when this is bright too, so that the
   // mean across does not carry a band past its lateral edge (where the
@@ -790,7 +815,15 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   box_across(1, v.spacing[w_ax]);
   std::vector<float> ltop(lines, -std::numeric_limits<float>::infinity());
   std::vector<long> ltop_at(lines, -1), lbottom(lines, 0), run(lines, -1);
-  const auto bright = [&](double t) { return t - below > params.min_ratio * t; };
+  // A faint band (faint_ratio, speckle_sds) must lie under faint_lines of the
+  // lines with a skin line: a layer across the probe. A few lines brighter at
+  // their top than the deep median (tissue on a gain that drifts with depth,
+  // an object near the skin) are no near field unless min_ratio brighter.
+  bool faint = false;
+  const auto bright = [&](double t) {
+    return t - below > params.min_ratio * t || (faint && t - below > params.faint_ratio * t && rep.speckle_sd > 0 &&
+                                                t - below > params.speckle_sds * rep.speckle_sd);
+  };
   const auto candidate = [&](std::size_t l) {
     return ltop_at[l] >= 0 && bright(double(ltop[l])) && !std::isnan(own_top[l]) && bright(double(own_top[l]));
   };
@@ -799,6 +832,55 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
       const float* x = &A[l * K];
       for (std::size_t k = 0; k < top_k && k < K_search; ++k)
         if (!std::isnan(x[k]) && x[k] > ltop[l]) ltop[l] = x[k], ltop_at[l] = long(k);
+    }
+  });
+  if (params.faint_ratio < params.min_ratio) {
+    faint = true;
+    std::size_t faint_lines = 0, with_skin_lines = 0;
+    for (std::size_t l = 0; l < lines; ++l) {
+      with_skin_lines += skin[l] >= 0;
+      faint_lines += candidate(l);
+    }
+    faint = double(faint_lines) >= params.faint_lines * double(with_skin_lines);
+  }
+  // A layered band (skin, a dark fat layer up to a few mm thick, then bright
+  // muscle or fascia): Pc(k), the median over the candidate lines of their
+  // samples k below the skin line, falls below halfway and rises above it
+  // again within layer_gap_mm, and then falls for good. Then each line's
+  // band ends only where it stays below halfway for layer_gap_mm (not
+  // stay_mm): the fat's dip is no bottom. A median over the lines decides:
+  // an object close under the band on some of them (a bone) is no layer.
+  double stay_mm = params.stay_mm;
+  if (params.layer_gap_mm > params.stay_mm) {
+    std::vector<std::size_t> cand;
+    std::vector<float> x;
+    for (std::size_t l = 0; l < lines; ++l)
+      if (candidate(l)) cand.push_back(l), x.push_back(ltop[l]);
+    const double half = 0.5 * (median(x) + below);
+    std::vector<double> Pc;
+    for (std::size_t k = 0; k < K_search && !cand.empty(); ++k) {
+      x.clear();
+      for (std::size_t l : cand)
+        if (!std::isnan(A[l * K + k])) x.push_back(A[l * K + k]);
+      if (double(x.size()) < 0.5 * double(cand.size())) break;
+      Pc.push_back(median(x));
+    }
+    const auto gap_k = std::size_t(std::floor(params.layer_gap_mm / hz));
+    const auto stay_k = std::max<std::size_t>(1, std::size_t(std::ceil(params.stay_mm / hz)));
+    std::size_t k = 0;
+    while (k < Pc.size() && top_k > k && Pc[k] < half) ++k;  // the top
+    while (k < Pc.size() && Pc[k] >= half) ++k;               // the first layer
+    const std::size_t fall = k;
+    while (k < Pc.size() && Pc[k] < half) ++k;                // the gap under it
+    if (k < Pc.size() && k - fall >= 1 && k - fall <= gap_k) {
+      std::size_t run = 0;                                    // the next layer, then a fall that stays
+      for (; k < Pc.size() && run < stay_k; ++k) run = Pc[k] < half ? run + 1 : 0;
+      if (run >= stay_k) stay_mm = params.layer_gap_mm, rep.layered = true;
+    }
+  }
+  parallel_ranges(lines, threads, [&](std::size_t l0, std::size_t l1) {
+    for (std::size_t l = l0; l < l1; ++l) {
+      const float* x = &A[l * K];
       if (!candidate(l)) continue;
       const double half = 0.5 * (double(ltop[l]) + below);
       for (std::size_t k = std::size_t(ltop_at[l]); k < K_search; ++k) {
@@ -808,7 +890,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
           continue;
         }
         if (run[l] < 0) run[l] = long(k);
-        if (double(long(k) - run[l] + 1) * hz >= params.stay_mm) {
+        if (double(long(k) - run[l] + 1) * hz >= stay_mm) {
           lbottom[l] = run[l];
           break;
         }
@@ -866,6 +948,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     rep.lines = band_lines;
     rep.depth_mm = median(depths);
     if (!tops.empty()) rep.top = median(tops);
+    rep.faint = faint && !(rep.top - below > params.min_ratio * rep.top);
     for (std::size_t bb = 0; bb < d[w_ax]; ++bb)
       for (std::size_t a = 0; a < d[u_ax]; ++a) {
         const std::size_t l = a + bb * d[u_ax];
@@ -961,6 +1044,22 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
     for (int k = 0; k < parts; ++k) rep.lines += pechoes[std::size_t(k)], with_data += pdata[std::size_t(k)];
   }
   if (rep.lines < 16 || double(rep.lines) < 0.05 * double(with_data)) return done();
+  // A flat reflector: its echo lies at nearly the same depth on neighbouring
+  // lines (a tilted one moves by about a lateral step per line). On bright
+  // speckle every line has a "first strong echo", at whatever depth its
+  // first bright grain lies: 3 mm apart on a quarter of the neighbouring
+  // lines (randomised spine 106), none on the flat reflector of IMLiF.
+  {
+    std::vector<double> jumps;
+    for (std::size_t l = 0; l + 1 < lines; ++l)
+      if ((l + 1) % d[u_ax] != 0 && echo[l] >= 0 && echo[l + 1] >= 0)
+        jumps.push_back(std::fabs(double(echo[l + 1] - echo[l])) * h);
+    if (jumps.empty()) return done();
+    const auto q = jumps.begin() + long(3 * (jumps.size() - 1) / 4);
+    std::nth_element(jumps.begin(), q, jumps.end());
+    rep.jump_mm = *q;
+    if (rep.jump_mm > std::max(params.max_jump_mm, 2.0 * v.spacing[u_ax])) return done();
+  }
   // The echo train: Q(s), the median over the aligned lines.
   const auto smax = std::size_t(std::min(1e9, std::floor(params.max_spacing_mm / h)));
   const auto smin = std::max<std::size_t>(1, std::size_t(std::ceil(params.min_spacing_mm / h)));

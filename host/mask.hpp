@@ -87,8 +87,11 @@ HostVector<float> lowpass_across_beam(const Volume& v, const std::vector<std::ui
 // darkest of P(d), the median over the lines of the lowpassed data at depth
 // d (0.5 mm steps), from top_mm to search_mm. Per line, its top T (the
 // brightest of its first top_mm): when T is brighter than `below` by more
-// than min_ratio of T, the line's band reaches down to where it falls below
-// halfway between the two and stays there for stay_mm. The lines' bottoms
+// than min_ratio of T (or, when at least faint_lines of the lines pass this
+// test, by faint_ratio of T and by speckle_sds of the speckle's spread: a
+// saturated band over bright tissue), the line's band reaches down to where
+// it falls below halfway between the two and stays there for stay_mm (a
+// layered band dips at the fat and rises again at the muscle). The lines' bottoms
 // are smoothed by a separable median over smooth_mm across the beam, and the
 // band is each line's bottom plus margin_mm, when at least min_lines of the
 // lines have one. Returns 1 for voxels in the band, all 0 when there is none.
@@ -104,7 +107,8 @@ HostVector<float> lowpass_across_beam(const Volume& v, const std::vector<std::ui
 // trough before it by min_copy of the echo's own rise, a trough that falls
 // at least min_gap of the way from the echo down to lo (under a strong
 // reflector lies its shadow), and a second, fainter copy within tolerance s1
-// of 2 s1 rising by min_second. Then, in every line
+// of 2 s1 rising by min_second; the echo itself flat (its depth on
+// neighbouring lines within max_jump_mm, see ReverbParams). Then, in every line
 // with a first strong echo, the voxels below it from where its lower flank
 // falls to halfway between the echo and that trough are the reverberation
 // region (held at u = 0 like the near field).
@@ -115,6 +119,9 @@ struct ReverbParams {
   double min_gap = 0.6;  // the trough before the first copy: at least this share of the way from the echo to lo
   double tolerance = 0.2;
   double sigma_mm = 1.0;  // lowpass across the beam, as the near field's
+  // The echo's depth on neighbouring lines (along the first lateral axis):
+  // its 75th percentile jump at most this, or two lateral voxels.
+  double max_jump_mm = 1.0;
 };
 struct ReverbReport {
   bool found = false;
@@ -122,6 +129,7 @@ struct ReverbReport {
   double cut_mm = 0;                // below the echo's crest: where the region starts
   double echo = 0, copy1 = 0, copy2 = 0, trough = 0;  // Q at 0, s1, 2 s1 and the trough before s1 (file units)
   std::size_t lines = 0;            // beam lines with a first strong echo
+  double jump_mm = 0;               // 75th percentile of the echo's depth step between neighbouring lines
   std::size_t voxels = 0;           // voxels in the region
 };
 // The region (1) below the first strong echo of each line when the echo
@@ -133,7 +141,13 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
 struct NearFieldParams {
   double top_mm = 3.0, search_mm = 25.0, margin_mm = 1.0;
   double stay_mm = 3.0;    // the band ends where the profile stays below halfway this long
+  double layer_gap_mm = 6.0;  // a layered band (its lines' median rises again within this under its first layer):
+                              // each line's band ends where it stays below halfway this long (0: never)
   double min_ratio = 0.3;  // the top brighter than below it by this share of the top
+  // ... or by this smaller share when that is also speckle_sds of the
+  // speckle's spread below the top (NearFieldReport::speckle_sd), on at
+  // least faint_lines of the lines with a skin line.
+  double faint_ratio = 0.1, speckle_sds = 2.5, faint_lines = 0.25;
   double sigma_mm = 1.0;   // lowpass across the beam of the profile's samples
   int axis = -1;           // beam axis (0 x, 1 y, 2 z); -1: beam_axis_of the data
   double max_share = 0.5;  // a "band" holding more of the scanned voxels is the object, not a near field
@@ -156,6 +170,9 @@ struct NearFieldReport {
   double depth_mm = 0;          // band bottom below the skin line, margin included (median over its lines)
   std::size_t lines = 0;        // beam lines with a band
   double top = 0, below = 0;    // P at the top and below it (file units)
+  double speckle_sd = 0;        // robust spread of the samples about the lowpass below the top (file units)
+  bool faint = false;           // found by the faint rule (faint_ratio, speckle_sds, faint_lines): its median top is not min_ratio brighter
+  bool layered = false;         // a layered band: its lines ended where they stayed below halfway for layer_gap_mm
   std::size_t voxels = 0;       // voxels in the band
   bool too_deep = false;        // a band was found but held more than max_share of the scanned voxels: kept
   ReverbReport reverb;          // remove_near_field with params.reverb

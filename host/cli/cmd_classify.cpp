@@ -590,8 +590,11 @@ int run_classify(const ClassifyOptions& given_options) {
     std::ostringstream t;
     if (nf.found) {
       t << "; near field removed: the first " << std::fixed << std::setprecision(1) << nf.depth_mm
-        << " mm below the skin line along " << "xyz"[nf.axis] << " (" << nf.voxels << " voxels, median " << std::setprecision(0) << nf.top
-        << " over " << nf.below << " below; --near-field keep to draw it)";
+        << " mm below the skin line along " << "xyz"[nf.axis];
+      if (nf.layered) t << " in layers";
+      t << " (" << nf.voxels << " voxels, median " << std::setprecision(0) << nf.top << " over " << nf.below << " below";
+      if (nf.faint) t << ", a faint band: speckle spread " << std::setprecision(1) << nf.speckle_sd;
+      t << "; --near-field keep to draw it)";
       if (nf.echo.found)
         t << ", with its echo at " << std::setprecision(2) << nf.echo.from << "-" << nf.echo.to
           << " x the band's depth (" << nf.echo.voxels << " of those voxels)";
