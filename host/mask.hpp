@@ -24,7 +24,9 @@ namespace softshell {
 //  2. its 6-connected regions that touch the volume boundary and hold at
 //     least min_fraction of all voxels are unscanned;
 //  3. they reclaim the zero voxels 6-connected to them within `solid`
-//     steps (the ragged edge of the fill that no cube fits into);
+//     steps (the ragged edge of the fill that no cube fits into), and the
+//     zero voxels on the volume's faces connected to them along the faces
+//     (a fan's arc meeting a face leaves a one-voxel layer of zeros there);
 //  4. then grow by `grow` voxels (6-neighbour dilation) over the
 //     partial-volume rim that the reconstruction leaves at the sweep edge:
 //     on the PLUS spine sweep the first scanned layer is dim (median 72
@@ -69,7 +71,8 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
 // so the mean squared difference between neighbours (per mm, scanned
 // nonzero samples) is largest along it.
 // `threads` (0: every core) does not change the result.
-int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int threads = 0);
+// `plane_step` > 1 sums every plane_step-th z-plane only (a cheaper estimate).
+int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int threads = 0, std::size_t plane_step = 1);
 
 // The data lowpassed across the beam only (a Gaussian of sigma_mm along the
 // two axes other than `beam_axis`; beam lines stay lines: speckle averaged,

@@ -130,6 +130,39 @@ TEST(Mask, OneInAThousandRule) {
   }
 }
 
+TEST(Mask, AFansArcMeetingTheFaceLeavesNoScannedZerosThere) {
+  // A fan (apex 40 voxels above the volume, radius 103) whose bottom arc
+  // just misses the bottom face in the middle: there the zeros under the arc
+  // are one voxel thick (z = 63) and no 5^3 cube fits them; at the sides they
+  // are six thick. Along the bottom face they are connected to the thick
+  // part, so they are unscanned too, with the 2-voxel rim above them (the
+  // data's last samples, whose step to 0 was drawn as a sheet). Speckle's
+  // dark samples in the fan are never 0 here, and the fan's inside stays
+  // scanned.
+  // Speckle finer along the beam (z) than across it, so that the data's
+  // beam axis is z: the rule looks at the faces across the beam.
+  const Volume speckle = test::speckled({64, 24, 64}, 0.5, [](double, double, double) { return 60.0; }, test::seed() + 41);
+  Volume v = speckle;
+  for (std::size_t z = 0; z < 64; ++z)
+    for (std::size_t y = 0; y < 24; ++y)
+      for (std::size_t x = 0; x < 64; ++x) {
+        const double dx = double(x) - 32.0, dz = double(z) + 40.0;
+        const bool in_fan = std::hypot(dx, dz) < 103.0 && std::fabs(dx) < 0.45 * dz;
+        if (!in_fan) v.at(x, y, z) = 0.0f;
+      }
+  ASSERT_EQ(beam_axis_of(v, nullptr), 2);
+  ASSERT_EQ(v.at(32, 12, 63), 0.0f);
+  ASSERT_GT(v.at(32, 12, 62), 0.0f);
+  MaskReport r;
+  const auto m = scanned_mask(v, MaskParams{}, &r);
+  ASSERT_GE(r.unscanned_regions, 1u);  // the side wedges and the arc's thick ends
+  for (std::size_t z : {63u, 62u, 61u}) EXPECT_EQ(m[v.index(32, 12, z)], 0) << "z " << z;
+  EXPECT_EQ(m[v.index(32, 12, 58)], 1);
+  EXPECT_EQ(m[v.index(32, 12, 30)], 1);
+  // Every zero on the bottom face is unscanned.
+  for (std::size_t x = 0; x < 64; ++x) EXPECT_EQ(m[v.index(x, 12, 63)], 0) << "x " << x;
+}
+
 // ---- the near field ------------------------------------------------------------------------------------------
 
 // Speckle-like samples of a given mean, with a grain along the beam axis
