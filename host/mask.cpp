@@ -262,7 +262,7 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
   // 3. The ragged edge of the fill: zeros within `solid` steps through zeros.
   if (rep.unscanned_regions > 0) grow_unscanned(mask, d, params.solid, &zero, threads);
   // 3b. The thin end of the fill along the volume's faces: where a fan's
-  // bottom arc (or its side) meets a face, the zeros between the arc and the
+  // bottom arc meets the face across the beam, the zeros between the arc and the
   // face thin to one voxel and no cube fits, so step 1 left them, and the
   // data's last samples above them were drawn as a sheet (randomised spine
   // 305: 11 600 of its 18 400 drawn voxels). The zeros on a face that are
@@ -288,8 +288,8 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
       std::vector<std::uint8_t> plane(w * h);  // the face's zeros, opened by the square
       for (std::size_t p = 0; p < w * h; ++p) plane[p] = zero[index(p)];
       const Dims3 pd{w, h, 1};
-      for (bool erode : {true, false})
-        for (int k = 0; k < 2; ++k) filter_axis(plane, pd, k, params.solid, erode, threads);
+      cube_filter(plane, pd, params.solid, true, threads);  // one plane: the square of step 1's cube
+      cube_filter(plane, pd, params.solid, false, threads);
       // Flood the face from its unscanned voxels through those zeros (the
       // face's plane holds the whole path: a voxel off the face is no zero
       // of it).
@@ -733,14 +733,16 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   const auto K_search = std::min(K, std::size_t(std::ceil(params.search_mm / hz)));
   const float nan = std::numeric_limits<float>::quiet_NaN();
   std::vector<float> A(lines * K, nan);
-  // The speckle's own spread (below): each scanned sample's departure from
-  // the lowpass, at depths top_mm ... search_mm below the skin line.
+  // The speckle's own spread (below) from R: each scanned sample's departure
+  // from the lowpass, at depths top_mm ... search_mm below the skin line
+  // (gathered per thread; only their median and spread are used).
   const auto top_k = std::size_t(std::ceil(params.top_mm / hz));
-  std::vector<float> R(lines * K, nan);
+  std::vector<float> R;
   std::size_t all = 0;  // scanned voxels
   {
     const int parts = range_count(d[w_ax], threads);
     std::vector<std::size_t> pall(static_cast<std::size_t>(parts), 0);
+    std::vector<std::vector<float>> presid(static_cast<std::size_t>(parts));
     parallel_ranges_indexed(d[w_ax], threads, [&](int part, std::size_t b0, std::size_t b1) {
       for (std::size_t z = 0; z < d[ax]; ++z)
         for (std::size_t bb = b0; bb < b1; ++bb)
@@ -752,11 +754,12 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
             const long k = long(z) - skin[l];
             if (k < long(K)) {
               A[l * K + std::size_t(k)] = lp[i];
-              if (k >= long(top_k) && k < long(K_search)) R[l * K + std::size_t(k)] = v.data[i] - lp[i];
+              if (k >= long(top_k) && k < long(K_search)) presid[std::size_t(part)].push_back(v.data[i] - lp[i]);
             }
           }
     });
     for (std::size_t c : pall) all += c;
+    for (const auto& pr : presid) R.insert(R.end(), pr.begin(), pr.end());
   }
   if (all < 100) {
     if (report) *report = rep;
@@ -795,18 +798,12 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   // not by min_ratio) counts when it stands out of the speckle by
   // speckle_sds of it: on bright tissue (grey levels near the top of the
   // range) a saturated band can never be min_ratio brighter.
-  {
-    std::vector<float> r;
-    r.reserve(lines * (K_search > top_k ? K_search - top_k : 0));
-    for (float x : R)
-      if (!std::isnan(x)) r.push_back(x);
-    std::vector<float>().swap(R);
-    if (r.size() >= 100) {
-      const double m = median(r);
-      for (float& x : r) x = float(std::fabs(double(x) - m));
-      rep.speckle_sd = 1.4826 * median(r);
-    }
+  if (R.size() >= 100) {
+    const double m = median(R);
+    for (float& x : R) x = float(std::fabs(double(x) - m));
+    rep.speckle_sd = 1.4826 * median(R);
   }
+  std::vector<float>().swap(R);
   // Per beam line (docs/real-data.md, "The near field"): the line's own top,
   // T (the brightest of its first top_mm), and, when T is at least min_ratio
   // brighter than `below` (relative to T), the band's bottom on this line:
@@ -885,7 +882,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     }
   });
   if (params.faint_ratio < params.min_ratio) {
-    faint = true;
+    faint = true;  // count the lines that pass with the faint rule in force, then keep it only if enough do
     std::size_t faint_lines = 0, with_skin_lines = 0;
     for (std::size_t l = 0; l < lines; ++l) {
       with_skin_lines += skin[l] >= 0;

@@ -25,8 +25,9 @@ namespace softshell {
 //     least min_fraction of all voxels are unscanned;
 //  3. they reclaim the zero voxels 6-connected to them within `solid`
 //     steps (the ragged edge of the fill that no cube fits into), and the
-//     zero voxels on the volume's faces connected to them along the faces
-//     (a fan's arc meeting a face leaves a one-voxel layer of zeros there);
+//     zero voxels on the two faces across the beam, solid in the face's
+//     plane, connected to them along the face (a fan's arc meeting that face
+//     leaves a one-voxel layer of zeros there);
 //  4. then grow by `grow` voxels (6-neighbour dilation) over the
 //     partial-volume rim that the reconstruction leaves at the sweep edge:
 //     on the PLUS spine sweep the first scanned layer is dim (median 72

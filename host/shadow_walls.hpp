@@ -7,9 +7,11 @@
 // beam and whose dark side, a short step down the gradient, is in shadow --
 // below the isovalue, some way below a voxel above the isovalue further up
 // its beam line -- while its bright side, the same step up, is not, and is
-// above the isovalue (where the classifier would draw the edge). It multiplies the classifier's edge strength like the bone cue's
-// (VariationalParams::edge_weight) but leaves the reference edge gradient the
-// data's own. The side of an object seen in fluid is no wall (the fluid
+// above the isovalue (where the classifier would draw the edge). It
+// multiplies the classifier's edge strength like the bone cue's
+// (VariationalParams::edge_weight); the reference edge gradient is then taken
+// from the weighted edges (EdgeReference::Weighted, set_edge_weights below)
+// unless the bone cue is on. The side of an object seen in fluid is no wall (the fluid
 // beside it has nothing bright above it), nor is a bone's top (its gradient
 // lies along the beam).
 #pragma once
