@@ -29,6 +29,7 @@ inline bool set_variational_param(VariationalParams& p, const std::string& key, 
   else if (key == "sharpen_lambda") p.sharpen_lambda = v;
   else if (key == "sharpen_barrier") p.sharpen_barrier = v;
   else if (key == "max_gain") p.max_gain = v;
+  else if (key == "shell_shift") p.shell_shift_mm = v;
   else return false;
   return true;
 }

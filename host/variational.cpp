@@ -45,6 +45,7 @@ ClassifyCoeffs VariationalParams::coeffs() const {
   k.shell_h2 = float(h * h), k.profile_power = float(profile_power);
   k.g_ref = edge_share > 0 ? float(g_ref) : 0.0f, k.edge_power = float(edge_power);
   k.weight_cap = float(weight_cap);
+  k.shell_shift = float(shell_shift_mm);
   k.sharpen_lambda = 0.0f, k.sharpen_ratio = 1.0f;
   return k;
 }
@@ -69,7 +70,7 @@ double small_volume_scale(const Dims3& dims, const Vec3d& spacing, double refere
 }
 
 void scale_length_scales(VariationalParams& p, double f) {
-  p.sigma_mm *= f, p.grad_sigma_mm *= f, p.thickness_mm *= f;
+  p.sigma_mm *= f, p.grad_sigma_mm *= f, p.thickness_mm *= f, p.shell_shift_mm *= f;
   p.beta *= f * f, p.kappa *= f * f;
 }
 

@@ -49,7 +49,11 @@ struct VariationalParams {
   // it u < 1 / (1 + weight_cap) anyway, and the bound keeps the coefficient
   // contrast, hence the multigrid convergence, in check.
   double weight_cap = 100.0;
-  double edge_share = 0.03, edge_power = 4.0;
+  // The shell's centre moved this far (mm) from the isosurface toward its
+  // bright side, onto the boundary echo's crest (docs/numerics.md, "The shell
+  // on the echo"). 0: centred on the isosurface.
+  double shell_shift_mm = 0.5;
+  double edge_share = 0.03, edge_power = 3.0;
   // u_ind from the data (the shell functional): the system is linear in
   // u_ind, so solving with u_ind / crest scales u by 1 / crest exactly; the
   // crest is the median of u on the shell's ridge (voxels where u is a

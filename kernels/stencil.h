@@ -48,6 +48,9 @@ typedef struct ClassifyCoeffs {
    * a previous u: sharpen_lambda (0: off) and sharpen_ratio, the weight of
    * the pull toward u_ind against the pull toward 0. */
   float sharpen_lambda, sharpen_ratio;
+  /* The shell's centre moved this far (mm) from the isosurface toward its
+   * bright side (docs/numerics.md, "The shell on the echo"; 0: on it). */
+  float shell_shift;
 } ClassifyCoeffs;
 
 #ifdef __OPENCL_VERSION__

@@ -47,7 +47,10 @@ __attribute__((always_inline)) inline float density_c(const ClassifyCoeffs k, co
 }
 __attribute__((always_inline)) inline float density_mu(const ClassifyCoeffs k, const float v, const float vs,
                                                       const float grad2) {
-  const float dv = v - k.v_iso, dvs = vs - k.v_iso;
+  /* The shell functional's centre moved shell_shift mm toward the bright
+   * side: to first order a local isovalue v_iso + shell_shift |grad v|. */
+  const float lift = k.shell_h2 > 0.0f ? k.shell_shift * sqrt(grad2) : 0.0f;
+  const float dv = v - k.v_iso - lift, dvs = vs - k.v_iso - lift;
   const float eps = k.g_ref > 0.0f ? k.epsilon * k.g_ref * k.g_ref : k.epsilon;
   float W = (k.omega * dv * dv + (1.0f - k.omega) * dvs * dvs) / (grad2 + eps);
   /* The shell functional: W is a squared distance (mm^2) to the isosurface;

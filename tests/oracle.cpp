@@ -258,7 +258,10 @@ Densities reference_densities(const Volume& v, const VariationalParams& p, const
     for (std::size_t y = 0; y < v.dims[1]; ++y)
       for (std::size_t x = 0; x < v.dims[0]; ++x, ++i) {
         const double gv2 = gv[0][i] * gv[0][i] + gv[1][i] * gv[1][i] + gv[2][i] * gv[2][i];
-        const double a = double(v.data[i]) - p.v_iso, b = smooth[i] - p.v_iso;
+        // The shell's centre moved shell_shift_mm toward the bright side: a
+        // local isovalue v_iso + shift |grad v| (kernels/system.cl).
+        const double lift = shell ? p.shell_shift_mm * std::sqrt(gv2) : 0.0;
+        const double a = double(v.data[i]) - p.v_iso - lift, b = smooth[i] - p.v_iso - lift;
         double W = (p.omega * a * a + (1.0 - p.omega) * b * b) / (gv2 + eps);
         if (shell) W = std::min(std::pow(W / h2, p.profile_power), p.weight_cap);
         const double c = relative ? p.delta + (1.0 - p.delta) * std::pow(std::min(1.0, std::sqrt(gv2) / g_ref), p.edge_power)

@@ -703,5 +703,62 @@ TEST(Transfers, RowAndVoxelKernelsAreTheHostInterpolationAndItsTranspose) {
   }
 }
 
+TEST(SolverShell, TheShiftMovesTheShellTowardTheBrightSideByAboutTheShift) {
+  // A flat boundary across z: fluid (40) on one side, tissue (160) on the
+  // other, the boundary's echo a Gaussian ridge on it (crest about 200);
+  // 0.5 mm voxels. The isovalue, at 0.75 of the way from the fluid to the
+  // crest as the automatic rule puts it, crosses the echo's fluid-side flank
+  // once. --shell-shift (default 0.5 mm, one voxel here) moves the shell
+  // toward the bright side, whichever way along z that is, by about the
+  // shift, and the shell keeps its peak (docs/numerics.md, "The shell on the
+  // echo").
+  const Dims3 dims{16, 16, 48};
+  const double h = 0.5, z0 = 24.0, shift = VariationalParams().shell_shift_mm;
+  EXPECT_EQ(shift, 0.5) << "the default this test was sized for";
+  for (const bool flip : {false, true}) {
+    SCOPED_TRACE(flip ? "tissue above (-z)" : "tissue below (+z)");
+    const double dir = flip ? -1.0 : 1.0;  // toward the tissue
+    auto grey = [&](double z) {
+      const double t = dir * (z - z0);
+      return 40.0 + 120.0 / (1.0 + std::exp(-t / 0.8)) + 90.0 * std::exp(-t * t / 2.0);
+    };
+    Volume v(dims, {h, h, h});
+    v.source_type = ScalarType::UInt8;
+    double crest = 0;
+    for (std::size_t z = 0; z < dims[2]; ++z) {
+      crest = std::max(crest, grey(double(z)));
+      for (std::size_t y = 0; y < dims[1]; ++y)
+        for (std::size_t x = 0; x < dims[0]; ++x) v.at(x, y, z) = float(grey(double(z)));
+    }
+    const double iso = 40.0 + 0.75 * (crest - 40.0);
+    // The shell's u-weighted mean z and its peak over the inner columns.
+    auto shell = [&](double shift_mm) {
+      VariationalParams p;
+      p.v_iso = iso / 255.0;
+      p.shell_shift_mm = shift_mm;
+      const Volume u = classify_variational(runtime(), v, p, SolverParams{});
+      double s = 0, w = 0, peak = 0;
+      for (std::size_t z = 1; z + 1 < dims[2]; ++z)
+        for (std::size_t y = 4; y + 4 < dims[1]; ++y)
+          for (std::size_t x = 4; x + 4 < dims[0]; ++x) {
+            const double a = u.at(x, y, z);
+            peak = std::max(peak, a);
+            if (a > 0.05) s += a * double(z), w += a;
+          }
+      EXPECT_GT(w, 0.0) << "shift " << shift_mm << ": no shell";
+      return std::make_pair(w > 0 ? s / w : 0.0, peak);
+    };
+    const auto [at_iso, peak0] = shell(0.0);
+    const auto [moved, peak1] = shell(shift);
+    std::cout << "[ shell    ] " << (flip ? "tissue above" : "tissue below") << ": boundary z " << z0
+              << ", shell centre " << at_iso << " (shift 0, peak " << peak0 << "), " << moved << " (shift " << shift
+              << " mm, peak " << peak1 << ")\n";
+    const double voxels = dir * (moved - at_iso);
+    EXPECT_GT(voxels, 0.25) << "toward the bright side";
+    EXPECT_LT(voxels, 1.5 * shift / h) << "by about the shift, not more";
+    EXPECT_GT(peak1, 0.5) << "the shell keeps its peak";
+  }
+}
+
 }  // namespace
 }  // namespace softshell

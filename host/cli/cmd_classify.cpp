@@ -294,7 +294,7 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
       std::cout << "  shell    thickness " << timing.resolved.thickness_mm << " mm, profile power " << p.profile_power
                 << ", reference edge gradient " << std::setprecision(4) << timing.resolved.g_ref
                 << " per mm (top " << std::setprecision(1) << 100 * p.edge_share << " %), edge power "
-                << std::setprecision(3) << p.edge_power << "\n";
+                << std::setprecision(3) << p.edge_power << ", shift " << timing.resolved.shell_shift_mm << " mm\n";
     std::cout << "  solve    " << report.levels << " levels, " << report.cycles << (sp.krylov ? " PCG iterations" : " V-cycles")
               << ", relative residual " << std::scientific << std::setprecision(2) << report.residuals.back()
               << std::fixed << std::setprecision(3) << '\n'
@@ -535,6 +535,7 @@ int run_classify(const ClassifyOptions& given_options) {
     if (variational && !given("--sigma")) o.sigma = scale * VariationalParams().sigma_mm;
     if (!given("--grad-sigma")) o.vp.grad_sigma_mm *= scale;
     if (!given("--shell")) o.vp.thickness_mm *= scale;
+    if (!given("--shell-shift")) o.vp.shell_shift_mm *= scale;
     if (!given("--iso-field-sigma")) o.iso_field_sigma *= scale;
     // beta and kappa are squared lengths (mm^2; host/variational.hpp).
     if (!given("--beta")) o.vp.beta *= scale * scale;
@@ -822,6 +823,11 @@ void add_classify_command(CLI::App& app, Action& action) {
                 "weight rises as (distance / half the thickness)^(2 profile-power); 0: the paper's F_iso")
       ->capture_default_str()
       ->check(real_range(0, 1000, "mm"));
+  g->add_option("--shell-shift", o->vp.shell_shift_mm,
+                "The shell's centre moved this far (mm) from the isosurface toward its bright side, onto the boundary "
+                "echo's crest (docs/numerics.md, \"The shell on the echo\"); 0: centred on the isosurface")
+      ->capture_default_str()
+      ->check(real_range(0, 10, "mm"));
   g->add_option("--profile-power", o->vp.profile_power,
                 "Power of the shell's normalised squared distance in F_iso (1: the paper's 1/(1+d^2) fall-off)")
       ->capture_default_str()
