@@ -36,6 +36,7 @@ const std::vector<std::pair<std::string, KeySpec>>& specs() {
       {"delta", {Kind::Numbers, 1, 0, 1, true}},
       {"epsilon", {Kind::Numbers, 1, 1e-6, 1e6}},
       {"kappa", {Kind::Numbers, 1, 0, 1e6}},
+      {"shell_shift", {Kind::Numbers, 1, 0, 10}},
       {"renderer", {Kind::Word, 1, 0, 0, false, "splat|isosplat|mc|raycast"}},
       {"threshold", {Kind::Numbers, 1, 0, 1, true}},
       {"mesh_level", {Kind::Numbers, 1, 0, 1, true}},

@@ -295,25 +295,25 @@ std::string slurp(const std::string& path) {
 TEST_F(ViewerCli, SavedParametersReproduceTheClassification) {
   const std::string in = file("raw.nrrd");
   ASSERT_EQ(run({"synthetic", "--size", "32", "-o", in, "-q"}).status, 0);
-  const std::string given = write("given.txt", "# a session\niso = 120\nalpha = 0.5\nkappa = 0.2\nrenderer = mc\nview = 20,10\n");
+  const std::string given = write("given.txt", "# a session\niso = 120\nalpha = 0.5\nkappa = 0.2\nshell_shift = 0.3\nrenderer = mc\nview = 20,10\n");
   const std::string saved = file("saved.txt"), vu = file("view-u.nrrd"), mesh = file("mesh.ply");
   const RunResult r = run({"view", in, "--params", given, "--frames", "2", "--size", "320x240", "--save-params", saved,
                            "--save-u", vu, "--save-mesh", mesh});
   ASSERT_EQ(r.status, 0) << r.err;
   const std::string text = slurp(saved);
-  for (const char* line : {"iso = 120\n", "alpha = 0.5\n", "kappa = 0.2\n", "renderer = mc\n", "view = 20,10\n", "beta = 2\n"})
+  for (const char* line : {"iso = 120\n", "alpha = 0.5\n", "kappa = 0.2\n", "shell_shift = 0.3\n", "renderer = mc\n", "view = 20,10\n", "beta = 2\n"})
     EXPECT_NE(text.find(line), std::string::npos) << line << " not in:\n" << text;
   EXPECT_TRUE(fs::exists(mesh));
 
   const std::string a = file("a.nrrd"), b = file("b.nrrd"), c = file("c.nrrd"), d = file("d.nrrd");
   ASSERT_EQ(run({"classify", in, "--params", saved, "-o", a, "-q"}).status, 0);
-  ASSERT_EQ(run({"classify", in, "--iso", "120", "--alpha", "0.5", "--kappa", "0.2", "-o", b, "-q"}).status, 0);
+  ASSERT_EQ(run({"classify", in, "--iso", "120", "--alpha", "0.5", "--kappa", "0.2", "--shell-shift", "0.3", "-o", b, "-q"}).status, 0);
   const Volume ua = read_volume(a), ub = read_volume(b), uv = read_volume(vu);
   EXPECT_EQ(ua.data, ub.data) << "classify --params differs from the same options on the command line";
   EXPECT_EQ(ua.data, uv.data) << "classify --params differs from the viewer's u";
   // The command line wins over the file.
   ASSERT_EQ(run({"classify", in, "--params", saved, "--alpha", "2", "-o", c, "-q"}).status, 0);
-  ASSERT_EQ(run({"classify", in, "--iso", "120", "--alpha", "2", "--kappa", "0.2", "-o", d, "-q"}).status, 0);
+  ASSERT_EQ(run({"classify", in, "--iso", "120", "--alpha", "2", "--kappa", "0.2", "--shell-shift", "0.3", "-o", d, "-q"}).status, 0);
   const Volume uc = read_volume(c), ud = read_volume(d);
   EXPECT_EQ(uc.data, ud.data);
   EXPECT_NE(uc.data, ua.data);

@@ -331,7 +331,8 @@ class ViewerApp {
 
   static bool same_params(const VariationalParams& a, const VariationalParams& b) {
     return a.v_iso == b.v_iso && a.alpha == b.alpha && a.beta == b.beta && a.gamma == b.gamma && a.omega == b.omega &&
-           a.delta == b.delta && a.epsilon == b.epsilon && a.kappa == b.kappa && a.sigma_mm == b.sigma_mm;
+           a.delta == b.delta && a.epsilon == b.epsilon && a.kappa == b.kappa && a.sigma_mm == b.sigma_mm &&
+           a.shell_shift_mm == b.shell_shift_mm;
   }
 
   void start_solve(const VariationalParams& p) {
@@ -799,6 +800,7 @@ class ViewerApp {
     release |= slider("delta (flat indication)", p.delta, 0.001f, 1.0f);
     release |= slider("epsilon (gradient floor)", p.epsilon, 1e-6f, 10.0f);
     release |= slider("kappa (smoothness)", p.kappa, 0.0f, 10.0f);
+    release |= slider("shell shift (mm, onto the echo)", p.shell_shift_mm, 0.0f, 2.0f, false);
     ImGui::TextDisabled("releasing a slider re-solves (warm start)");
     if (release) start_solve(p);
     if (solving_.valid()) {
@@ -1014,6 +1016,7 @@ class ViewerApp {
       else f.set("iso", input_.data.intensity_map().from_unit(p.v_iso));
       f.set("sigma", p.sigma_mm), f.set("alpha", p.alpha), f.set("beta", p.beta), f.set("gamma", p.gamma);
       f.set("omega", p.omega), f.set("delta", p.delta), f.set("epsilon", p.epsilon), f.set("kappa", p.kappa);
+      f.set("shell_shift", p.shell_shift_mm);
     }
     f.set("renderer", std::string(mode_ == ViewRenderer::Mesh      ? "mc"
                                   : mode_ == ViewRenderer::Raycast ? "raycast"

@@ -330,6 +330,7 @@ ClassifyOptions with_params_file(ClassifyOptions o) {
                                                      {"kappa", &o.vp.kappa}};
   for (const auto& [key, value] : weights)
     if (take(key, std::string("--") + key)) *value = *f.number(key);
+  if (take("shell_shift", "--shell-shift")) o.vp.shell_shift_mm = *f.number("shell_shift");
   return o;
 }
 

@@ -69,7 +69,8 @@ ViewOptions with_params_file(ViewOptions o, viewer::ViewerOptions& v, Variationa
   const std::pair<const char*, double*> keys[] = {{"sigma", &weights.sigma_mm}, {"alpha", &weights.alpha},
                                                   {"beta", &weights.beta},      {"gamma", &weights.gamma},
                                                   {"omega", &weights.omega},    {"delta", &weights.delta},
-                                                  {"epsilon", &weights.epsilon}, {"kappa", &weights.kappa}};
+                                                  {"epsilon", &weights.epsilon}, {"kappa", &weights.kappa},
+                                                  {"shell_shift", &weights.shell_shift_mm}};
   for (const auto& [key, value] : keys)
     if (f.find(key)) *value = *f.number(key), have_weights = true;
   return o;
