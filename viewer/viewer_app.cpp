@@ -800,7 +800,7 @@ class ViewerApp {
     release |= slider("delta (flat indication)", p.delta, 0.001f, 1.0f);
     release |= slider("epsilon (gradient floor)", p.epsilon, 1e-6f, 10.0f);
     release |= slider("kappa (smoothness)", p.kappa, 0.0f, 10.0f);
-    release |= slider("shell shift (mm, onto the echo)", p.shell_shift_mm, 0.0f, 2.0f, false);
+    release |= slider("shell shift (mm)", p.shell_shift_mm, 0.0f, 2.0f, false);
     ImGui::TextDisabled("releasing a slider re-solves (warm start)");
     if (release) start_solve(p);
     if (solving_.valid()) {
