@@ -53,7 +53,7 @@ struct VariationalParams {
   // bright side, onto the boundary echo's crest (docs/numerics.md, "The shell
   // on the echo"). 0: centred on the isosurface.
   double shell_shift_mm = 0.5;
-  double edge_share = 0.03, edge_power = 3.0;
+  double edge_share = 0.03, edge_power = 3.5;
   // u_ind from the data (the shell functional): the system is linear in
   // u_ind, so solving with u_ind / crest scales u by 1 / crest exactly; the
   // crest is the median of u on the shell's ridge (voxels where u is a
