@@ -1,6 +1,6 @@
 // The solver's kernels one by one, against the device's copy and the host's
-// STREAM copy, in one run: the Gauss-Seidel sweep (forward and reverse), the
-// operator apply and residual, the grid transfers and the vector kernels on
+// STREAM copy, in one run: the Gauss-Seidel sweep (forward and reverse, and
+// forward once more in plain C++ on the host's threads), the operator apply and residual, the grid transfers and the vector kernels on
 // the face phantom's system (the grid transfers' results are checked by the
 // Transfers test instead); then one cold solve and one PCG iteration
 // (the difference of two solves one iteration apart). Every kernel result is
@@ -20,6 +20,8 @@
 #include <vector>
 
 #include "bench.hpp"
+#include "stencil.h"
+#include "parallel.hpp"
 #include "error.hpp"
 #include "phantom.hpp"
 #include "progress.hpp"
@@ -51,6 +53,77 @@ double max_relative(const std::vector<float>& a, const std::vector<double>& ref)
 }
 
 }  // namespace
+
+// The forward slab sweep in plain C++ on the host's threads, the kernel's
+// algorithm (kernels/system.cl, relax_gs_slabs: rows in chunks, the chunk's
+// row sums in a loop the compiler vectorises, then the recurrence along x in
+// blocks of 4) on the same coefficients in the same padded layout: whether
+// the OpenCL compiler or the memory system sets the sweep's speed. Not used
+// by the solver.
+struct NativeSweep {
+  GridDesc g{};
+  std::size_t N = 0, slice = 0;
+  std::vector<float> coef, b;  // coef: STENCIL_COEFS slices of `slice` floats
+  explicit NativeSweep(const HostStencil& hs) : g(hs.grid), N(hs.voxels()), slice(STENCIL_SLICE(hs.voxels())) {
+    coef.assign(STENCIL_COEFS * slice, 0.0f);
+    for (int k = 0; k < STENCIL_COEFS; ++k)
+      std::copy(hs.coef.begin() + long(k * N), hs.coef.begin() + long((k + 1) * N), coef.begin() + long(k * slice));
+    b = hs.b;
+  }
+  void row(float* x, std::size_t row) const { native_row(coef.data(), b.data(), slice, g, x, row); }
+  static __attribute__((target_clones("arch=x86-64-v3", "default"))) void native_row(const float* c, const float* b,
+                                                                                 std::size_t slice, GridDesc g,
+                                                                                 float* x, std::size_t row) {
+    constexpr int kChunk = 128;
+    const long sy = g.nx, sz = long(g.nx) * g.ny;
+    const long offs[STENCIL_COEFS] = {
+#define OFF(K, DX, DY, DZ) long(DX) + long(DY) * sy + long(DZ) * sz,
+        STENCIL_OFFSETS(OFF)
+#undef OFF
+    };
+    if (row / std::size_t(g.nx) % std::size_t(g.ny) == 0 || row / std::size_t(g.nx) % std::size_t(g.ny) == std::size_t(g.ny - 1) ||
+        row / (std::size_t(g.nx) * g.ny) == 0 || row / (std::size_t(g.nx) * g.ny) == std::size_t(g.nz - 1)) {
+      for (int i = 0; i < g.nx; ++i) x[row + i] = b[row + i] / c[row + i];
+      return;
+    }
+    x[row] = b[row] / c[row];
+    x[row + g.nx - 1] = b[row + g.nx - 1] / c[row + g.nx - 1];
+    const int n = g.nx - 2;
+    float r[kChunk], l[kChunk];
+    for (int done = 0; done < n; done += kChunk) {
+      const int m = std::min(kChunk, n - done);
+      const std::size_t p0 = row + 1 + std::size_t(done);
+      for (int i = 0; i < m; ++i) {
+        const std::size_t p = p0 + std::size_t(i);
+        float acc = -c[slice + p] * x[p + 1];
+#pragma GCC unroll 10
+        for (int k = 2; k < STENCIL_COEFS; ++k) {
+          acc = std::fma(-c[std::size_t(k) * slice + p], x[p + offs[k]], acc);
+          acc = std::fma(-c[std::size_t(k) * slice + p - offs[k]], x[p - offs[k]], acc);
+        }
+        const float inv = 1.0f / c[p];
+        r[i] = (b[p] + acc) * inv;
+        l[i] = c[slice + p - 1] * inv;
+      }
+      float u = x[p0 - 1];
+      for (int i = 0; i < m; ++i) x[p0 + std::size_t(i)] = u = std::fma(-l[i], u, r[i]);
+    }
+  }
+  // One forward sweep: colour 0's slabs, then colour 1's, slabs shared
+  // round-robin among `threads` threads (as PoCL shares its work-items).
+  void sweep(std::vector<float>& x, int slab, int threads) const {
+    const int slabs = (g.nz + 2 * slab - 1) / (2 * slab);
+    for (int colour = 0; colour < 2; ++colour) {
+      parallel_ranges(std::size_t(slabs), threads, [&](std::size_t lo, std::size_t hi) {
+        for (std::size_t k = lo; k < hi; ++k) {
+          const int z0 = (2 * int(k) + colour) * slab;
+          for (int z = z0; z < std::min(z0 + slab, g.nz); ++z)
+            for (int y = 0; y < g.ny; ++y) row(x.data(), std::size_t(g.nx) * (std::size_t(y) + std::size_t(g.ny) * z));
+        }
+      });
+    }
+  }
+};
 
 int main(int argc, char** argv) {
   int size = 128, reps = 10;
@@ -142,6 +215,21 @@ int main(int argc, char** argv) {
         return event_span_seconds(span.first, span.second);
       });
       row(rev ? "sweep (reverse)" : "sweep (forward)", s, 52, check);
+    }
+    {
+      // The same forward sweep in native C++ (NativeSweep), checked the same way.
+      const NativeSweep ns(hs);
+      const int nslab = std::max(1, sys.gs_slab());  // the CPU order's slabs, whichever device runs the kernels
+      std::vector<float> got = u0, want = u0;
+      ns.sweep(got, nslab, hstream.threads);
+      host_gs_slab_sweep(hs, want, nslab, false);
+      const double check = max_relative(got, std::vector<double>(want.begin(), want.end()));
+      const double s = best_of(reps, [&] {
+        const auto t0 = std::chrono::steady_clock::now();
+        ns.sweep(got, nslab, hstream.threads);
+        return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      });
+      row("sweep (native C++, fwd)", s, 52, check);
     }
     {
       rt.queue().enqueueWriteBuffer(x, CL_TRUE, 0, bytes, u0.data());

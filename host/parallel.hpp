@@ -7,13 +7,19 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
+#include <new>
 #include <stdexcept>
 #include <memory>
 #include <thread>
 #include <type_traits>
 #include <utility>
 #include <vector>
+
+#ifdef __linux__
+#include <sys/mman.h>
+#endif
 
 namespace softshell {
 
@@ -128,9 +134,14 @@ float kth_smallest_where(std::size_t n, std::size_t k, int threads, Value value)
 // calling thread (a page's first touch costs a fault, about 2 ms per 4 MB on
 // this kind of VM, 36 ms for a 256^3 float array) before the threads that
 // fill it in parallel start.
+//
+// Blocks of 4 MiB and more are also aligned to 2 MiB and marked for
+// transparent huge pages (Linux, madvise mode, Debian's default): one fault
+// per 2 MiB instead of per 4 KiB.
 template <class T, class A = std::allocator<T>>
 class DefaultInitAllocator : public A {
   using traits = std::allocator_traits<A>;
+  static constexpr std::size_t kHuge = std::size_t(2) << 20;
 
  public:
   template <class U>
@@ -138,6 +149,28 @@ class DefaultInitAllocator : public A {
     using other = DefaultInitAllocator<U, typename traits::template rebind_alloc<U>>;
   };
   using A::A;
+  T* allocate(std::size_t n) {
+#ifdef __linux__
+    const std::size_t bytes = n * sizeof(T);
+    if (bytes >= 2 * kHuge && n <= std::size_t(-1) / sizeof(T) / 2) {
+      const std::size_t rounded = (bytes + kHuge - 1) / kHuge * kHuge;
+      void* p = std::aligned_alloc(kHuge, rounded);
+      if (!p) throw std::bad_alloc();
+      madvise(p, rounded, MADV_HUGEPAGE);  // advice only: its failure changes nothing
+      return static_cast<T*>(p);
+    }
+#endif
+    return A::allocate(n);
+  }
+  void deallocate(T* p, std::size_t n) {
+#ifdef __linux__
+    if (n * sizeof(T) >= 2 * kHuge && n <= std::size_t(-1) / sizeof(T) / 2) {
+      std::free(p);
+      return;
+    }
+#endif
+    A::deallocate(p, n);
+  }
   template <class U>
   void construct(U* p) noexcept(std::is_nothrow_default_constructible<U>::value) {
     ::new (static_cast<void*>(p)) U;

@@ -1221,6 +1221,29 @@ TEST(HostThreads, ChunksCoverTheRangeOnceEachInOrder) {
       }
 }
 
+TEST(HostThreads, LargeHostVectorsSitOnHugePageBoundariesAndKeepTheirValues) {
+  // HostVector (host/parallel.hpp): blocks of 4 MiB and more start on a
+  // 2 MiB boundary (the transparent huge pages' size) on Linux; smaller ones
+  // come from the plain allocator. Resizing, copying and growing keep the
+  // values either way.
+  const std::size_t big = (std::size_t(5) << 20) / sizeof(float) + 3, small = 1000;
+  HostVector<float> a(big);
+  for (std::size_t i = 0; i < big; ++i) a[i] = float(i % 4099);
+#ifdef __linux__
+  EXPECT_EQ(reinterpret_cast<std::uintptr_t>(a.data()) % (std::size_t(2) << 20), 0u);
+#endif
+  HostVector<float> b = a;  // a copy: another large block
+  EXPECT_NE(b.data(), a.data());
+  b.resize(big * 2);        // grows: moves into a new block
+  b.resize(small);          // shrinks in place
+  b.shrink_to_fit();        // a small block again
+  for (std::size_t i = 0; i < small; ++i) ASSERT_EQ(b[i], float(i % 4099)) << i;
+  HostVector<std::uint8_t> c(small);
+  c.assign(small, 7);
+  EXPECT_EQ(std::count(c.begin(), c.end(), std::uint8_t(7)), long(small));
+  for (std::size_t i = 0; i < big; i += 997) ASSERT_EQ(a[i], float(i % 4099)) << i;
+}
+
 TEST(HostThreads, KthNonNegativeIsNthElementOverTheNonNegativeValues) {
   // The edge threshold of --iso auto: the k-th smallest of the usable
   // voxels' |grad| (the others are -1), against std::nth_element over them,

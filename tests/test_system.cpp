@@ -221,11 +221,19 @@ VariationalParams test_params() {
 }
 
 // The shell functional's terms on top (docs/numerics.md, "The shell
-// functional"): a non-integer profile power and edge power take the general
-// power path of the kernel.
+// functional"): a profile power and an edge power that take the general
+// power path of the kernel (exp2(q log2 x); shell_power in kernels/system.cl).
 VariationalParams shell_test_params() {
   VariationalParams p = test_params();
-  p.thickness_mm = 2.5, p.profile_power = 1.5, p.edge_share = 0.05, p.edge_power = 3.0, p.weight_cap = 50;
+  p.thickness_mm = 2.5, p.profile_power = 1.5, p.edge_share = 0.05, p.edge_power = 2.7, p.weight_cap = 50;
+  return p;
+}
+
+// The same with the given edge power: every power with a path of its own
+// (1, 2, 2.5, 3, 3.5 and 4 by multiplication and sqrt).
+VariationalParams shell_test_params(double edge_power) {
+  VariationalParams p = shell_test_params();
+  p.edge_power = edge_power;
   return p;
 }
 
@@ -343,9 +351,11 @@ TEST(System, DeviceDensitiesMatchReference) {
   const Volume v = test_volume(kSmall, kSmallSpacing, test::seed() + 121);
   const auto mask = corner_mask(kSmall);
   for (const bool masked : {false, true})
-  for (const VariationalParams& p : {test_params(), shell_test_params()}) {
+  for (const VariationalParams& p : {test_params(), shell_test_params(), shell_test_params(1.0), shell_test_params(2.0),
+                                     shell_test_params(2.5), shell_test_params(3.0), shell_test_params(3.5),
+                                     shell_test_params(4.0)}) {
     SCOPED_TRACE(masked ? "with mask" : "without mask");
-    SCOPED_TRACE(p.thickness_mm > 0 ? "shell functional" : "paper's terms");
+    SCOPED_TRACE(p.thickness_mm > 0 ? "shell functional, edge power " + std::to_string(p.edge_power) : "paper's terms");
     const DeviceSystem sys(runtime(), v, p, masked ? &mask : nullptr);
     const Densities got = sys.download_densities();
     const Densities want = test::reference_densities(v, p, masked ? &mask : nullptr);
