@@ -14,6 +14,15 @@ namespace softshell {
 namespace {
 
 constexpr const char* kSystem = "system.cl";
+
+// The build options of the kernels that form the densities (system.cl,
+// shell_power): the default build takes powers that are half-integers in
+// [0, 8] and vectorises; any other edge or profile power needs the general
+// build (exp2 and log2, scalar).
+bool half_integer_power(float q) { return q >= 0.0f && q <= 8.0f && 2.0f * q == std::floor(2.0f * q); }
+std::string density_options(const ClassifyCoeffs& k) {
+  return half_integer_power(k.edge_power) && half_integer_power(k.profile_power) ? "" : "-DSHELL_GENERAL_POWERS";
+}
 constexpr const char* kMultigrid = "multigrid.cl";
 constexpr std::size_t kReduceGroups = 64, kReduceLocal = 256;  // GPU: strided work-groups
 constexpr std::size_t kReduceChunks = 256;                     // CPU: contiguous chunks
@@ -235,7 +244,7 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
     // (F_ind is then delta everywhere).
     if (!(resolved_.g_ref > 0)) resolved_.g_ref = 1.0;
   }
-  cl::Kernel k = rt.kernel(kSystem, "system_densities");
+  cl::Kernel k = rt.kernel(kSystem, "system_densities", density_options(resolved_.coeffs()));
   Runtime::set_args(k, dv, dvs, dvg, dmask, mu_, rho_, T_[0], T_[1], T_[2],
                     T_[3], T_[4], T_[5], fixed_, grad2, resolved_.coeffs(), grid_);
   rt.enqueue_3d(k, grid_);
@@ -249,7 +258,7 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
     const std::vector<float>& w = *p.edge_weight;
     for (std::size_t i = 0; i < n; ++i) g2[i] *= w[i] * w[i];
     rt.queue().enqueueWriteBuffer(grad2, CL_TRUE, 0, bytes, g2.data());
-    cl::Kernel ku = rt.kernel(kSystem, "system_update_point");
+    cl::Kernel ku = rt.kernel(kSystem, "system_update_point", density_options(resolved_.coeffs()));
     Runtime::set_args(ku, dv, dvs, grad2, fixed_, dT_, mu_, rho_, coef_, b_, resolved_.coeffs(), grid_);
     rt.enqueue_3d(ku, grid_);
   }
@@ -263,7 +272,7 @@ void DeviceSystem::update_point(const VariationalParams& p) {
   VariationalParams r = p;
   r.g_ref = resolved_.g_ref;
   r.thickness_mm = p.effective_thickness_mm(spacing_);
-  cl::Kernel k = rt_.kernel(kSystem, "system_update_point");
+  cl::Kernel k = rt_.kernel(kSystem, "system_update_point", density_options(r.coeffs()));
   Runtime::set_args(k, sources_[0], sources_[1], sources_[2], fixed_, dT_, mu_, rho_, coef_, b_, r.coeffs(), grid_);
   resolved_ = r;
   rt_.enqueue_3d(k, grid_);
@@ -285,7 +294,7 @@ void DeviceSystem::update_sharpen(const VariationalParams& p, const cl::Buffer& 
   r.thickness_mm = p.effective_thickness_mm(spacing_);
   ClassifyCoeffs k = r.coeffs();
   k.sharpen_lambda = float(lambda), k.sharpen_ratio = float(ratio);
-  cl::Kernel kern = rt_.kernel(kSystem, "system_update_sharpen");
+  cl::Kernel kern = rt_.kernel(kSystem, "system_update_sharpen", density_options(k));
   Runtime::set_args(kern, sources_[0], sources_[1], sources_[2], fixed_, dT_, u0, mu_, rho_, coef_, b_, k, grid_);
   rt_.enqueue_3d(kern, grid_);
   resolved_ = r;

@@ -28,20 +28,30 @@ __attribute__((always_inline)) inline bool on_boundary(const GridDesc g, int x, 
  * lowpass): mu = alpha W + gamma c and rho = gamma c u_ind. They are all
  * that depends on v_iso, alpha, gamma, omega, delta, epsilon and u_ind, so
  * a change of those re-targets a system in place (system_update_point). */
-/* x^q for x >= 0: the usual integer and half-integer powers by
- * multiplication and sqrt (pow() keeps PoCL's work-group loop from
- * vectorising; exp2(q log2 x), the path for any other q, runs the
- * re-targeting kernel 6-7x slower: 30 ms instead of 4.5 ms at 105^3 with the
- * default edge power 3.5 before it had its own line), others by
- * exp2(q log2 x). */
+/* x^q for x >= 0. Built by default for half-integer q in [0, 8] (the host
+ * checks: DeviceSystem picks the program's options): x^n by its binary
+ * digits, times sqrt(x) for the half, each factor chosen by a select on the
+ * uniform q, so PoCL's work-group loop vectorises the density kernels (a
+ * branch per power kept them scalar: the re-targeting kernel took 7.4 ms at
+ * 105^3 against 1.8 ms; with exp2(q log2 x), the path for every power other
+ * than 1, 2 and 4 before, 30 ms). The products come in the order of the
+ * earlier lines for 1, 2, 3.5 and 4, so those give the same bits. Any other
+ * q: the program built with -DSHELL_GENERAL_POWERS, exp2(q log2 x). */
 __attribute__((always_inline)) inline float shell_power(const float x, const float q) {
+#ifdef SHELL_GENERAL_POWERS
   if (q == 1.0f) return x;
   if (q == 2.0f) return x * x;
-  if (q == 3.0f) return (x * x) * x;
-  if (q == 3.5f) return ((x * x) * x) * sqrt(x);
   if (q == 4.0f) return (x * x) * (x * x);
-  if (q == 2.5f) return (x * x) * sqrt(x);
   return x > 0.0f ? exp2(q * log2(x)) : 0.0f;
+#else
+  const int q2 = (int)(2.0f * q);
+  const float x2 = x * x, x4 = x2 * x2, x8 = x4 * x4;
+  float r = (q2 & 2) ? x : 1.0f;
+  r = (q2 & 4) ? ((q2 & 2) ? x2 * r : x2) : r;
+  r = (q2 & 8) ? ((q2 & 6) ? r * x4 : x4) : r;
+  r = (q2 & 16) ? ((q2 & 14) ? r * x8 : x8) : r;
+  return (q2 & 1) ? r * sqrt(x) : r;
+#endif
 }
 __attribute__((always_inline)) inline float density_c(const ClassifyCoeffs k, const float grad2) {
   if (k.g_ref > 0.0f) {
