@@ -364,8 +364,9 @@ class VariationalClassifier {
   // `init` when given, else from the previous solution when `warm`, else cold.
   // With sharpening (the default) a solve starts cold, `init` applying to
   // the linear functional only (sharpen_iterations 0), unless `warm` and the
-  // last linear solution is kept (keep_resolve_start): the linear solve then
-  // starts there.
+  // last solve's stages are kept (keep_resolve_start): the linear solve then
+  // starts from the last linear solution and the last sharpening step from
+  // the new previous stage plus the last solve's change over that step.
   // `sequence`: a 3D+t warm start (SequenceStart).
   Volume solve(SolveReport* report = nullptr, const Volume* init = nullptr, bool warm = false,
                const SequenceStart* sequence = nullptr);
@@ -374,13 +375,17 @@ class VariationalClassifier {
   double setup_seconds() const { return setup_seconds_; }    // the constructor, hierarchy included
   double update_seconds() const { return update_seconds_; }  // the last update()
   int levels() const { return mg_->levels(); }
-  // Keeps the linear solution of every solve on the device (one float per
-  // voxel) so that solve(..., warm = true) after update() starts the
-  // linear solve there instead of from full multigrid. Off by default:
-  // one-shot classifications never re-solve.
+  // Keeps the solution of every stage of each solve on the device (the
+  // linear solve and each sharpening step: sharpen_iterations + 2 floats per
+  // voxel with a scratch buffer, less than the tangential tensor freed after
+  // the setup) so that solve(..., warm = true) after update() starts the
+  // linear solve from the last linear solution instead of from full
+  // multigrid, and the last sharpening step from the new step before it plus
+  // the last solve's change over the step (docs/numerics.md, "Re-solving").
+  // Off by default: one-shot classifications never re-solve.
   void keep_resolve_start(bool on) {
     keep_start_ = on;
-    if (!on) resolve_start_ = cl::Buffer(), resolve_start_valid_ = false;
+    if (!on) kept_.clear(), scratch_ = cl::Buffer(), kept_linear_ = kept_steps_ = false;
   }
 
  private:
@@ -392,9 +397,12 @@ class VariationalClassifier {
   std::unique_ptr<MultigridSolver> mg_;
   double setup_seconds_ = 0, update_seconds_ = 0, gain_ = 1.0;
   bool sharpened_ = false;  // the system holds the sharpening term of the last solve
-  // The last solve's linear solution (keep_resolve_start).
-  cl::Buffer resolve_start_;
-  bool resolve_start_valid_ = false, keep_start_ = false;
+  // The last solve's stages (keep_resolve_start): kept_[0] its linear
+  // solution (valid: kept_linear_), kept_[s] its sharpening step s's
+  // (kept_steps_: all of them, from the same solve as kept_[0]).
+  std::vector<cl::Buffer> kept_;
+  cl::Buffer scratch_;
+  bool kept_linear_ = false, kept_steps_ = false, keep_start_ = false;
 };
 
 // The whole classifier on a volume in its own intensity units: normalise
