@@ -2,6 +2,7 @@
 // kernel sources (embedded or from $SOFTSHELL_KERNEL_DIR).
 #include "cl_runtime.hpp"
 
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -261,8 +262,55 @@ void Runtime::check_allocation(std::size_t bytes, const std::string& what) const
                       " of " + info_.device_name);
 }
 
+namespace {
+
+// Host memory for a CPU device's buffers in 2 MiB pages (docs/benchmarks.md,
+// "Huge pages"): the solver's kernels walk up to 40 arrays at once, and with
+// 4 KiB pages every one of them misses the TLB every 1024 floats; a fresh
+// buffer's first touch also faults 512x less often. Transparent huge pages
+// are "madvise" on Debian, and PoCL's own allocations are not advised, so
+// softshell allocates, advises and hands the memory to PoCL
+// (CL_MEM_USE_HOST_PTR, which the CPU device uses in place); the buffer's
+// destructor callback frees it.
+constexpr std::size_t kHugePage = std::size_t(2) << 20;
+
+void CL_CALLBACK free_host_memory(cl_mem, void* p) { std::free(p); }
+
+cl::Buffer huge_page_buffer(const cl::Context& context, cl_mem_flags flags, std::size_t bytes) {
+  const std::size_t size = (bytes + kHugePage - 1) / kHugePage * kHugePage;
+  void* p = std::aligned_alloc(kHugePage, size);
+  if (!p) return cl::Buffer();
+  madvise(p, size, MADV_HUGEPAGE);  // advice only: without THP the pages stay 4 KiB
+  cl_int err = CL_SUCCESS;
+  cl_mem m = clCreateBuffer(context(), flags | CL_MEM_USE_HOST_PTR, bytes, p, &err);
+  if (err != CL_SUCCESS || !m) {
+    std::free(p);
+    return cl::Buffer();
+  }
+  if (clSetMemObjectDestructorCallback(m, free_host_memory, p) != CL_SUCCESS) {
+    // Without the callback the memory could not be given back: keep it
+    // only as long as the buffer by not using this path.
+    clReleaseMemObject(m);
+    std::free(p);
+    return cl::Buffer();
+  }
+  return cl::Buffer(m);  // takes the reference clCreateBuffer gave
+}
+
+}  // namespace
+
 cl::Buffer Runtime::buffer(std::size_t bytes, cl_mem_flags flags) {
   check_allocation(bytes, "a volume");
+  const bool host_flags = flags & (CL_MEM_USE_HOST_PTR | CL_MEM_ALLOC_HOST_PTR | CL_MEM_COPY_HOST_PTR);
+  // SOFTSHELL_HUGE_PAGES=0 leaves the allocation to the OpenCL driver.
+  static const bool huge = [] {
+    const char* e = std::getenv("SOFTSHELL_HUGE_PAGES");
+    return !(e && std::string(e) == "0");
+  }();
+  if (huge && !info_.is_gpu() && bytes >= kHugePage && !host_flags) {
+    cl::Buffer b = huge_page_buffer(context_, flags, bytes);
+    if (b() != nullptr) return b;
+  }
   return cl::Buffer(context_, flags, std::max<std::size_t>(bytes, 4));
 }
 
