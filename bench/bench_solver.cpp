@@ -1,7 +1,8 @@
 // The solver's kernels one by one, against the device's copy and the host's
 // STREAM copy, in one run: the Gauss-Seidel sweep (forward and reverse, and
-// forward once more in plain C++ on the host's threads), the operator apply and residual, the grid transfers and the vector kernels on
-// the face phantom's system (the grid transfers' results are checked by the
+// forward once more in plain C++ on the host's threads), the operator apply
+// and residual, the grid transfers and the vector kernels on the face
+// phantom's system (the grid transfers' results are checked by the
 // Transfers test instead); then one cold solve and one PCG iteration
 // (the difference of two solves one iteration apart). Every kernel result is
 // checked against the host reference (bench.hpp) before it is timed.
@@ -56,10 +57,10 @@ double max_relative(const std::vector<float>& a, const std::vector<double>& ref)
 
 // The forward slab sweep in plain C++ on the host's threads, the kernel's
 // algorithm (kernels/system.cl, relax_gs_slabs: rows in chunks, the chunk's
-// row sums in a loop the compiler vectorises, then the recurrence along x in
-// blocks of 4) on the same coefficients in the same padded layout: whether
-// the OpenCL compiler or the memory system sets the sweep's speed. Not used
-// by the solver.
+// row sums in a loop the compiler vectorises, then the recurrence along x,
+// here one voxel at a time) on the same coefficients in the same padded
+// layout: whether the OpenCL compiler or the memory system sets the sweep's
+// speed. Not used by the solver.
 struct NativeSweep {
   GridDesc g{};
   std::size_t N = 0, slice = 0;
@@ -70,10 +71,10 @@ struct NativeSweep {
       std::copy(hs.coef.begin() + long(k * N), hs.coef.begin() + long((k + 1) * N), coef.begin() + long(k * slice));
     b = hs.b;
   }
-  void row(float* x, std::size_t row) const { native_row(coef.data(), b.data(), slice, g, x, row); }
+  // x-row (y, z), as gs_any_row does it.
   static __attribute__((target_clones("arch=x86-64-v3", "default"))) void native_row(const float* c, const float* b,
                                                                                  std::size_t slice, GridDesc g,
-                                                                                 float* x, std::size_t row) {
+                                                                                 float* x, int y, int z) {
     constexpr int kChunk = 128;
     const long sy = g.nx, sz = long(g.nx) * g.ny;
     const long offs[STENCIL_COEFS] = {
@@ -81,8 +82,8 @@ struct NativeSweep {
         STENCIL_OFFSETS(OFF)
 #undef OFF
     };
-    if (row / std::size_t(g.nx) % std::size_t(g.ny) == 0 || row / std::size_t(g.nx) % std::size_t(g.ny) == std::size_t(g.ny - 1) ||
-        row / (std::size_t(g.nx) * g.ny) == 0 || row / (std::size_t(g.nx) * g.ny) == std::size_t(g.nz - 1)) {
+    const std::size_t row = std::size_t(g.nx) * (std::size_t(y) + std::size_t(g.ny) * std::size_t(z));
+    if (y == 0 || z == 0 || y == g.ny - 1 || z == g.nz - 1) {
       for (int i = 0; i < g.nx; ++i) x[row + i] = b[row + i] / c[row + i];
       return;
     }
@@ -109,8 +110,8 @@ struct NativeSweep {
       for (int i = 0; i < m; ++i) x[p0 + std::size_t(i)] = u = std::fma(-l[i], u, r[i]);
     }
   }
-  // One forward sweep: colour 0's slabs, then colour 1's, slabs shared
-  // round-robin among `threads` threads (as PoCL shares its work-items).
+  // One forward sweep: colour 0's slabs, then colour 1's, each colour's
+  // slabs split into `threads` contiguous ranges.
   void sweep(std::vector<float>& x, int slab, int threads) const {
     const int slabs = (g.nz + 2 * slab - 1) / (2 * slab);
     for (int colour = 0; colour < 2; ++colour) {
@@ -118,7 +119,7 @@ struct NativeSweep {
         for (std::size_t k = lo; k < hi; ++k) {
           const int z0 = (2 * int(k) + colour) * slab;
           for (int z = z0; z < std::min(z0 + slab, g.nz); ++z)
-            for (int y = 0; y < g.ny; ++y) row(x.data(), std::size_t(g.nx) * (std::size_t(y) + std::size_t(g.ny) * z));
+            for (int y = 0; y < g.ny; ++y) native_row(coef.data(), b.data(), slice, g, x.data(), y, z);
         }
       });
     }

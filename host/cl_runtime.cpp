@@ -2,7 +2,6 @@
 // kernel sources (embedded or from $SOFTSHELL_KERNEL_DIR).
 #include "cl_runtime.hpp"
 
-#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -15,6 +14,7 @@
 
 #include "embedded_kernels.hpp"
 #include "error.hpp"
+#include "huge_pages.hpp"
 #include "text.hpp"
 
 namespace softshell {
@@ -272,15 +272,11 @@ namespace {
 // softshell allocates, advises and hands the memory to PoCL
 // (CL_MEM_USE_HOST_PTR, which the CPU device uses in place); the buffer's
 // destructor callback frees it.
-constexpr std::size_t kHugePage = std::size_t(2) << 20;
-
 void CL_CALLBACK free_host_memory(cl_mem, void* p) { std::free(p); }
 
 cl::Buffer huge_page_buffer(const cl::Context& context, cl_mem_flags flags, std::size_t bytes) {
-  const std::size_t size = (bytes + kHugePage - 1) / kHugePage * kHugePage;
-  void* p = std::aligned_alloc(kHugePage, size);
+  void* p = huge_page_alloc(bytes);
   if (!p) return cl::Buffer();
-  madvise(p, size, MADV_HUGEPAGE);  // advice only: without THP the pages stay 4 KiB
   cl_int err = CL_SUCCESS;
   cl_mem m = clCreateBuffer(context(), flags | CL_MEM_USE_HOST_PTR, bytes, p, &err);
   if (err != CL_SUCCESS || !m) {
@@ -307,7 +303,7 @@ cl::Buffer Runtime::buffer(std::size_t bytes, cl_mem_flags flags) {
     const char* e = std::getenv("SOFTSHELL_HUGE_PAGES");
     return !(e && std::string(e) == "0");
   }();
-  if (huge && !info_.is_gpu() && bytes >= kHugePage && !host_flags) {
+  if (huge && !info_.is_gpu() && bytes >= kHugePageBytes && !host_flags) {
     cl::Buffer b = huge_page_buffer(context_, flags, bytes);
     if (b() != nullptr) return b;
   }

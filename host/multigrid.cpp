@@ -550,13 +550,12 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
   // With sharpening the result depends on where the loose linear solve
   // stops, so it starts as a cold one does (FMG), not from `init`; a warm
   // re-solve starts it from the last linear solution (kept on the device,
-  // keep_resolve_start) instead of FMG, and each sharpening step from the
-  // the first sharpening step from the new linear solution, as a cold
-  // solve does, and the last step from the new previous stage's solution
-  // plus the last solve's change over that step (it moves little with a
-  // parameter). Measured against sharpening from converged solves, the
-  // result is as close as a cold classification's (docs/numerics.md,
-  // "Re-solving").
+  // keep_resolve_start) instead of FMG, the first sharpening step from the
+  // new linear solution, as a cold solve does, and the last step from the
+  // new previous stage's solution plus the last solve's change over that
+  // step (it moves little with a parameter). Measured against sharpening
+  // from converged solves, the result is as close as a cold
+  // classification's (docs/numerics.md, "Re-solving").
   SolveReport local;
   if (!report) report = &local;
   const std::size_t bytes = geometry_.voxels() * sizeof(float);

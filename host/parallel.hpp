@@ -7,7 +7,6 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
-#include <cstdlib>
 #include <cstring>
 #include <new>
 #include <stdexcept>
@@ -17,9 +16,7 @@
 #include <utility>
 #include <vector>
 
-#ifdef __linux__
-#include <sys/mman.h>
-#endif
+#include "huge_pages.hpp"
 
 namespace softshell {
 
@@ -135,13 +132,13 @@ float kth_smallest_where(std::size_t n, std::size_t k, int threads, Value value)
 // this kind of VM, 36 ms for a 256^3 float array) before the threads that
 // fill it in parallel start.
 //
-// Blocks of 4 MiB and more are also aligned to 2 MiB and marked for
-// transparent huge pages (Linux, madvise mode, Debian's default): one fault
-// per 2 MiB instead of per 4 KiB.
+// Blocks of 4 MiB and more come from huge_page_alloc (host/huge_pages.hpp):
+// 2 MiB-aligned and marked for transparent huge pages, one fault per 2 MiB
+// instead of per 4 KiB.
 template <class T, class A = std::allocator<T>>
 class DefaultInitAllocator : public A {
   using traits = std::allocator_traits<A>;
-  static constexpr std::size_t kHuge = std::size_t(2) << 20;
+  static bool huge(std::size_t n) { return n <= std::size_t(-1) / sizeof(T) / 2 && n * sizeof(T) >= 2 * kHugePageBytes; }
 
  public:
   template <class U>
@@ -150,26 +147,16 @@ class DefaultInitAllocator : public A {
   };
   using A::A;
   T* allocate(std::size_t n) {
-#ifdef __linux__
-    const std::size_t bytes = n * sizeof(T);
-    if (bytes >= 2 * kHuge && n <= std::size_t(-1) / sizeof(T) / 2) {
-      const std::size_t rounded = (bytes + kHuge - 1) / kHuge * kHuge;
-      void* p = std::aligned_alloc(kHuge, rounded);
-      if (!p) throw std::bad_alloc();
-      madvise(p, rounded, MADV_HUGEPAGE);  // advice only: its failure changes nothing
-      return static_cast<T*>(p);
-    }
-#endif
-    return A::allocate(n);
+    if (!huge(n)) return A::allocate(n);
+    void* p = huge_page_alloc(n * sizeof(T));
+    if (!p) throw std::bad_alloc();
+    return static_cast<T*>(p);
   }
   void deallocate(T* p, std::size_t n) {
-#ifdef __linux__
-    if (n * sizeof(T) >= 2 * kHuge && n <= std::size_t(-1) / sizeof(T) / 2) {
+    if (huge(n))
       std::free(p);
-      return;
-    }
-#endif
-    A::deallocate(p, n);
+    else
+      A::deallocate(p, n);
   }
   template <class U>
   void construct(U* p) noexcept(std::is_nothrow_default_constructible<U>::value) {
