@@ -301,9 +301,16 @@ void DeviceSystem::update_sharpen(const VariationalParams& p, const cl::Buffer& 
 }
 
 void DeviceSystem::restrict_point(const DeviceSystem& fine) {
-  cl::Kernel k = rt_.kernel(kMultigrid, "mg_restrict_point");
+  // With the CPU ordering (GsOrder::Slabs) a work-item per coarse x-row (fine
+  // rows read in memory order), as the V-cycle's transfers and coarsen(); with
+  // the GPU's a work-item per voxel (set_gs_order picks either on any device).
+  const bool rows = gs_order_ == GsOrder::Slabs;
+  cl::Kernel k = rt_.kernel(kMultigrid, rows ? "mg_restrict_point_rows" : "mg_restrict_point");
   Runtime::set_args(k, fine.mu_, fine.rho_, fixed_, dT_, mu_, rho_, coef_, b_, fine.grid_, grid_);
-  rt_.enqueue_3d(k, grid_);
+  if (rows)
+    rt_.enqueue_rows(k, grid_);
+  else
+    rt_.enqueue_3d(k, grid_);
 }
 
 std::unique_ptr<DeviceSystem> DeviceSystem::coarsen(const DeviceSystem& fine) {
@@ -315,11 +322,17 @@ std::unique_ptr<DeviceSystem> DeviceSystem::coarsen(const DeviceSystem& fine) {
   std::unique_ptr<DeviceSystem> c(new DeviceSystem(fine.rt_, gc));
   c->gs_order_ = fine.gs_order_;
   c->gs_slab_ = fine.gs_slab_;
-  cl::Kernel k = fine.rt_.kernel(kMultigrid, "mg_restrict_densities");
+  // The same kernel form as restrict_point's (rows with the CPU ordering): the
+  // re-restricted mu and rho then have the bits of a fresh coarsening.
+  const bool rows = fine.gs_order_ == GsOrder::Slabs;
+  cl::Kernel k = fine.rt_.kernel(kMultigrid, rows ? "mg_restrict_densities_rows" : "mg_restrict_densities");
   Runtime::set_args(k, fine.mu_, fine.rho_, fine.T_[0], fine.T_[1], fine.T_[2], fine.T_[3], fine.T_[4], fine.T_[5],
                     fine.fixed_, c->mu_, c->rho_, c->T_[0], c->T_[1], c->T_[2], c->T_[3], c->T_[4], c->T_[5],
                     c->fixed_, gf, gc);
-  fine.rt_.enqueue_3d(k, gc);
+  if (rows)
+    fine.rt_.enqueue_rows(k, gc);
+  else
+    fine.rt_.enqueue_3d(k, gc);
   c->assemble();
   return c;
 }

@@ -86,6 +86,106 @@ __kernel void mg_restrict_point(__global const float* restrict mu_f, __global co
               r * inv);
 }
 
+/* The same P^T-weighted averages for CPUs: a work-item per coarse x-row
+ * (global size ny_c x nz_c, as the *_rows transfers below), the 9 fine rows
+ * around it (2Y + dy, 2Z + dz) in the volume summed one after another, each
+ * along x with the weights 1/2, 1, 1/2 (taps outside the volume left out).
+ * Every fine row is read in memory order instead of PoCL's work-group loop
+ * gathering 27 strided taps per coarse voxel for each field (105^3, all the
+ * levels after an update: 0.7-1.1 ms against 2.9-3.0; docs/benchmarks.md,
+ * "Re-solving: the costs around the iterations"). The terms are added in
+ * another order than FOR_EACH_RESTRICTION_TAP's: the same averages up to
+ * rounding, and one function for both row kernels, so a field restricted by
+ * the two gets the same bits, as the voxel kernels' fields do. */
+/* Along x: 1/2 f[2X - 1] + f[2X] + 1/2 f[2X + 1] over the taps inside the
+ * fine row (restrict_x_weight: the sum of their weights). */
+__attribute__((always_inline)) inline float restrict_x_taps(__global const float* restrict f, const int X,
+                                                            const int nfx) {
+  float s = 0.0f;
+  if (2 * X - 1 >= 0 && 2 * X - 1 < nfx) s += 0.5f * f[2 * X - 1];
+  if (2 * X < nfx) s += f[2 * X];
+  if (2 * X + 1 < nfx) s += 0.5f * f[2 * X + 1];
+  return s;
+}
+
+__attribute__((always_inline)) inline float restrict_x_weight(const int X, const int nfx) {
+  return (2 * X - 1 >= 0 && 2 * X - 1 < nfx ? 0.5f : 0.0f) + (2 * X < nfx ? 1.0f : 0.0f) +
+         (2 * X + 1 < nfx ? 0.5f : 0.0f);
+}
+
+__attribute__((always_inline)) inline void restrict_field_row(__global const float* restrict f,
+                                                              __global float* restrict out, const GridDesc gf,
+                                                              const GridDesc gc, const int Y, const int Z) {
+  const size_t row_c = (size_t)gc.nx * ((size_t)Y + (size_t)gc.ny * Z);
+  /* Coarse X in [1, x_end) has all three x-taps inside the fine row. */
+  const int x_end = min(gc.nx, gf.nx / 2);
+  for (int X = 0; X < gc.nx; ++X) out[row_c + X] = 0.0f;
+  float wyz = 0.0f;
+  for (int dz = -1; dz <= 1; ++dz)
+    for (int dy = -1; dy <= 1; ++dy) {
+      const int fy = 2 * Y + dy, fz = 2 * Z + dz;
+      if (fy < 0 || fz < 0 || fy >= gf.ny || fz >= gf.nz) continue;
+      const float w = hat_weight(abs(dy)) * hat_weight(abs(dz));
+      wyz += w;
+      __global const float* r = f + (size_t)gf.nx * ((size_t)fy + (size_t)gf.ny * fz);
+      out[row_c] = fma(w, restrict_x_taps(r, 0, gf.nx), out[row_c]);
+      for (int X = 1; X < x_end; ++X)
+        out[row_c + X] = fma(w, fma(0.5f, r[2 * X - 1] + r[2 * X + 1], r[2 * X]), out[row_c + X]);
+      for (int X = max(x_end, 1); X < gc.nx; ++X)
+        out[row_c + X] = fma(w, restrict_x_taps(r, X, gf.nx), out[row_c + X]);
+    }
+  for (int X = 0; X < gc.nx; ++X) out[row_c + X] *= 1.0f / (restrict_x_weight(X, gf.nx) * wyz);
+}
+
+/* mg_restrict_densities by rows (the CPU's coarsening). */
+__kernel void mg_restrict_densities_rows(__global const float* restrict mu_f, __global const float* restrict rho_f,
+                                         __global const float* restrict txx_f, __global const float* restrict tyy_f,
+                                         __global const float* restrict tzz_f, __global const float* restrict txy_f,
+                                         __global const float* restrict txz_f, __global const float* restrict tyz_f,
+                                         __global const uchar* restrict fixed_f, __global float* restrict mu_c,
+                                         __global float* restrict rho_c, __global float* restrict txx_c,
+                                         __global float* restrict tyy_c, __global float* restrict tzz_c,
+                                         __global float* restrict txy_c, __global float* restrict txz_c,
+                                         __global float* restrict tyz_c, __global uchar* restrict fixed_c,
+                                         const GridDesc gf, const GridDesc gc) {
+  const int Y = get_global_id(0), Z = get_global_id(1);
+  if (Y >= gc.ny || Z >= gc.nz) return;
+  restrict_field_row(mu_f, mu_c, gf, gc, Y, Z);
+  restrict_field_row(rho_f, rho_c, gf, gc, Y, Z);
+  restrict_field_row(txx_f, txx_c, gf, gc, Y, Z);
+  restrict_field_row(tyy_f, tyy_c, gf, gc, Y, Z);
+  restrict_field_row(tzz_f, tzz_c, gf, gc, Y, Z);
+  restrict_field_row(txy_f, txy_c, gf, gc, Y, Z);
+  restrict_field_row(txz_f, txz_c, gf, gc, Y, Z);
+  restrict_field_row(tyz_f, tyz_c, gf, gc, Y, Z);
+  const size_t row_c = (size_t)gc.nx * ((size_t)Y + (size_t)gc.ny * Z);
+  const bool row_boundary = Y == 0 || Z == 0 || Y == gc.ny - 1 || Z == gc.nz - 1;
+  const bool row_inside = 2 * Y < gf.ny && 2 * Z < gf.nz;
+  for (int X = 0; X < gc.nx; ++X) {
+    const bool boundary = row_boundary || X == 0 || X == gc.nx - 1;
+    fixed_c[row_c + X] =
+        (boundary || !row_inside || 2 * X >= gf.nx || fixed_f[grid_index(gf, 2 * X, 2 * Y, 2 * Z)]) ? 1 : 0;
+  }
+}
+
+/* mg_restrict_point by rows. */
+__kernel void mg_restrict_point_rows(__global const float* restrict mu_f, __global const float* restrict rho_f,
+                                     __global const uchar* restrict fixed_c, __global const float* restrict dT_c,
+                                     __global float* restrict mu_c, __global float* restrict rho_c,
+                                     __global float* restrict coef_c, __global float* restrict b_c,
+                                     const GridDesc gf, const GridDesc gc) {
+  const int Y = get_global_id(0), Z = get_global_id(1);
+  if (Y >= gc.ny || Z >= gc.nz) return;
+  restrict_field_row(mu_f, mu_c, gf, gc, Y, Z);
+  restrict_field_row(rho_f, rho_c, gf, gc, Y, Z);
+  const size_t row_c = (size_t)gc.nx * ((size_t)Y + (size_t)gc.ny * Z);
+  const float V = gc.hx * gc.hy * gc.hz;
+  for (int X = 0; X < gc.nx; ++X) {
+    const size_t p = row_c + X;
+    store_point(mu_c, rho_c, coef_c, b_c, fixed_c, dT_c, p, V, mu_c[p], rho_c[p]);
+  }
+}
+
 /* r_c = P^T r_f (zero at fixed coarse voxels). */
 __kernel void mg_restrict_residual(__global const float* restrict r_f, __global const uchar* restrict fixed_c,
                                    __global float* restrict r_c, const GridDesc gf, const GridDesc gc) {

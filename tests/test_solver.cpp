@@ -328,42 +328,104 @@ TEST(SolverFace, WarmStartAfterAFivePercentIsoChangeIsCheap) {
   EXPECT_LE(warm.cycles, cold.cycles);
 }
 
+TEST(SolverCoarsening, CoarseDensitiesAreTheWeightedAveragesOfTheFineOnes) {
+  // Every field of a coarse level (mu, rho, the six tensor components) is
+  // the P^T-weighted average of the fine field over the fine voxels 2I + d,
+  // |d_i| <= 1, that lie in the volume (weights 1, 1/2 per axis); a coarse
+  // voxel is fixed on the coarse boundary, beyond the fine grid, or where its
+  // fine voxel 2I is. Float64 reference on the host; odd and even sizes, so
+  // the last coarse plane has its fine centre inside and outside the volume;
+  // the CPU's row kernels and the GPU's voxel kernels (GsOrder picks them).
+  for (const GsOrder order : {GsOrder::Slabs, GsOrder::Points})
+    for (const Dims3 dims : {Dims3{21, 18, 15}, Dims3{16, 23, 20}}) {
+      SCOPED_TRACE(order == GsOrder::Slabs ? "rows" : "voxels");
+      const Volume v = noisy_sphere(dims, {0.9, 1.0, 1.2}, test::seed() + 31);
+      DeviceSystem sys(runtime(), v, sphere_params());
+      sys.set_gs_order(order);
+      auto coarse = DeviceSystem::coarsen(sys);
+      const Densities f = sys.download_densities(), c = coarse->download_densities();
+      const Dims3 dc = c.dims;
+      ASSERT_EQ(dc, (Dims3{dims[0] / 2 + 1, dims[1] / 2 + 1, dims[2] / 2 + 1}));
+      std::vector<const std::vector<float>*> fine_fields = {&f.mu, &f.rho}, coarse_fields = {&c.mu, &c.rho};
+      for (int k = 0; k < 6; ++k)
+        fine_fields.push_back(&f.T[std::size_t(k)]), coarse_fields.push_back(&c.T[std::size_t(k)]);
+      double worst = 0;
+      std::size_t fixed_wrong = 0;
+      for (std::size_t Z = 0; Z < dc[2]; ++Z)
+        for (std::size_t Y = 0; Y < dc[1]; ++Y)
+          for (std::size_t X = 0; X < dc[0]; ++X) {
+            const std::size_t I = X + dc[0] * (Y + dc[1] * Z);
+            for (std::size_t q = 0; q < fine_fields.size(); ++q) {
+              double sum = 0, wsum = 0, scale = 0;
+              for (int dz = -1; dz <= 1; ++dz)
+                for (int dy = -1; dy <= 1; ++dy)
+                  for (int dx = -1; dx <= 1; ++dx) {
+                    const long fx = 2 * long(X) + dx, fy = 2 * long(Y) + dy, fz = 2 * long(Z) + dz;
+                    if (fx < 0 || fy < 0 || fz < 0 || fx >= long(dims[0]) || fy >= long(dims[1]) || fz >= long(dims[2]))
+                      continue;
+                    const double w = (dx ? 0.5 : 1.0) * (dy ? 0.5 : 1.0) * (dz ? 0.5 : 1.0);
+                    const double val =
+                        (*fine_fields[q])[std::size_t(fx) + dims[0] * (std::size_t(fy) + dims[1] * std::size_t(fz))];
+                    sum += w * val, wsum += w, scale = std::max(scale, std::abs(val));
+                  }
+              const double ref = sum / wsum;
+              worst = std::max(worst, std::abs(double((*coarse_fields[q])[I]) - ref) / std::max(scale, 1e-30));
+            }
+            const bool boundary = X == 0 || Y == 0 || Z == 0 || X + 1 == dc[0] || Y + 1 == dc[1] || Z + 1 == dc[2];
+            const bool inside = 2 * X < dims[0] && 2 * Y < dims[1] && 2 * Z < dims[2];
+            const bool fixed = boundary || !inside || f.fixed[2 * X + dims[0] * (2 * Y + dims[1] * 2 * Z)];
+            fixed_wrong += (c.fixed[I] != 0) != fixed;
+          }
+      EXPECT_LT(worst, 1e-6) << dims[0] << "x" << dims[1] << "x" << dims[2];
+      EXPECT_EQ(fixed_wrong, 0u);
+    }
+}
+
 class SolverUpdateBoth : public ::testing::TestWithParam<bool> {};
 
 TEST_P(SolverUpdateBoth, PointwiseUpdateEqualsAFreshBuildOnEveryLevel) {
   // New v_iso, alpha, gamma, omega, delta, epsilon, u_ind: the updated fine
   // level and a coarse level re-restricted from it equal fresh builds, for
   // the earlier functional and for the shell functional (whose reference
-  // gradient and thickness floor the update keeps).
-  const Volume v = noisy_sphere({33, 28, 25}, {0.8, 1.0, 1.3}, 11);
-  VariationalParams p0 = sphere_params();
-  if (GetParam()) {
-    p0 = VariationalParams();
-    p0.v_iso = 0.45;
+  // gradient and thickness floor the update keeps); with the CPU's row
+  // kernels for the restrictions and the GPU's voxel kernels.
+  for (const GsOrder order : {GsOrder::Slabs, GsOrder::Points}) {
+    SCOPED_TRACE(order == GsOrder::Slabs ? "rows" : "voxels");
+    const Volume v = noisy_sphere({33, 28, 25}, {0.8, 1.0, 1.3}, 11);
+    VariationalParams p0 = sphere_params();
+    if (GetParam()) {
+      p0 = VariationalParams();
+      p0.v_iso = 0.45;
+    }
+    VariationalParams p1 = p0;
+    p1.v_iso = 0.52, p1.alpha = 0.7, p1.gamma = 2.0, p1.omega = 0.4, p1.delta = 0.05, p1.epsilon = 0.02, p1.u_ind = 0.9;
+    DeviceSystem sys(runtime(), v, p0);
+    sys.set_gs_order(order);
+    auto coarse = DeviceSystem::coarsen(sys);
+    auto coarser = DeviceSystem::coarsen(*coarse);
+    const std::vector<float> before = sys.download_coefficients();
+    sys.update_point(p1);
+    coarse->restrict_point(sys);
+    coarser->restrict_point(*coarse);
+    DeviceSystem fresh(runtime(), v, p1);
+    fresh.set_gs_order(order);
+    auto fresh_coarse = DeviceSystem::coarsen(fresh);
+    auto fresh_coarser = DeviceSystem::coarsen(*fresh_coarse);
+    runtime().queue().finish();
+    EXPECT_GT(test::max_relative_deviation(before, fresh.download_coefficients()), 1e-3)
+        << "the update must change something";
+    EXPECT_EQ(test::max_relative_deviation(sys.download_coefficients(), fresh.download_coefficients()), 0.0);
+    EXPECT_EQ(test::max_relative_deviation(sys.download_b(), fresh.download_b()), 0.0);
+    EXPECT_EQ(test::max_relative_deviation(coarse->download_coefficients(), fresh_coarse->download_coefficients()),
+              0.0);
+    EXPECT_EQ(test::max_relative_deviation(coarse->download_b(), fresh_coarse->download_b()), 0.0);
+    EXPECT_EQ(test::max_relative_deviation(coarser->download_coefficients(), fresh_coarser->download_coefficients()),
+              0.0);
+    // mu and rho too (the next restriction starts from them).
+    const Densities a = coarser->download_densities(), b = fresh_coarser->download_densities();
+    EXPECT_EQ(test::max_relative_deviation(a.mu, b.mu), 0.0);
+    EXPECT_EQ(test::max_relative_deviation(a.rho, b.rho), 0.0);
   }
-  VariationalParams p1 = p0;
-  p1.v_iso = 0.52, p1.alpha = 0.7, p1.gamma = 2.0, p1.omega = 0.4, p1.delta = 0.05, p1.epsilon = 0.02, p1.u_ind = 0.9;
-  DeviceSystem sys(runtime(), v, p0);
-  auto coarse = DeviceSystem::coarsen(sys);
-  auto coarser = DeviceSystem::coarsen(*coarse);
-  const std::vector<float> before = sys.download_coefficients();
-  sys.update_point(p1);
-  coarse->restrict_point(sys);
-  coarser->restrict_point(*coarse);
-  DeviceSystem fresh(runtime(), v, p1);
-  auto fresh_coarse = DeviceSystem::coarsen(fresh);
-  auto fresh_coarser = DeviceSystem::coarsen(*fresh_coarse);
-  runtime().queue().finish();
-  EXPECT_GT(test::max_relative_deviation(before, fresh.download_coefficients()), 1e-3) << "the update must change something";
-  EXPECT_EQ(test::max_relative_deviation(sys.download_coefficients(), fresh.download_coefficients()), 0.0);
-  EXPECT_EQ(test::max_relative_deviation(sys.download_b(), fresh.download_b()), 0.0);
-  EXPECT_EQ(test::max_relative_deviation(coarse->download_coefficients(), fresh_coarse->download_coefficients()), 0.0);
-  EXPECT_EQ(test::max_relative_deviation(coarse->download_b(), fresh_coarse->download_b()), 0.0);
-  EXPECT_EQ(test::max_relative_deviation(coarser->download_coefficients(), fresh_coarser->download_coefficients()), 0.0);
-  // mu and rho too (the next restriction starts from them).
-  const Densities a = coarser->download_densities(), b = fresh_coarser->download_densities();
-  EXPECT_EQ(test::max_relative_deviation(a.mu, b.mu), 0.0);
-  EXPECT_EQ(test::max_relative_deviation(a.rho, b.rho), 0.0);
 }
 
 TEST(SolverUpdate, OnlyVolumeBuiltSystemsAreUpdatable) {
