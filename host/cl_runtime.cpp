@@ -295,15 +295,21 @@ cl::Buffer huge_page_buffer(const cl::Context& context, cl_mem_flags flags, std:
 
 }  // namespace
 
+bool Runtime::huge_pages() const {
+  // SOFTSHELL_HUGE_PAGES=0 or 1 overrides set_huge_pages().
+  static const int forced = [] {
+    const char* e = std::getenv("SOFTSHELL_HUGE_PAGES");
+    if (!e) return -1;
+    const std::string s(e);
+    return s == "0" ? 0 : s == "1" ? 1 : -1;
+  }();
+  return forced >= 0 ? forced == 1 : huge_pages_;
+}
+
 cl::Buffer Runtime::buffer(std::size_t bytes, cl_mem_flags flags) {
   check_allocation(bytes, "a volume");
   const bool host_flags = flags & (CL_MEM_USE_HOST_PTR | CL_MEM_ALLOC_HOST_PTR | CL_MEM_COPY_HOST_PTR);
-  // SOFTSHELL_HUGE_PAGES=0 leaves the allocation to the OpenCL driver.
-  static const bool huge = [] {
-    const char* e = std::getenv("SOFTSHELL_HUGE_PAGES");
-    return !(e && std::string(e) == "0");
-  }();
-  if (huge && !info_.is_gpu() && bytes >= kHugePageBytes && !host_flags) {
+  if (huge_pages() && !info_.is_gpu() && bytes >= kHugePageBytes && !host_flags) {
     cl::Buffer b = huge_page_buffer(context_, flags, bytes);
     if (b() != nullptr) return b;
   }

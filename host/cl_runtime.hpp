@@ -99,12 +99,24 @@ class Runtime {
 
   std::size_t programs_built() const { return builds_; }
 
+  // CPU device buffers of 2 MiB and more in transparent huge pages (fewer TLB
+  // misses for the solver's kernels, which walk a dozen arrays at once). Off
+  // by default: on a VM whose freed 2 MiB blocks go back to the hypervisor
+  // (free page reporting) a huge page's first touch faults on the host, and
+  // a one-shot 256^3 classification took 1.0-1.3 s longer in its setup. The
+  // viewer turns it on: it re-solves on the same buffers many times.
+  // SOFTSHELL_HUGE_PAGES=0 or 1 overrides either (docs/benchmarks.md,
+  // "Huge pages: first touch on a VM").
+  void set_huge_pages(bool on) { huge_pages_ = on; }
+  bool huge_pages() const;
+
  private:
   DeviceInfo info_;
   cl::Context context_;
   cl::CommandQueue queue_;
   std::map<std::string, cl::Program> programs_;
   std::size_t builds_ = 0;
+  bool huge_pages_ = false;
 };
 
 // Seconds between an event's start and end (queue has profiling enabled).

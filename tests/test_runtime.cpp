@@ -148,5 +148,44 @@ TEST(Runtime, PoclCacheDirDefaultsToWritablePlace) {
   if (old) ::setenv("POCL_CACHE_DIR", saved.c_str(), 1); else ::unsetenv("POCL_CACHE_DIR");
 }
 
+
+TEST(Runtime, HugePageBuffersAreOptInAlignedAndKeepTheirValues) {
+  // Runtime::buffer: off by default (a one-shot command's buffers are touched
+  // a few times, and a huge page's first touch can cost more than it saves);
+  // with set_huge_pages(true) a CPU device's buffers of 2 MiB and more sit on
+  // 2 MiB boundaries of host memory (the viewer's). Either way the values go
+  // in and out unchanged, and smaller buffers are the driver's.
+  Runtime& rt = test::runtime();
+  const char* forced = std::getenv("SOFTSHELL_HUGE_PAGES");
+  if (!forced) EXPECT_FALSE(rt.huge_pages()) << "off unless asked for";
+  const bool before = rt.huge_pages();
+  const std::size_t n = (std::size_t(3) << 20) / sizeof(float) + 5;
+  std::vector<float> values(n);
+  for (std::size_t i = 0; i < n; ++i) values[i] = float(i % 8191) - 4000.0f;
+  for (const bool on : {false, true}) {
+    SCOPED_TRACE(on ? "huge pages" : "driver's memory");
+    rt.set_huge_pages(on);
+    cl::Buffer big = rt.buffer(n * sizeof(float)), little = rt.buffer(1000 * sizeof(float));
+    rt.queue().enqueueWriteBuffer(big, CL_TRUE, 0, n * sizeof(float), values.data());
+    EXPECT_EQ(test::download(rt, big, n), values);
+    void* host = nullptr;
+    clGetMemObjectInfo(big(), CL_MEM_HOST_PTR, sizeof host, &host, nullptr);
+    void* small_host = nullptr;
+    clGetMemObjectInfo(little(), CL_MEM_HOST_PTR, sizeof small_host, &small_host, nullptr);
+    EXPECT_EQ(small_host, nullptr) << "small buffers stay the driver's";
+#ifdef __linux__
+    if (!forced && !rt.info().is_gpu()) {
+      if (on) {
+        ASSERT_NE(host, nullptr) << "a huge-page buffer wraps host memory";
+        EXPECT_EQ(reinterpret_cast<std::uintptr_t>(host) % (std::size_t(2) << 20), 0u);
+      } else {
+        EXPECT_EQ(host, nullptr) << "without huge pages the driver allocates";
+      }
+    }
+#endif
+  }
+  rt.set_huge_pages(before);
+}
+
 }  // namespace
 }  // namespace softshell
