@@ -103,10 +103,10 @@ class Runtime {
   // misses for the solver's kernels, which walk a dozen arrays at once). Off
   // by default: on a VM whose freed 2 MiB blocks go back to the hypervisor
   // (free page reporting) a huge page's first touch faults on the host, and
-  // a one-shot 256^3 classification took 1.0-1.3 s longer in its setup. The
-  // viewer turns it on: it re-solves on the same buffers many times.
-  // SOFTSHELL_HUGE_PAGES=0 or 1 overrides either (docs/benchmarks.md,
-  // "Huge pages: first touch on a VM").
+  // a one-shot 256^3 classification took 1.0-1.3 s longer in its setup, while
+  // the viewer's re-solve measured the same with and without.
+  // SOFTSHELL_HUGE_PAGES=0 or 1 overrides this (docs/benchmarks.md, "Huge
+  // pages: first touch on a VM").
   void set_huge_pages(bool on) { huge_pages_ = on; }
   bool huge_pages() const;
 

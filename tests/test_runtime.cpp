@@ -150,11 +150,11 @@ TEST(Runtime, PoclCacheDirDefaultsToWritablePlace) {
 
 
 TEST(Runtime, HugePageBuffersAreOptInAlignedAndKeepTheirValues) {
-  // Runtime::buffer: off by default (a one-shot command's buffers are touched
-  // a few times, and a huge page's first touch can cost more than it saves);
-  // with set_huge_pages(true) a CPU device's buffers of 2 MiB and more sit on
-  // 2 MiB boundaries of host memory (the viewer's). Either way the values go
-  // in and out unchanged, and smaller buffers are the driver's.
+  // Runtime::buffer: off by default (a huge page's first touch can cost more
+  // than it saves); with set_huge_pages(true) (or SOFTSHELL_HUGE_PAGES=1) a
+  // CPU device's buffers of 2 MiB and more sit on 2 MiB boundaries of host
+  // memory. Either way the values go in and out unchanged, and smaller
+  // buffers are the driver's.
   Runtime& rt = test::runtime();
   const char* forced = std::getenv("SOFTSHELL_HUGE_PAGES");
   if (!forced) EXPECT_FALSE(rt.huge_pages()) << "off unless asked for";

@@ -149,7 +149,6 @@ int run_view(const ViewOptions& given_options) {
   v.quiet = o.quiet;
   std::optional<progress::Stage> stage(std::in_place, "view: load");
   Runtime rt(o.device);
-  rt.set_huge_pages(true);  // re-solves walk the same device buffers many times
   viewer::OpacityInput input =
       viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, have_weights ? &weights : nullptr, o.frame, bone_cue);
   if (!o.volume.empty()) {
