@@ -300,6 +300,17 @@ void DeviceSystem::update_sharpen(const VariationalParams& p, const cl::Buffer& 
   resolved_ = r;
 }
 
+namespace {
+// A coarsening kernel over the coarse grid g: a work-item per x-row (`rows`,
+// the CPU ordering's *_rows kernels) or per voxel.
+void enqueue_coarse(Runtime& rt, const cl::Kernel& k, const GridDesc& g, bool rows) {
+  if (rows)
+    rt.enqueue_rows(k, g);
+  else
+    rt.enqueue_3d(k, g);
+}
+}  // namespace
+
 void DeviceSystem::restrict_point(const DeviceSystem& fine) {
   // With the CPU ordering (GsOrder::Slabs) a work-item per coarse x-row (fine
   // rows read in memory order), as the V-cycle's transfers and coarsen(); with
@@ -307,10 +318,7 @@ void DeviceSystem::restrict_point(const DeviceSystem& fine) {
   const bool rows = gs_order_ == GsOrder::Slabs;
   cl::Kernel k = rt_.kernel(kMultigrid, rows ? "mg_restrict_point_rows" : "mg_restrict_point");
   Runtime::set_args(k, fine.mu_, fine.rho_, fixed_, dT_, mu_, rho_, coef_, b_, fine.grid_, grid_);
-  if (rows)
-    rt_.enqueue_rows(k, grid_);
-  else
-    rt_.enqueue_3d(k, grid_);
+  enqueue_coarse(rt_, k, grid_, rows);
 }
 
 std::unique_ptr<DeviceSystem> DeviceSystem::coarsen(const DeviceSystem& fine) {
@@ -329,10 +337,7 @@ std::unique_ptr<DeviceSystem> DeviceSystem::coarsen(const DeviceSystem& fine) {
   Runtime::set_args(k, fine.mu_, fine.rho_, fine.T_[0], fine.T_[1], fine.T_[2], fine.T_[3], fine.T_[4], fine.T_[5],
                     fine.fixed_, c->mu_, c->rho_, c->T_[0], c->T_[1], c->T_[2], c->T_[3], c->T_[4], c->T_[5],
                     c->fixed_, gf, gc);
-  if (rows)
-    fine.rt_.enqueue_rows(k, gc);
-  else
-    fine.rt_.enqueue_3d(k, gc);
+  enqueue_coarse(fine.rt_, k, gc, rows);
   c->assemble();
   return c;
 }

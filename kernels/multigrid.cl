@@ -26,8 +26,17 @@ inline float hat_weight(const int d) { return d == 0 ? 1.0f : 0.5f; }
         wsum += w;                                                                                     \
       }
 
-/* Weighted averages of the densities over the fine voxels around 2I; a coarse
- * voxel is fixed on the coarse boundary or where its fine voxel is fixed. */
+/* A coarse voxel is fixed on the coarse boundary, beyond the fine grid, or
+ * where its fine voxel 2I is fixed (both coarsening kernels). */
+__attribute__((always_inline)) inline uchar coarse_fixed(__global const uchar* restrict fixed_f, const GridDesc gf,
+                                                         const GridDesc gc, const int X, const int Y, const int Z) {
+  const bool boundary = X == 0 || Y == 0 || Z == 0 || X == gc.nx - 1 || Y == gc.ny - 1 || Z == gc.nz - 1;
+  const bool fine_inside = 2 * X < gf.nx && 2 * Y < gf.ny && 2 * Z < gf.nz;
+  return (boundary || !fine_inside || fixed_f[grid_index(gf, 2 * X, 2 * Y, 2 * Z)]) ? 1 : 0;
+}
+
+/* Weighted averages of the densities over the fine voxels around 2I; which
+ * coarse voxels are fixed: coarse_fixed. */
 __kernel void mg_restrict_densities(__global const float* restrict mu_f, __global const float* restrict rho_f,
                                     __global const float* restrict txx_f, __global const float* restrict tyy_f,
                                     __global const float* restrict tzz_f, __global const float* restrict txy_f,
@@ -61,9 +70,7 @@ __kernel void mg_restrict_densities(__global const float* restrict mu_f, __globa
   txy_c[I] = xy * inv;
   txz_c[I] = xz * inv;
   tyz_c[I] = yz * inv;
-  const bool boundary = X == 0 || Y == 0 || Z == 0 || X == gc.nx - 1 || Y == gc.ny - 1 || Z == gc.nz - 1;
-  const bool fine_inside = 2 * X < gf.nx && 2 * Y < gf.ny && 2 * Z < gf.nz;
-  fixed_c[I] = (boundary || !fine_inside || fixed_f[grid_index(gf, 2 * X, 2 * Y, 2 * Z)]) ? 1 : 0;
+  fixed_c[I] = coarse_fixed(fixed_f, gf, gc, X, Y, Z);
 }
 
 /* After a pointwise update of the finer level (system_update_point): the
@@ -159,13 +166,7 @@ __kernel void mg_restrict_densities_rows(__global const float* restrict mu_f, __
   restrict_field_row(txz_f, txz_c, gf, gc, Y, Z);
   restrict_field_row(tyz_f, tyz_c, gf, gc, Y, Z);
   const size_t row_c = (size_t)gc.nx * ((size_t)Y + (size_t)gc.ny * Z);
-  const bool row_boundary = Y == 0 || Z == 0 || Y == gc.ny - 1 || Z == gc.nz - 1;
-  const bool row_inside = 2 * Y < gf.ny && 2 * Z < gf.nz;
-  for (int X = 0; X < gc.nx; ++X) {
-    const bool boundary = row_boundary || X == 0 || X == gc.nx - 1;
-    fixed_c[row_c + X] =
-        (boundary || !row_inside || 2 * X >= gf.nx || fixed_f[grid_index(gf, 2 * X, 2 * Y, 2 * Z)]) ? 1 : 0;
-  }
+  for (int X = 0; X < gc.nx; ++X) fixed_c[row_c + X] = coarse_fixed(fixed_f, gf, gc, X, Y, Z);
 }
 
 /* mg_restrict_point by rows. */
