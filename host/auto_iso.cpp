@@ -53,79 +53,104 @@ __attribute__((target_clones("avx2", "default"))) void weighted_rows(float* out,
   }
 }
 
-// In-place separable Gaussian along `axis` (clamp-to-edge like the device
-// lowpass) of one or two fields. Each output sample sums its taps in a fixed
-// order; the work is split among threads by x-lines (axis 0), z-planes (axis
-// 1) or y-slices (axis 2), whole contiguous rows at a time, so the result
-// does not depend on the thread count.
-void blur_axis(float* a, float* b, const Dims3& d, int axis, const std::vector<float>& w, int max_threads) {
-  const std::size_t len = d[axis];
+// A thread's scratch for the blurs below.
+struct BlurScratch {
+  std::vector<float> pad, out;
+  std::vector<const float*> rows;
+};
+
+// Gaussian weights w along x of one row of `len` samples, in place,
+// clamp-to-edge like the device lowpass.
+void blur_row_x(float* line, std::size_t len, const std::vector<float>& w, BlurScratch& s) {
   const long r = static_cast<long>(w.size() / 2);
   if (r == 0 || len < 2) return;
-  const std::size_t nx = d[0], ny = d[1], nz = d[2], taps = w.size();
-  const int threads = host_threads(max_threads);
-  auto clamp_at = [&](long i) { return std::size_t(std::clamp(i, 0L, long(len) - 1)); };
-  for (float* f : {a, b}) {
-    if (!f) continue;
-    if (axis == 0) {
-      parallel_ranges(ny * nz, threads, [&](std::size_t l0, std::size_t l1) {
-        std::vector<float> pad(len + 2 * std::size_t(r));
-        std::vector<const float*> rows(taps);
-        for (std::size_t l = l0; l < l1; ++l) {
-          float* line = f + l * nx;
-          for (long i = -r; i < long(len) + r; ++i) pad[std::size_t(i + r)] = line[clamp_at(i)];
-          for (std::size_t k = 0; k < taps; ++k) rows[k] = pad.data() + k;
-          weighted_rows(line, rows.data(), w.data(), taps, len);
-        }
-      });
-    } else if (axis == 1) {
-      parallel_ranges(nz, threads, [&](std::size_t z0, std::size_t z1) {
-        std::vector<float> out(nx * ny);
-        std::vector<const float*> rows(taps);
-        for (std::size_t z = z0; z < z1; ++z) {
-          float* plane = f + z * nx * ny;
-          for (std::size_t y = 0; y < ny; ++y) {
-            for (std::size_t k = 0; k < taps; ++k) rows[k] = plane + clamp_at(long(y) + long(k) - r) * nx;
-            weighted_rows(out.data() + y * nx, rows.data(), w.data(), taps, nx);
-          }
-          std::copy(out.begin(), out.end(), plane);
-        }
-      });
-    } else {
-      parallel_ranges(ny, threads, [&](std::size_t y0, std::size_t y1) {
-        std::vector<float> slice(nz * nx);  // the rows (z, y) of one y, z-major
-        std::vector<const float*> rows(taps);
-        for (std::size_t y = y0; y < y1; ++y) {
-          for (std::size_t z = 0; z < nz; ++z) std::copy_n(f + (z * ny + y) * nx, nx, slice.data() + z * nx);
-          for (std::size_t z = 0; z < nz; ++z) {
-            for (std::size_t k = 0; k < taps; ++k) rows[k] = slice.data() + clamp_at(long(z) + long(k) - r) * nx;
-            weighted_rows(f + (z * ny + y) * nx, rows.data(), w.data(), taps, nx);
-          }
-        }
-      });
-    }
+  s.pad.resize(len + 2 * std::size_t(r));
+  s.rows.resize(w.size());
+  for (long i = -r; i < long(len) + r; ++i) s.pad[std::size_t(i + r)] = line[std::size_t(std::clamp(i, 0L, long(len) - 1))];
+  for (std::size_t k = 0; k < w.size(); ++k) s.rows[k] = s.pad.data() + k;
+  weighted_rows(line, s.rows.data(), w.data(), w.size(), len);
+}
+
+// The same along y of one plane of nx x ny samples, in place.
+void blur_plane_y(float* plane, std::size_t nx, std::size_t ny, const std::vector<float>& w, BlurScratch& s) {
+  const long r = static_cast<long>(w.size() / 2);
+  if (r == 0 || ny < 2) return;
+  s.out.resize(nx * ny);
+  s.rows.resize(w.size());
+  for (std::size_t y = 0; y < ny; ++y) {
+    for (std::size_t k = 0; k < w.size(); ++k)
+      s.rows[k] = plane + std::size_t(std::clamp(long(y) + long(k) - r, 0L, long(ny) - 1)) * nx;
+    weighted_rows(s.out.data() + y * nx, s.rows.data(), w.data(), w.size(), nx);
   }
+  std::copy_n(s.out.data(), nx * ny, plane);
+}
+
+// In-place separable Gaussian of one or two fields (b may be null), wx, wy
+// and wz the weights along each axis, clamp-to-edge like the device
+// lowpass. x and y are blurred a z-plane at a time while the plane is in
+// cache (prepare(z), when given, first writes plane z of both fields), then
+// z a y-slice at a time. Each output sample sums its taps in a fixed order
+// and the work is split by whole planes or slices, so the result does not
+// depend on the thread count.
+template <class Prepare>
+void blur_3d(float* a, float* b, const Dims3& d, const std::vector<float>& wx, const std::vector<float>& wy,
+             const std::vector<float>& wz, int max_threads, Prepare&& prepare) {
+  const std::size_t nx = d[0], ny = d[1], nz = d[2], plane = nx * ny;
+  const int threads = host_threads(max_threads);
+  parallel_ranges(nz, threads, [&](std::size_t z0, std::size_t z1) {
+    BlurScratch s;
+    for (std::size_t z = z0; z < z1; ++z) {
+      prepare(z);
+      for (float* f : {a, b}) {
+        if (!f) continue;
+        float* const p = f + z * plane;
+        for (std::size_t y = 0; y < ny; ++y) blur_row_x(p + y * nx, nx, wx, s);
+        blur_plane_y(p, nx, ny, wy, s);
+      }
+    }
+  });
+  const long r = static_cast<long>(wz.size() / 2);
+  if (r == 0 || nz < 2) return;
+  const std::size_t taps = wz.size();
+  parallel_ranges(ny, threads, [&](std::size_t y0, std::size_t y1) {
+    std::vector<float> slice(nz * nx);  // the rows (z, y) of one y, z-major
+    std::vector<const float*> rows(taps);
+    for (float* f : {a, b}) {
+      if (!f) continue;
+      for (std::size_t y = y0; y < y1; ++y) {
+        for (std::size_t z = 0; z < nz; ++z) std::copy_n(f + (z * ny + y) * nx, nx, slice.data() + z * nx);
+        for (std::size_t z = 0; z < nz; ++z) {
+          for (std::size_t k = 0; k < taps; ++k)
+            rows[k] = slice.data() + std::size_t(std::clamp(long(z) + long(k) - r, 0L, long(nz) - 1)) * nx;
+          weighted_rows(f + (z * ny + y) * nx, rows.data(), wz.data(), taps, nx);
+        }
+      }
+    }
+  });
 }
 
 // For x in [0, len) of a row of v~ (c: its first voxel; sy, sz: the strides):
 // g[x] = |central-difference gradient| (h2: twice the spacings) and bin[x] =
-// the histogram bin of c[x] (lo, width, bins), in double as the per-voxel
-// loop had them: vectorised (this file is built with -fno-math-errno, which
-// a vectorised sqrt needs; built for AVX2 too; the same bits).
+// the histogram bin of c[x] (lo, width, bins), in double: vectorised (this
+// file is built with -fno-math-errno, which a vectorised sqrt needs; built
+// for AVX2 too; the same bits). The spacings and the bin width enter as
+// reciprocals: four divisions per voxel were a quarter of the pass (16 of
+// 83 ms at 256^3); a product may differ from the quotient in the last bit.
 __attribute__((target_clones("avx2", "default"))) void row_gradients(
     const float* c, std::size_t len, std::size_t sy, std::size_t sz, double h2x, double h2y, double h2z, double lo,
     double width, int bins, float* g, int* bin) {
   // The six neighbours' rows (c is an interior voxel: all inside the array).
   const float *xm = c - 1, *xp = c + 1, *ym = c - sy, *yp = c + sy, *zm = c - sz, *zp = c + sz;
+  const double ix = 1 / h2x, iy = 1 / h2y, iz = 1 / h2z, iw = 1 / width;
   for (std::size_t x = 0; x < len; ++x) {
-    const double gx = (xp[x] - xm[x]) / h2x, gy = (yp[x] - ym[x]) / h2y, gz = (zp[x] - zm[x]) / h2z;
+    const double gx = (xp[x] - xm[x]) * ix, gy = (yp[x] - ym[x]) * iy, gz = (zp[x] - zm[x]) * iz;
     g[x] = float(std::sqrt(gx * gx + gy * gy + gz * gz));
     // Clamped before the conversion: the row's unusable voxels (outside the
     // mask) may lie far outside [lo, hi], and a float beyond int's range
     // converted to int is undefined (found by fuzz_classify). fmax/fmin take
     // a NaN to the other operand. For every finite value the same bin as
     // clamping the converted int.
-    bin[x] = int(std::fmax(0.0, std::fmin(double(bins - 1), (c[x] - lo) / width)));
+    bin[x] = int(std::fmax(0.0, std::fmin(double(bins - 1), (c[x] - lo) * iw)));
   }
 }
 
@@ -151,6 +176,14 @@ __attribute__((target_clones("avx2", "default"))) void field_row(float* __restri
   }
 }
 
+// v[x] - field[x] + iso for one row, in place (level_isovalue's expression).
+void level_row(float* v, const float* field, std::size_t len, double iso) {
+  // In double, then clamped to float's range: on float data spanning
+  // +-3e38 the difference would overflow to infinity (found by fuzzing).
+  const double big = std::numeric_limits<float>::max();
+  for (std::size_t x = 0; x < len; ++x) v[x] = float(std::clamp(double(v[x]) - double(field[x]) + iso, -big, big));
+}
+
 }  // namespace
 
 float kth_nonnegative(const float* g, std::size_t n, std::size_t k, int threads) {
@@ -161,10 +194,12 @@ float kth_nonnegative(const float* g, std::size_t n, std::size_t k, int threads)
 }
 
 double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const AutoIsoParams& params,
-                AutoIsoReport* report) {
+                AutoIsoReport* report, Volume* level) {
   const Dims3& d = v.dims;
   const std::size_t n = v.voxels();
   if (mask && mask->size() != n) throw std::invalid_argument("auto_iso: mask size differs from the volume");
+  if (level && (level->dims != d || level->data.size() != n))
+    throw std::invalid_argument("auto_iso: the volume to level differs in size from the volume");
   if (params.bins < 4 || !(params.sigma_mm >= 0) || !(params.min_bin_share >= 0))
     throw InputError("auto iso: bins must be >= 4, sigma and min_bin_share >= 0");
   if (d[0] < 3 || d[1] < 3 || d[2] < 3)
@@ -187,19 +222,21 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   }
 
   const int threads = host_threads(params.threads);
-  // Calls f(z0, z1) for ranges of the interior planes [1, nz - 1).
-  const std::size_t inner_planes = d[2] - 2;
-  auto over_planes = [&](auto&& f) {
-    parallel_ranges(inner_planes, threads, [&](std::size_t a, std::size_t b) { f(a + 1, b + 1); });
-  };
+  const std::size_t inner_planes = d[2] - 2;  // the interior planes [1, nz - 1)
   auto over_voxels = [&](auto&& f) { parallel_ranges(n, threads, f); };
 
   // v~: normalised convolution of the scanned samples. The large arrays are
   // first written by the threads that use them (a page's first touch costs a
   // fault, 2 ms per 4 MB on this kind of VM: a serial zero-fill of the four
-  // 256^3 arrays took 0.15 s).
+  // 256^3 arrays took 0.15 s), a plane at a time just before its x and y
+  // blurs, while it is in cache.
   HostVector<float> num(n), den(mask ? n : 0);
-  over_voxels([&](std::size_t i0, std::size_t i1) {
+  std::array<std::vector<float>, 3> w;
+  for (int axis = 0; axis < 3; ++axis)
+    w[std::size_t(axis)] = gaussian_weights(std::max(1.0, params.sigma_mm / v.spacing[axis]), 3.0);
+  const std::size_t plane = d[0] * d[1];
+  blur_3d(num.data(), mask ? den.data() : nullptr, d, w[0], w[1], w[2], threads, [&](std::size_t z) {
+    const std::size_t i0 = z * plane, i1 = i0 + plane;
     if (mask) {
       for (std::size_t i = i0; i < i1; ++i) {
         den[i] = (*mask)[i] ? 1.0f : 0.0f;
@@ -209,37 +246,49 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
       std::copy(v.data.begin() + std::ptrdiff_t(i0), v.data.begin() + std::ptrdiff_t(i1), num.data() + i0);
     }
   });
-  for (int axis = 0; axis < 3; ++axis) {
-    const double sigma_vox = std::max(1.0, params.sigma_mm / v.spacing[axis]);
-    blur_axis(num.data(), mask ? den.data() : nullptr, d, axis, gaussian_weights(sigma_vox, 3.0), threads);
-  }
-
-  // Voxels that count: inside, scanned with their six neighbours.
-  const std::size_t sx = 1, sy = d[0], sz = d[0] * d[1];
-  auto usable = [&](std::size_t i) {
-    if (!mask) return true;
-    const auto& m = *mask;
-    return m[i] && m[i - sx] && m[i + sx] && m[i - sy] && m[i + sy] && m[i - sz] && m[i + sz];
-  };
+  // Voxels that count: inside, scanned with their six neighbours; a flag
+  // per voxel (1: usable; 0 on the volume's faces), formed a row at a time
+  // (byte operations that vectorise). Its storage later holds the climbs'
+  // upward steps.
+  const std::size_t sy = d[0], sz = d[0] * d[1];
+  HostVector<std::uint8_t> flags(n);
+  std::uint8_t* const usable = flags.data();
   double lo = std::numeric_limits<double>::infinity(), hi = -lo;
   std::size_t used = 0;
   {
-    // Per plane: v~ normalised, then (interior planes) the usable voxels'
-    // min, max and count (exact, in any order) while the plane is in cache.
+    // Per plane: v~ normalised, the usable flags, then (interior planes) the
+    // usable voxels' min, max and count (exact, in any order) while the
+    // plane is in cache.
     std::vector<double> plo(d[2], lo), phi(d[2], hi);
     std::vector<std::size_t> pused(d[2], 0);
     parallel_ranges(d[2], threads, [&](std::size_t z0, std::size_t z1) {
       for (std::size_t z = z0; z < z1; ++z) {
         if (mask)
           for (std::size_t i = z * sz; i < (z + 1) * sz; ++i) num[i] = den[i] > 1e-6f ? num[i] / den[i] : 0.0f;
+        std::uint8_t* const u = usable + z * sz;
+        std::fill(u, u + sz, std::uint8_t{0});
         if (z == 0 || z + 1 == d[2]) continue;
-        for (std::size_t y = 1; y + 1 < d[1]; ++y)
-          for (std::size_t x = 1; x + 1 < d[0]; ++x) {
-            const std::size_t i = v.index(x, y, z);
-            if (!usable(i)) continue;
-            plo[z] = std::min(plo[z], double(num[i])), phi[z] = std::max(phi[z], double(num[i]));
-            ++pused[z];
+        double plane_lo = plo[z], plane_hi = phi[z];
+        std::size_t plane_used = 0;
+        for (std::size_t y = 1; y + 1 < d[1]; ++y) {
+          const std::size_t row = v.index(1, y, z), len = d[0] - 2;
+          std::uint8_t* const ur = usable + row;
+          if (mask) {
+            const std::uint8_t* m = mask->data() + row;
+            for (std::size_t x = 0; x < len; ++x)
+              ur[x] = std::uint8_t((m[x] != 0) & (m[x - 1] != 0) & (m[x + 1] != 0) & (m[x - sy] != 0) &
+                                   (m[x + sy] != 0) & (m[x - sz] != 0) & (m[x + sz] != 0));
+          } else {
+            std::fill(ur, ur + len, std::uint8_t{1});
           }
+          for (std::size_t x = 0; x < len; ++x) {
+            if (!ur[x]) continue;
+            const double f = num[row + x];
+            plane_lo = std::min(plane_lo, f), plane_hi = std::max(plane_hi, f);
+            ++plane_used;
+          }
+        }
+        plo[z] = plane_lo, phi[z] = plane_hi, pused[z] = plane_used;
       }
     });
     for (std::size_t z = 0; z < d[2]; ++z) lo = std::min(lo, plo[z]), hi = std::max(hi, phi[z]), used += pused[z];
@@ -258,34 +307,45 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   // den is not needed any more: with a mask its storage holds gfield.
   HostVector<float> own_gfield(mask ? 0 : n);
   float* const gfield = mask ? den.data() : own_gfield.data();
-  over_voxels([&](std::size_t i0, std::size_t i1) { std::fill(gfield + i0, gfield + i1, -1.0f); });
   {
     // Per plane: the histogram's sums and counts, added up in z order.
     std::vector<double> psum(d[2] * std::size_t(bins), 0.0);
     std::vector<std::size_t> pcount(d[2] * std::size_t(bins), 0);
     // Each row's gradients and bins first, for all its voxels (a loop without
-    // branches that vectorises), then the usable ones entered.
+    // branches that vectorises), then the usable ones entered; gfield -1
+    // where a voxel is not usable (the faces too).
     const std::size_t len = d[0] - 2;
-    over_planes([&](std::size_t z0, std::size_t z1) {
+    parallel_ranges(d[2], threads, [&](std::size_t z0, std::size_t z1) {
       std::vector<float> g(len);
       std::vector<int> bin(len);
-      for (std::size_t z = z0; z < z1; ++z)
+      for (std::size_t z = z0; z < z1; ++z) {
+        float* const gplane = gfield + z * sz;
+        if (z == 0 || z + 1 == d[2]) {
+          std::fill(gplane, gplane + sz, -1.0f);
+          continue;
+        }
+        std::fill(gplane, gplane + sy, -1.0f);
+        std::fill(gplane + sz - sy, gplane + sz, -1.0f);
         for (std::size_t y = 1; y + 1 < d[1]; ++y) {
           const std::size_t row = v.index(1, y, z);
           row_gradients(num.data() + row, len, sy, sz, 2 * hx, 2 * hy, 2 * hz, lo, width, bins, g.data(), bin.data());
+          const std::uint8_t* const ur = usable + row;
+          float* const gr = gfield + row;
+          gr[-1] = -1.0f, gr[len] = -1.0f;
+          for (std::size_t x = 0; x < len; ++x) gr[x] = ur[x] ? g[x] : -1.0f;
+          double* const ps = psum.data() + z * std::size_t(bins);
+          std::size_t* const pc = pcount.data() + z * std::size_t(bins);
           for (std::size_t x = 0; x < len; ++x) {
-            const std::size_t i = row + x;
-            if (!usable(i)) continue;
-            gfield[i] = g[x];
-            psum[z * std::size_t(bins) + std::size_t(bin[x])] += g[x];
-            ++pcount[z * std::size_t(bins) + std::size_t(bin[x])];
+            if (!ur[x]) continue;
+            ps[bin[x]] += g[x];
+            ++pc[bin[x]];
           }
         }
+      }
     });
     for (std::size_t z = 0; z < d[2]; ++z)
       for (int b = 0; b < bins; ++b) sum[b] += psum[z * std::size_t(bins) + std::size_t(b)], count[b] += pcount[z * std::size_t(bins) + std::size_t(b)];
   }
-
   // Mean per bin where there are enough voxels, smoothed [1 2 1] over the
   // valid bins; the peak's centre is the isovalue.
   const auto min_count = std::max<std::size_t>(1, std::size_t(std::ceil(params.min_bin_share * double(used))));
@@ -339,7 +399,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   // down, is found once and kept (255: not yet). Two threads may find the
   // same step at once and store the same byte: relaxed atomic accesses.
   constexpr std::uint8_t kUnknown = 255, kStay = 26;
-  HostVector<std::uint8_t> step_up(n), step_down(params.rule == AutoIsoRule::Local ? n : 0);
+  HostVector<std::uint8_t> step_up = std::move(flags), step_down(params.rule == AutoIsoRule::Local ? n : 0);
   over_voxels([&](std::size_t i0, std::size_t i1) {
     std::fill(step_up.data() + i0, step_up.data() + i1, kUnknown);
     if (step_down.size()) std::fill(step_down.data() + i0, step_down.data() + i1, kUnknown);
@@ -435,10 +495,11 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
         const std::size_t c = x / f[0] + dc[0] * (y / f[1] + dc[1] * (z / f[2]));
         fn[c] += float((double(locals[k]) - local_iso) / spread), fd[c] += 1.0f;
       }
+      // Unnormalised Gaussian: the density of edges per cell stays comparable to the prior.
+      std::array<std::vector<float>, 3> wc;
       for (int axis = 0; axis < 3; ++axis)
-        // Unnormalised Gaussian: the density of edges per cell stays comparable to the prior.
-        blur_axis(fn.data(), fd.data(), dcoarse, axis, gaussian_weights(std::max(1.0, sigma_vox[axis] / double(f[axis])), 3.0),
-                  threads);
+        wc[std::size_t(axis)] = gaussian_weights(std::max(1.0, sigma_vox[axis] / double(f[axis])), 3.0);
+      blur_3d(fn.data(), fd.data(), dcoarse, wc[0], wc[1], wc[2], threads, [](std::size_t) {});
       // fd is now the Gaussian-weighted edge density per cell (weights sum to
       // 1 per axis); field_prior edges per Gaussian volume of (sqrt(2 pi) sigma)^3 voxels.
       double gauss_volume = 1;
@@ -446,7 +507,8 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
       const double prior = params.field_prior / gauss_volume * double(f[0] * f[1] * f[2]);
       std::vector<float> coarse(nc);
       for (std::size_t c = 0; c < nc; ++c) coarse[c] = float(double(fn[c]) / (double(fd[c]) + prior));
-      field.resize(n);
+      // Levelling in place forms the field row by row and keeps none of it.
+      if (!level) field.resize(n);
       // Trilinear from cell centres: voxel x sits at (x + 0.5) / f - 0.5 cells.
       auto weights = [&](int a, std::size_t x, std::size_t& c0, std::size_t& c1, float& t) {
         const double pos = std::clamp((double(x) + 0.5) / double(f[a]) - 0.5, 0.0, double(dc[a] - 1));
@@ -462,6 +524,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
         wx0[x] = std::uint32_t(c0), wx1[x] = std::uint32_t(c1);
       }
       parallel_ranges(d[2], threads, [&](std::size_t za, std::size_t zb) {
+      std::vector<float> row(level ? d[0] : 0);
       for (std::size_t z = za; z < zb; ++z) {
         std::size_t z0, z1;
         float tz;
@@ -474,8 +537,10 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
           const float* r10 = coarse.data() + dc[0] * (y1 + dc[1] * z0);
           const float* r01 = coarse.data() + dc[0] * (y0 + dc[1] * z1);
           const float* r11 = coarse.data() + dc[0] * (y1 + dc[1] * z1);
-          field_row(field.data() + d[0] * (y + d[1] * z), d[0], r00, r10, r01, r11, wx0.data(), wx1.data(), wtx.data(),
-                    ty, tz, local_iso, spread, lo_local, hi_local);
+          const std::size_t at = d[0] * (y + d[1] * z);
+          field_row(level ? row.data() : field.data() + at, d[0], r00, r10, r01, r11, wx0.data(), wx1.data(),
+                    wtx.data(), ty, tz, local_iso, spread, lo_local, hi_local);
+          if (level) level_row(level->data.data() + at, row.data(), d[0], local_iso);
         }
       }
       });
@@ -502,26 +567,20 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
 
 Volume level_isovalue(const Volume& v, const float* field, std::size_t field_size, double iso) {
   if (field_size != v.voxels()) throw std::invalid_argument("level_isovalue: field size differs from the volume");
-  std::vector<float> out(v.voxels());
-  // In double, then clamped to float's range: on float data spanning
-  // +-3e38 the difference would overflow to infinity (found by fuzzing).
-  const double big = std::numeric_limits<float>::max();
-  parallel_ranges(out.size(), host_threads(0), [&](std::size_t i0, std::size_t i1) {
-    for (std::size_t i = i0; i < i1; ++i)
-      out[i] = float(std::clamp(double(v.data[i]) - double(field[i]) + iso, -big, big));
+  Volume out = v;
+  parallel_ranges(out.data.size(), host_threads(0), [&](std::size_t i0, std::size_t i1) {
+    level_row(out.data.data() + i0, field + i0, i1 - i0, iso);
   });
-  return v.with_data(std::move(out), v.source_type);
+  return out;
 }
 
 LevelledVolume auto_iso_levelled(const Volume& v, const std::vector<std::uint8_t>* mask, const Volume* target,
                                  AutoIsoParams params, AutoIsoReport* report) {
   params.rule = AutoIsoRule::Local;
   params.want_field = true;
-  AutoIsoReport local;
-  AutoIsoReport& r = report ? *report : local;
   LevelledVolume out;
-  out.iso = auto_iso(v, mask, params, &r);
-  out.data = level_isovalue(target ? *target : v, r.field, out.iso);
+  out.data = target ? *target : v;
+  out.iso = auto_iso(v, mask, params, report, &out.data);
   return out;
 }
 

@@ -48,7 +48,7 @@ struct AutoIsoParams {
   double local_fraction = 0.75; // Local: where between trough and crest the surface lies
   double field_sigma_mm = 4.0;  // Local: spread of the edges' isovalues into a field
   double field_prior = 0.5;     // Local: weight of the global median in the field (edges per Gaussian volume)
-  bool want_field = false;      // Local: fill AutoIsoReport::field
+  bool want_field = false;      // Local: fill AutoIsoReport::field (or level auto_iso's `level`)
   int threads = 0;              // host threads (0: every core); the results are the same for any count
 };
 
@@ -80,7 +80,7 @@ inline Volume level_isovalue(const Volume& v, const std::vector<float>& field, d
 // Local rule's isovalue (file units) taken from `v` (the mask as for
 // auto_iso), and `target` (v itself when null; with a mask, v with its
 // unscanned samples filled, host/mask.hpp) levelled by its field: `data`,
-// what the classifier should see.
+// what the classifier should see. The report's field stays empty.
 struct LevelledVolume {
   Volume data;
   double iso = 0;
@@ -93,8 +93,15 @@ LevelledVolume auto_iso_levelled(const Volume& v, const std::vector<std::uint8_t
 // lowpass to scanned samples (normalised convolution), so the edge of the
 // sweep does not count as a boundary. Throws InputError when no voxel is
 // usable (an empty mask, a volume thinner than 3 voxels) or v~ is constant.
+//
+// `level` (Local rule with want_field; same dims as v): levelled in place by
+// the field, level_isovalue's values, row by row as the field is formed;
+// the field is then not kept (report->field stays empty): 4 bytes per voxel
+// and two passes over the volume less. It may be &v (v's samples are read
+// only before the field is formed), v with its unscanned samples filled,
+// or any volume on v's grid.
 double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const AutoIsoParams& params = {},
-                AutoIsoReport* report = nullptr);
+                AutoIsoReport* report = nullptr, Volume* level = nullptr);
 
 // The k-th smallest (k from 0) of the values >= 0 among g[0, n),
 // the others ignored: what std::nth_element over them gives. k must be below

@@ -369,13 +369,30 @@ void fill_unscanned_in_place(Volume& out, const std::vector<std::uint8_t>& mask,
         value[a] = static_cast<float>(s / c);
       }
     });
-    for (std::size_t a = 0; a < layer.size(); ++a) out.data[layer[a]] = value[a], done[layer[a]] = 1;
+    const int parts = layer.size() >= 65536 ? threads : 1;
+    parallel_ranges(layer.size(), parts, [&](std::size_t a0, std::size_t a1) {
+      for (std::size_t a = a0; a < a1; ++a) out.data[layer[a]] = value[a], done[layer[a]] = 1;
+    });
+    // The next layer: the not yet done face neighbours, each queued once (2)
+    // by whichever range finds it first. Its order may differ from run to
+    // run; its values do not (they come from earlier layers only).
+    std::vector<std::vector<std::size_t>> found(std::size_t(range_count(layer.size(), parts)));
+    parallel_ranges_indexed(layer.size(), parts, [&](int k, std::size_t a0, std::size_t a1) {
+      std::vector<std::size_t>& f = found[std::size_t(k)];
+      for (std::size_t a = a0; a < a1; ++a)
+        for_face_neighbours(d, layer[a], [&](std::size_t j) {
+          std::uint8_t expected = 0;
+          if (__atomic_load_n(&done[j], __ATOMIC_RELAXED) == 0 &&
+              __atomic_compare_exchange_n(&done[j], &expected, std::uint8_t{2}, false, __ATOMIC_RELAXED,
+                                          __ATOMIC_RELAXED))
+            f.push_back(j);
+        });
+    });
     next.clear();
-    for (std::size_t i : layer)
-      for_face_neighbours(d, i, [&](std::size_t j) {
-        if (!done[j]) done[j] = 2, next.push_back(j);  // 2: queued
-      });
-    for (std::size_t j : next) done[j] = 0;
+    for (const auto& f : found) next.insert(next.end(), f.begin(), f.end());
+    parallel_ranges(next.size(), next.size() >= 65536 ? threads : 1, [&](std::size_t a0, std::size_t a1) {
+      for (std::size_t a = a0; a < a1; ++a) done[next[a]] = 0;
+    });
     layer.swap(next);
   }
 }

@@ -16,7 +16,6 @@
 #include <utility>
 #include <vector>
 
-#include "huge_pages.hpp"
 
 namespace softshell {
 
@@ -132,13 +131,14 @@ float kth_smallest_where(std::size_t n, std::size_t k, int threads, Value value)
 // this kind of VM, 36 ms for a 256^3 float array) before the threads that
 // fill it in parallel start.
 //
-// Blocks of 4 MiB and more come from huge_page_alloc (host/huge_pages.hpp):
-// 2 MiB-aligned and marked for transparent huge pages, one fault per 2 MiB
-// instead of per 4 KiB.
+// Its blocks come from the C library's allocator, in 4 KiB pages: on this
+// kind of VM a 2 MiB page's first touch is slower (docs/benchmarks.md, "Huge
+// pages: first touch on a VM"), and a block aligned to 2 MiB cannot reuse
+// the freed block of the same size that a KeepFreedMemory scope keeps
+// (host/host_memory.hpp).
 template <class T, class A = std::allocator<T>>
 class DefaultInitAllocator : public A {
   using traits = std::allocator_traits<A>;
-  static bool huge(std::size_t n) { return n <= std::size_t(-1) / sizeof(T) / 2 && n * sizeof(T) >= 2 * kHugePageBytes; }
 
  public:
   template <class U>
@@ -146,18 +146,6 @@ class DefaultInitAllocator : public A {
     using other = DefaultInitAllocator<U, typename traits::template rebind_alloc<U>>;
   };
   using A::A;
-  T* allocate(std::size_t n) {
-    if (!huge(n)) return A::allocate(n);
-    void* p = huge_page_alloc(n * sizeof(T));
-    if (!p) throw std::bad_alloc();
-    return static_cast<T*>(p);
-  }
-  void deallocate(T* p, std::size_t n) {
-    if (huge(n))
-      std::free(p);
-    else
-      A::deallocate(p, n);
-  }
   template <class U>
   void construct(U* p) noexcept(std::is_nothrow_default_constructible<U>::value) {
     ::new (static_cast<void*>(p)) U;

@@ -11,6 +11,7 @@
 #include <set>
 
 #include "auto_iso.hpp"
+#include "host_memory.hpp"
 #include "classify_checks.hpp"
 #include "cl_runtime.hpp"
 #include "cli_common.hpp"
@@ -561,6 +562,9 @@ int run_classify(const ClassifyOptions& given_options) {
   std::optional<Runtime> own_rt;
   Runtime& rt = o.hooks && o.hooks->rt ? *o.hooks->rt : own_rt.emplace(o.device);
   step.emplace("read");
+  // The host stages reuse each other's freed blocks; the free pages go back
+  // to the kernel before the device classification (host/host_memory.hpp).
+  std::optional<KeepFreedMemory> keep_freed(std::in_place);
   // A tolerance below 1e-4 is reached by float64 refinement (host/multigrid.cpp).
   check_classify_memory(rt, o.in, head.dims, variational ? Classifier::Variational : Classifier::Levoy,
                         o.mask != "none", variational && o.sp.tol < 1e-4);
@@ -626,9 +630,16 @@ int run_classify(const ClassifyOptions& given_options) {
     if (count_unscanned(mask.scanned) == mask.scanned.size())
       throw InputError("--depth-clip " + o.depth_clip + ": no scanned voxel lies at that depth");
   }
+  // Unscanned samples continue the scanned data, so the lowpass and the
+  // gradients see no step at the edge of the sweep (host/mask.hpp); in
+  // place, the unfilled samples are not needed any more (the automatic
+  // isovalue reads the scanned samples only).
+  if (!mask.scanned.empty()) {
+    step.emplace("fill unscanned");
+    fill_unscanned_in_place(in, mask.scanned);
+  }
   double iso = 0;
   std::string iso_text;
-  HostVector<float> iso_field;  // the local rule's isovalue per voxel (file units)
   if (given_iso) {
     iso = *given_iso;
   } else {
@@ -646,26 +657,18 @@ int run_classify(const ClassifyOptions& given_options) {
     ap.local_fraction = o.iso_fraction;
     ap.field_sigma_mm = o.iso_field_sigma;
     ap.sigma_mm = o.auto_iso_sigma;
+    // The local isovalue field levelled out as it is formed: the classifier
+    // then works at one isovalue on data whose brightness no longer drifts
+    // (host/auto_iso.hpp).
     AutoIsoReport rep;
-    iso = auto_iso(in, mask.scanned.empty() ? nullptr : &mask.scanned, ap, &rep);
-    iso_field = std::move(rep.field);
-    iso_text = ap.rule == AutoIsoRule::Local ? (iso_field.empty() ? " (auto: local rule, one value)"
-                                                                 : " (auto: local rule, the median of a field)")
+    iso = auto_iso(in, mask.scanned.empty() ? nullptr : &mask.scanned, ap, &rep, &in);
+    iso_text = ap.rule == AutoIsoRule::Local ? (!ap.want_field ? " (auto: local rule, one value)"
+                                                               : " (auto: local rule, the median of a field)")
                : ap.rule == AutoIsoRule::EchoRidge ? " (auto: echo ridge)"
                                                    : " (auto: edge)";
   }
   // Levoy's kernel takes the isovalue as a float.
   if (!variational && !(std::fabs(iso) <= 3.0e38)) throw InputError("--iso " + format_iso(iso) + " does not fit a float");
-  // Unscanned samples continue the scanned data, so the lowpass and the
-  // gradients see no step at the edge of the sweep (host/mask.hpp); in
-  // place, the unfilled samples are not needed any more.
-  if (!mask.scanned.empty()) fill_unscanned_in_place(in, mask.scanned);
-  // The local isovalue field levelled out: the classifier then works at one
-  // isovalue on data whose brightness no longer drifts (host/auto_iso.hpp).
-  if (!iso_field.empty()) {
-    in = level_isovalue(in, iso_field, iso);
-    HostVector<float>().swap(iso_field);  // not held through the solve (4 bytes per voxel)
-  }
   // The bone cue (host/bone_cue.hpp): on the data the classifier sees.
   std::shared_ptr<const std::vector<float>> cue, walls;
   std::string cue_text = "off";
@@ -704,6 +707,7 @@ int run_classify(const ClassifyOptions& given_options) {
     cue_text += t.str();
   }
   step.reset();
+  keep_freed.reset();
   return o.method == "levoy" ? run_levoy(o, rt, in, iso, iso_text, iso_warning, mask, t0)
                              : run_variational(o, rt, in, iso, iso_text, iso_warning, mask, t0, std::move(cue),
                                                std::move(walls), cue_text);
