@@ -274,10 +274,12 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
           const std::size_t row = v.index(1, y, z), len = d[0] - 2;
           std::uint8_t* const ur = usable + row;
           if (mask) {
-            const std::uint8_t* m = mask->data() + row;
+            // The row and its six neighbours' rows (all inside the array).
+            const std::uint8_t* const m = mask->data() + row;
+            const std::uint8_t *xm = m - 1, *xp = m + 1, *ym = m - sy, *yp = m + sy, *zm = m - sz, *zp = m + sz;
             for (std::size_t x = 0; x < len; ++x)
-              ur[x] = std::uint8_t((m[x] != 0) & (m[x - 1] != 0) & (m[x + 1] != 0) & (m[x - sy] != 0) &
-                                   (m[x + sy] != 0) & (m[x - sz] != 0) & (m[x + sz] != 0));
+              ur[x] = std::uint8_t((m[x] != 0) & (xm[x] != 0) & (xp[x] != 0) & (ym[x] != 0) & (yp[x] != 0) &
+                                   (zm[x] != 0) & (zp[x] != 0));
           } else {
             std::fill(ur, ur + len, std::uint8_t{1});
           }
