@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <iomanip>
 #include <iostream>
+#include <optional>
 #include <sstream>
 
 #include "auto_iso.hpp"
@@ -14,6 +15,7 @@
 #include "error.hpp"
 #include "io.hpp"
 #include "filter.hpp"
+#include "host_memory.hpp"
 #include "mask.hpp"
 #include "memory_need.hpp"
 
@@ -77,13 +79,17 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   check_lowpass_sigma(defaults.sigma_mm, v.spacing, "the classifier's lowpass sigma");
   check_lowpass_sigma(defaults.grad_sigma_mm, v.spacing, "the classifier's --grad-sigma");
   check_classify_memory(rt, path, v.dims, Classifier::Variational, true);
+  // The host stages reuse each other's freed blocks; the free pages go back
+  // to the kernel before the device work (host/host_memory.hpp).
+  std::optional<KeepFreedMemory> keep_freed(std::in_place);
   in.bmode = v;  // before the near field is removed: the slices show the data as read
   MaskReport mr;
   in.mask = scanned_mask(v, MaskParams{}, &mr);
   if (mr.unscanned == 0) in.mask.clear();
   const NearFieldReport nf = remove_near_field(v, in.mask);  // the near field is an occluder (docs/real-data.md)
   const std::vector<std::uint8_t>* mask = in.mask.empty() ? nullptr : &in.mask;
-  Volume filled = mask ? fill_unscanned(v, in.mask) : Volume();
+  // In place: the isovalue reads the scanned samples only, as classify does.
+  if (mask) fill_unscanned_in_place(v, in.mask);
   // A small volume's length scales shrink with it, as classify's do
   // (host/variational.hpp, small_volume_scale).
   // Given weights are the user's and stay as they are.
@@ -92,17 +98,18 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   if (iso_text == "auto") {
     // The local rule's field levelled out, as classify does (host/auto_iso.hpp).
     AutoIsoParams ap;
+    ap.rule = AutoIsoRule::Local;
+    ap.want_field = true;
     ap.sigma_mm *= scale, ap.field_sigma_mm *= scale;
-    LevelledVolume lv = auto_iso_levelled(v, mask, mask ? &filled : nullptr, ap);
-    in.iso = lv.iso;
-    in.data = std::move(lv.data);
+    in.iso = auto_iso(v, mask, ap, nullptr, &v);  // levels v in place
+    in.data = std::move(v);
   } else {
     char* end = nullptr;
     in.iso = std::strtod(iso_text.c_str(), &end);
     if (iso_text.empty() || *end != '\0' || !std::isfinite(in.iso))
       throw InputError("--iso: expected a number in the input's intensity units or 'auto', got '" + iso_text + "'");
     std::cerr << iso_outside_data(in.bmode, in.iso);  // as classify warns; in.bmode: the samples as read
-    in.data = mask ? std::move(filled) : std::move(v);
+    in.data = std::move(v);
   }
   in.params = defaults;
   in.params.v_iso = in.data.intensity_map().to_unit(in.iso);
@@ -115,6 +122,7 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   // The walls of acoustic shadows weighted down, as classify does by default
   // (host/shadow_walls.hpp); not with the paper's functional.
   ShadowWallReport wr;
+  keep_freed.reset();  // before the device work, as classify does
   if (!(weights && weights->literal())) {
     const ShadowWallParams wp = shadow_wall_params(in.params, nf.axis);
     in.walls = std::make_shared<const std::vector<float>>(shadow_wall_weight(rt, in.data, mask, in.iso, wp, &wr));
