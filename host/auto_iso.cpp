@@ -406,19 +406,27 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     std::fill(step_up.data() + i0, step_up.data() + i1, kUnknown);
     if (step_down.size()) std::fill(step_down.data() + i0, step_down.data() + i1, kUnknown);
   });
+  // Both of a voxel's steps are found in one look at its neighbours (a
+  // climb's first voxel, the edge, is always looked at both ways): up to the
+  // first strictly greater maximum, down to the first strictly smaller
+  // minimum, the choices of comparing sign * v~ (-c > -b is c < b for every
+  // float but NaN, and false for NaN either way).
   auto climb = [&](std::size_t x, std::size_t y, std::size_t z, float sign) {
     std::uint8_t* steps = sign > 0 ? step_up.data() : step_down.data();
     std::size_t i = v.index(x, y, z);
     for (int step = 0; step < params.climb_steps; ++step) {
       std::uint8_t k = __atomic_load_n(&steps[i], __ATOMIC_RELAXED);
       if (k == kUnknown) {
-        k = kStay;
-        float best = sign * num[i];
+        std::uint8_t up = kStay, down = kStay;
+        float high = num[i], low = num[i];
         for (std::uint8_t q = 0; q < 26; ++q) {
-          const float c = sign * num[std::size_t(long(i) + around[q])];
-          if (c > best) k = q, best = c;
+          const float c = num[std::size_t(long(i) + around[q])];
+          if (c > high) up = q, high = c;
+          if (c < low) down = q, low = c;
         }
-        __atomic_store_n(&steps[i], k, __ATOMIC_RELAXED);
+        __atomic_store_n(&step_up[i], up, __ATOMIC_RELAXED);
+        if (!step_down.empty()) __atomic_store_n(&step_down[i], down, __ATOMIC_RELAXED);
+        k = sign > 0 ? up : down;
       }
       if (k == kStay) break;
       i = std::size_t(long(i) + around[k]);
