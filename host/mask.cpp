@@ -38,53 +38,64 @@ void for_face_neighbours(const Dims3& d, std::size_t i, F&& f) {
 
 // One axis of a binary cube filter with half-width r, in place on `a`:
 // erode (all of [i - r, i + r] set; outside the volume counts as set) or
-// dilate (any of them set). Running counts along each line, O(voxels).
+// dilate (any of them set). Along x a row at a time, the 2r + 1 offsets ORed
+// in; along y (the rows of a z-plane) and z (the rows of a y-slice) running
+// counts for a whole row of x at once, O(voxels), so every read and write is
+// a contiguous row (the lines along z wrote a byte per plane: the cube filter
+// took 0.24-0.36 s of a 0.40-0.54 s mask at 256^3). Every line is read
+// before any of it is written.
 void filter_axis(std::vector<std::uint8_t>& a, const Dims3& d, int axis, int r, bool erode, int threads) {
-  if (axis == 2) {
-    // Lines along z are d[0] d[1] bytes apart: each y-slice (its z-rows) is
-    // copied to a contiguous buffer first and filtered there, in cache.
-    const std::size_t nx = d[0], ny = d[1], nz = d[2];
-    parallel_ranges(ny, threads, [&](std::size_t y0, std::size_t y1) {
-      std::vector<std::uint8_t> slice(nz * nx);
-      std::vector<std::size_t> prefix(nz + 1);
-      for (std::size_t y = y0; y < y1; ++y) {
-        for (std::size_t z = 0; z < nz; ++z) std::copy_n(a.data() + (z * ny + y) * nx, nx, slice.data() + z * nx);
-        for (std::size_t x = 0; x < nx; ++x) {
-          for (std::size_t z = 0; z < nz; ++z) prefix[z + 1] = prefix[z] + ((slice[z * nx + x] != 0) != erode ? 1 : 0);
-          for (std::size_t z = 0; z < nz; ++z) {
-            const std::size_t lo = z >= std::size_t(r) ? z - r : 0, hi = std::min(nz, z + r + 1);
-            const bool any_break = prefix[hi] - prefix[lo] > 0;
-            a[(z * ny + y) * nx + x] = erode ? !any_break : any_break;
-          }
+  const std::size_t nx = d[0], ny = d[1], nz = d[2];
+  // A voxel that breaks the test: unset for erosion, set for dilation.
+  const auto breaks = [erode](std::uint8_t v) { return std::uint32_t((v != 0) != erode); };
+  const std::size_t len = d[axis];
+  if (axis == 0) {
+    // Per row, the breaks at each offset t in [-r, r] ORed in (clamped to
+    // the row: the window's part inside the volume), a pass per offset that
+    // vectorises (r is the mask's cube half-width, 2 by default).
+    parallel_ranges(ny * nz, threads, [&](std::size_t l0, std::size_t l1) {
+      std::vector<std::uint8_t> brk(nx), any(nx);
+      for (std::size_t l = l0; l < l1; ++l) {
+        std::uint8_t* const row = a.data() + l * nx;
+        for (std::size_t i = 0; i < nx; ++i) brk[i] = std::uint8_t(breaks(row[i]));
+        std::fill(any.begin(), any.end(), std::uint8_t{0});
+        for (long t = -long(r); t <= long(r); ++t) {
+          const long i0 = std::max(0L, -t), i1 = long(nx) - std::max(0L, t);
+          if (i1 <= i0) continue;
+          const std::uint8_t* const src = brk.data() + (i0 + t);  // brk[i + t] for i from i0
+          std::uint8_t* const dst = any.data() + i0;
+          for (long j = 0; j < i1 - i0; ++j) dst[j] |= src[j];
         }
+        for (std::size_t i = 0; i < nx; ++i) row[i] = std::uint8_t(erode ? !any[i] : any[i]);
       }
     });
     return;
   }
-  const std::size_t stride = axis == 0 ? 1 : (axis == 1 ? d[0] : d[0] * d[1]);
-  const std::size_t len = d[axis];
-  const std::size_t lines = a.size() / len;
-  // Lines are independent: each range of lines on its own thread.
-  parallel_ranges(lines, threads, [&](std::size_t l0, std::size_t l1) {
-  std::vector<std::uint8_t> line(len);
-  std::vector<std::size_t> prefix(len + 1);
-  for (std::size_t l = l0; l < l1; ++l) {
-    // Start of line l: enumerate the voxels with coordinate 0 along `axis`.
-    std::size_t start;
-    if (axis == 0) start = l * d[0];
-    else if (axis == 1) start = (l % d[0]) + (l / d[0]) * d[0] * d[1];
-    else start = l;
-    for (std::size_t i = 0; i < len; ++i) {
-      line[i] = a[start + i * stride];
-      // count of voxels that break the test: unset ones for erosion, set for dilation
-      prefix[i + 1] = prefix[i] + ((line[i] != 0) != erode ? 1 : 0);
+  // The rows along the axis: of z-plane o (y) or of y-slice o (z), copied
+  // first; a running count per x of the breaks in the window [k - r, k + r].
+  const std::size_t outer = axis == 1 ? nz : ny, step = axis == 1 ? nx : nx * ny;
+  parallel_ranges(outer, threads, [&](std::size_t o0, std::size_t o1) {
+    std::vector<std::uint8_t> rows(len * nx);
+    std::vector<std::uint32_t> count(nx);
+    for (std::size_t o = o0; o < o1; ++o) {
+      std::uint8_t* const base = a.data() + (axis == 1 ? o * nx * ny : o * nx);
+      for (std::size_t k = 0; k < len; ++k) std::copy_n(base + k * step, nx, rows.data() + k * nx);
+      std::fill(count.begin(), count.end(), 0u);
+      for (std::size_t k = 0; k < std::min(len, std::size_t(r) + 1); ++k)
+        for (std::size_t x = 0; x < nx; ++x) count[x] += breaks(rows[k * nx + x]);
+      for (std::size_t k = 0; k < len; ++k) {
+        std::uint8_t* const out = base + k * step;
+        for (std::size_t x = 0; x < nx; ++x) out[x] = std::uint8_t(erode ? count[x] == 0 : count[x] != 0);
+        if (k + std::size_t(r) + 1 < len) {
+          const std::uint8_t* const in = rows.data() + (k + std::size_t(r) + 1) * nx;
+          for (std::size_t x = 0; x < nx; ++x) count[x] += breaks(in[x]);
+        }
+        if (k >= std::size_t(r)) {
+          const std::uint8_t* const gone = rows.data() + (k - std::size_t(r)) * nx;
+          for (std::size_t x = 0; x < nx; ++x) count[x] -= breaks(gone[x]);
+        }
+      }
     }
-    for (std::size_t i = 0; i < len; ++i) {
-      const std::size_t lo = i >= std::size_t(r) ? i - r : 0, hi = std::min(len, i + r + 1);
-      const bool any_break = prefix[hi] - prefix[lo] > 0;
-      a[start + i * stride] = erode ? !any_break : any_break;
-    }
-  }
   });
 }
 
