@@ -706,7 +706,8 @@ void echo_layer(const HostVector<float>& lp, const std::vector<long>& skin,
 }  // namespace
 
 std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std::uint8_t>* scanned,
-                                          const NearFieldParams& params, NearFieldReport* report) {
+                                          const NearFieldParams& params, NearFieldReport* report,
+                                          HostVector<float>* lowpass_out) {
   const Dims3& d = v.dims;
   const std::size_t n = v.voxels();
   if (scanned && scanned->size() != n) throw std::invalid_argument("near_field_band: mask size differs from the volume");
@@ -722,7 +723,9 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     if (report) *report = rep;
     return band;
   }
-  const HostVector<float> lp = lowpass_across_beam(v, scanned, ax, params.sigma_mm, threads);
+  HostVector<float> own_lp;
+  HostVector<float>& lp = lowpass_out ? *lowpass_out : own_lp;
+  lp = lowpass_across_beam(v, scanned, ax, params.sigma_mm, threads);
   // Skin line per beam line (its first scanned voxel).
   auto voxel = [&](std::size_t a, std::size_t b, std::size_t z) {
     return a * stride[u_ax] + b * stride[w_ax] + z * stride[ax];
@@ -1050,7 +1053,8 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
 }
 
 std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vector<std::uint8_t>* scanned, int ax,
-                                               const ReverbParams& params, ReverbReport* report, int threads) {
+                                               const ReverbParams& params, ReverbReport* report, int threads,
+                                               const HostVector<float>* lowpass) {
   const Dims3& d = v.dims;
   const std::size_t n = v.voxels();
   if (scanned && scanned->size() != n) throw std::invalid_argument("reverberation_region: mask size differs from the volume");
@@ -1064,7 +1068,10 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
   const double h = v.spacing[ax];
   if (d[ax] < 8 || !(h > 0)) return done();
   threads = host_threads(threads);
-  const HostVector<float> lp = lowpass_across_beam(v, scanned, ax, params.sigma_mm, threads);
+  if (lowpass && lowpass->size() != n) throw std::invalid_argument("reverberation_region: lowpass size differs from the volume");
+  HostVector<float> own_lp;
+  if (!lowpass) own_lp = lowpass_across_beam(v, scanned, ax, params.sigma_mm, threads);
+  const HostVector<float>& lp = lowpass ? *lowpass : own_lp;
   const auto is_scanned = [&](std::size_t i) { return !scanned || (*scanned)[i] != 0; };
   // lo (median) and hi (99th percentile) of the scanned samples.
   const std::size_t count = scanned ? std::size_t(std::count_if(scanned->begin(), scanned->end(),
@@ -1223,11 +1230,60 @@ std::size_t clip_depth(const Volume& v, std::vector<std::uint8_t>& scanned, int 
   return clipped;
 }
 
+namespace {
+
+// lowpass_across_beam(v, scanned, ax, sigma_mm) written into lp for the
+// planes across the beam (index along ax) that hold a voxel set in
+// `changed`, from a slab of the volume spanning them; lp elsewhere is kept.
+void relowpass_planes(const Volume& v, const std::vector<std::uint8_t>& scanned,
+                      const std::vector<std::uint8_t>& changed, int ax, double sigma_mm, int threads,
+                      HostVector<float>& lp) {
+  const Dims3& d = v.dims;
+  const std::size_t stride[3] = {1, d[0], d[0] * d[1]};
+  std::size_t k0 = d[ax], k1 = 0;  // the planes [k0, k1)
+  for (std::size_t i = 0; i < changed.size(); ++i)
+    if (changed[i]) {
+      const std::size_t k = (i / stride[ax]) % d[ax];
+      k0 = std::min(k0, k), k1 = std::max(k1, k + 1);
+    }
+  if (k0 >= k1) return;
+  Dims3 sd = d;
+  sd[ax] = k1 - k0;
+  Volume slab = v.with_data(std::vector<float>(sd[0] * sd[1] * sd[2]), v.source_type);
+  slab.dims = sd;
+  std::vector<std::uint8_t> mask(slab.data.size());
+  // Voxel (x, y, z) of the slab is (x, y, z) + k0 along ax of the volume.
+  const std::size_t offset = k0 * stride[ax];
+  for (std::size_t z = 0; z < sd[2]; ++z)
+    for (std::size_t y = 0; y < sd[1]; ++y) {
+      const std::size_t from = offset + (z * d[1] + y) * d[0], to = (z * sd[1] + y) * sd[0];
+      std::copy_n(v.data.data() + from, sd[0], slab.data.data() + to);
+      std::copy_n(scanned.data() + from, sd[0], mask.data() + to);
+    }
+  const HostVector<float> part = lowpass_across_beam(slab, &mask, ax, sigma_mm, threads);
+  for (std::size_t z = 0; z < sd[2]; ++z)
+    for (std::size_t y = 0; y < sd[1]; ++y) {
+      const std::size_t from = offset + (z * d[1] + y) * d[0], to = (z * sd[1] + y) * sd[0];
+      std::copy_n(part.data() + to, sd[0], lp.data() + from);
+    }
+}
+
+}  // namespace
+
 NearFieldReport remove_near_field(const Volume& v, std::vector<std::uint8_t>& scanned, const NearFieldParams& params) {
   NearFieldReport rep;
   std::vector<std::uint8_t> band;
+  // The reverberation rule reads the same lowpass across the beam as the
+  // band, of the mask without the band. It never mixes depths along the
+  // beam, so only the planes across the beam that hold band voxels change:
+  // those are lowpassed again, as a slab of the volume (the same sums per
+  // voxel, the same bits), and the rest is the band's. Only with a mask
+  // before and after (a null mask is another sum) and the same sigma.
+  HostVector<float> lp;
+  const bool share = params.band && params.reverb && !scanned.empty() &&
+                     params.reverb_params.sigma_mm == params.sigma_mm;
   if (params.band)
-    band = near_field_band(v, scanned.empty() ? nullptr : &scanned, params, &rep);
+    band = near_field_band(v, scanned.empty() ? nullptr : &scanned, params, &rep, share ? &lp : nullptr);
   else
     rep.axis = params.axis >= 0 && params.axis < 3 ? params.axis
                                                    : beam_axis_of(v, scanned.empty() ? nullptr : &scanned, params.threads);
@@ -1235,10 +1291,12 @@ NearFieldReport remove_near_field(const Volume& v, std::vector<std::uint8_t>& sc
     if (scanned.empty()) scanned.assign(v.voxels(), 1);
     for (std::size_t i = 0; i < band.size(); ++i)
       if (band[i]) scanned[i] = 0;
+    if (!lp.empty()) relowpass_planes(v, scanned, band, rep.axis, params.sigma_mm, params.threads, lp);
   }
   if (params.reverb) {
-    const std::vector<std::uint8_t> region = reverberation_region(v, scanned.empty() ? nullptr : &scanned, rep.axis,
-                                                                  params.reverb_params, &rep.reverb, params.threads);
+    const std::vector<std::uint8_t> region =
+        reverberation_region(v, scanned.empty() ? nullptr : &scanned, rep.axis, params.reverb_params, &rep.reverb,
+                             params.threads, lp.empty() ? nullptr : &lp);
     if (rep.reverb.found) {
       if (scanned.empty()) scanned.assign(v.voxels(), 1);
       for (std::size_t i = 0; i < region.size(); ++i)

@@ -138,9 +138,11 @@ struct ReverbReport {
 };
 // The region (1) below the first strong echo of each line when the echo
 // train is a reverberation; all 0 otherwise. `axis` the beam's.
+// `lowpass` (optional): lowpass_across_beam(v, scanned, axis,
+// params.sigma_mm) when the caller has it (remove_near_field).
 std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vector<std::uint8_t>* scanned, int axis,
                                                const ReverbParams& params = {}, ReverbReport* report = nullptr,
-                                               int threads = 0);
+                                               int threads = 0, const HostVector<float>* lowpass = nullptr);
 
 struct NearFieldParams {
   double top_mm = 3.0, search_mm = 25.0, margin_mm = 1.0;
@@ -187,8 +189,12 @@ struct NearFieldReport {
     std::size_t voxels = 0;             // voxels it added to the band
   } echo;                       // the band's echo layer (params.echo_layer)
 };
+// `lowpass_out` (optional) receives the data lowpassed across the beam that
+// the band was read from (lowpass_across_beam(v, scanned, the axis,
+// params.sigma_mm)); empty where the volume is too thin along the beam.
 std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std::uint8_t>* scanned,
-                                          const NearFieldParams& params = {}, NearFieldReport* report = nullptr);
+                                          const NearFieldParams& params = {}, NearFieldReport* report = nullptr,
+                                          HostVector<float>* lowpass_out = nullptr);
 
 // near_field_band() merged into a scanned mask (band voxels become
 // unscanned: u held at 0, their samples continued from below before the

@@ -512,6 +512,71 @@ FanScan fan_scan(int copies, double fade, std::uint64_t seed) {
   return f;
 }
 
+TEST(Reverb, RemoveNearFieldSharesTheBandsLowpassWithoutChangingAnything) {
+  // remove_near_field reuses the band's lowpass across the beam for the
+  // reverberation rule, lowpassing again only the planes across the beam
+  // that hold band voxels: the same region, report and mask as the rule on
+  // its own lowpass of the mask without the band. A layered band over dark
+  // tissue and a bright reflector, an unswept wedge of zeros (a mask), with
+  // the beam along each of the three axes.
+  for (int beam = 0; beam < 3; ++beam) {
+    SCOPED_TRACE(beam);
+    Dims3 dims{40, 40, 40};
+    dims[beam] = 60;
+    const Volume flat = layered_scan(dims, {0.5, 0.5, 0.5}, beam,
+                                     {{2.0, 220}, {2.0, 150}, {4.0, 210}, {10.0, 40}, {1.5, 200}}, 40,
+                                     test::seed() + 5);
+    // A sloping skin line (zeros above it, unswept), so a plane across the
+    // beam holds band voxels on some lines and tissue under the band on
+    // others, and an unswept wedge.
+    const int u = beam == 0 ? 1 : 0, w = beam == 2 ? 1 : 2;  // the lateral axes
+    Volume v = flat;
+    for (std::size_t z = 0; z < dims[2]; ++z)
+      for (std::size_t y = 0; y < dims[1]; ++y)
+        for (std::size_t x = 0; x < dims[0]; ++x) {
+          std::size_t c[3] = {x, y, z};
+          const std::size_t skin = c[u] / 3;
+          if (c[beam] < skin || c[u] + c[w] < 12) {
+            v.at(x, y, z) = 0.0f;
+            continue;
+          }
+          c[beam] -= skin;
+          v.at(x, y, z) = flat.at(c[0], c[1], c[2]);
+        }
+    const auto mask = scanned_mask(v);
+    ASSERT_GT(count_unscanned(mask), 0u);
+    NearFieldParams np;
+    np.axis = beam;
+    // Each step on its own: the band, the mask without it, the rule.
+    NearFieldReport band_rep;
+    const auto band = near_field_band(v, &mask, np, &band_rep);
+    ASSERT_TRUE(band_rep.found);
+    std::vector<std::uint8_t> alone = mask;
+    for (std::size_t i = 0; i < band.size(); ++i)
+      if (band[i]) alone[i] = 0;
+    ReverbReport rr;
+    const auto region = reverberation_region(v, &alone, beam, np.reverb_params, &rr);
+    for (std::size_t i = 0; i < region.size(); ++i)
+      if (region[i]) alone[i] = 0;
+    // Together.
+    std::vector<std::uint8_t> together = mask;
+    const NearFieldReport nf = remove_near_field(v, together, np);
+    EXPECT_TRUE(nf.found);
+    EXPECT_EQ(together, alone);
+    EXPECT_EQ(nf.reverb.found, rr.found);
+    EXPECT_EQ(nf.reverb.spacing_mm, rr.spacing_mm);
+    EXPECT_EQ(nf.reverb.cut_mm, rr.cut_mm);
+    EXPECT_EQ(nf.reverb.echo, rr.echo);
+    EXPECT_EQ(nf.reverb.copy1, rr.copy1);
+    EXPECT_EQ(nf.reverb.copy2, rr.copy2);
+    EXPECT_EQ(nf.reverb.trough, rr.trough);
+    EXPECT_EQ(nf.reverb.lines, rr.lines);
+    EXPECT_EQ(nf.reverb.jump_mm, rr.jump_mm);
+    EXPECT_EQ(nf.reverb.voxels, rr.voxels);
+    EXPECT_GT(rr.lines, 0u);  // the rule found first echoes on the lowpass (not an early return)
+  }
+}
+
 TEST(Reverb, EquallySpacedCopiesOfAFlatReflectorAreFoundBelowItsEcho) {
   const FanScan f = fan_scan(3, 0.6, test::seed() + 21);
   const Volume& v = f.v;
