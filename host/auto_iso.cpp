@@ -88,7 +88,7 @@ void blur_plane_y(float* plane, std::size_t nx, std::size_t ny, const std::vecto
 // In-place separable Gaussian of one or two fields (b may be null), wx, wy
 // and wz the weights along each axis, clamp-to-edge like the device
 // lowpass. x and y are blurred a z-plane at a time while the plane is in
-// cache (prepare(z), when given, first writes plane z of both fields), then
+// cache (prepare(z) first writes plane z of both fields, or does nothing), then
 // z a y-slice at a time. Each output sample sums its taps in a fixed order
 // and the work is split by whole planes or slices, so the result does not
 // depend on the thread count.
@@ -133,7 +133,7 @@ void blur_3d(float* a, float* b, const Dims3& d, const std::vector<float>& wx, c
 // g[x] = |central-difference gradient| (h2: twice the spacings) and bin[x] =
 // the histogram bin of c[x] (lo, width, bins), in double: vectorised (this
 // file is built with -fno-math-errno, which a vectorised sqrt needs; built
-// for AVX2 too; the same bits). The spacings and the bin width enter as
+// for AVX2 too, with the default build's bits). The spacings and the bin width enter as
 // reciprocals: four divisions per voxel were a quarter of the pass (16 of
 // 83 ms at 256^3); a product may differ from the quotient in the last bit.
 __attribute__((target_clones("avx2", "default"))) void row_gradients(
@@ -584,14 +584,26 @@ Volume level_isovalue(const Volume& v, const float* field, std::size_t field_siz
   return out;
 }
 
-LevelledVolume auto_iso_levelled(const Volume& v, const std::vector<std::uint8_t>* mask, const Volume* target,
-                                 AutoIsoParams params, AutoIsoReport* report) {
+namespace {
+// The Local rule with its field: what levelling needs.
+AutoIsoParams with_local_field(AutoIsoParams params) {
   params.rule = AutoIsoRule::Local;
   params.want_field = true;
+  return params;
+}
+}  // namespace
+
+LevelledVolume auto_iso_levelled(const Volume& v, const std::vector<std::uint8_t>* mask, const Volume* target,
+                                 const AutoIsoParams& params, AutoIsoReport* report) {
   LevelledVolume out;
   out.data = target ? *target : v;
-  out.iso = auto_iso(v, mask, params, report, &out.data);
+  out.iso = auto_iso(v, mask, with_local_field(params), report, &out.data);
   return out;
+}
+
+double auto_iso_level_in_place(Volume& v, const std::vector<std::uint8_t>* mask, const AutoIsoParams& params,
+                               AutoIsoReport* report) {
+  return auto_iso(v, mask, with_local_field(params), report, &v);
 }
 
 std::string iso_outside_data(const Volume& in, double iso) {

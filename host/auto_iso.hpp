@@ -86,7 +86,12 @@ struct LevelledVolume {
   double iso = 0;
 };
 LevelledVolume auto_iso_levelled(const Volume& v, const std::vector<std::uint8_t>* mask, const Volume* target = nullptr,
-                                 AutoIsoParams params = {}, AutoIsoReport* report = nullptr);
+                                 const AutoIsoParams& params = {}, AutoIsoReport* report = nullptr);
+// The same in place: `v` (with a mask, its unscanned samples may be filled
+// first: the isovalue reads the scanned ones only) levelled by its own
+// field; returns the isovalue (file units).
+double auto_iso_level_in_place(Volume& v, const std::vector<std::uint8_t>* mask, const AutoIsoParams& params = {},
+                               AutoIsoReport* report = nullptr);
 
 // v_iso in the file's units. `mask` (optional, 1 = scanned) limits the
 // statistics to scanned voxels whose six neighbours are scanned too, and the

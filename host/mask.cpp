@@ -366,11 +366,14 @@ void fill_unscanned_in_place(Volume& out, const std::vector<std::uint8_t>& mask,
   threads = host_threads(threads);
   std::vector<std::size_t> layer = frontier_of(done, d, threads, [&](std::size_t j) { return done[j] != 0; }), next;
   std::vector<float> value(layer.size());
+  // Threads only for a layer large enough to pay for starting them.
+  const auto parts_for = [threads](std::size_t items) { return items >= 65536 ? threads : 1; };
   for (int k = 0; !layer.empty() && (depth <= 0 || k < depth); ++k) {
     // Values first, from earlier layers only, so the order within a layer
     // does not matter (deterministic).
     value.resize(layer.size());
-    parallel_ranges(layer.size(), layer.size() >= 65536 ? threads : 1, [&](std::size_t a0, std::size_t a1) {
+    const int parts = parts_for(layer.size());
+    parallel_ranges(layer.size(), parts, [&](std::size_t a0, std::size_t a1) {
       for (std::size_t a = a0; a < a1; ++a) {
         double s = 0;
         int c = 0;
@@ -380,7 +383,6 @@ void fill_unscanned_in_place(Volume& out, const std::vector<std::uint8_t>& mask,
         value[a] = static_cast<float>(s / c);
       }
     });
-    const int parts = layer.size() >= 65536 ? threads : 1;
     parallel_ranges(layer.size(), parts, [&](std::size_t a0, std::size_t a1) {
       for (std::size_t a = a0; a < a1; ++a) out.data[layer[a]] = value[a], done[layer[a]] = 1;
     });
@@ -401,7 +403,7 @@ void fill_unscanned_in_place(Volume& out, const std::vector<std::uint8_t>& mask,
     });
     next.clear();
     for (const auto& f : found) next.insert(next.end(), f.begin(), f.end());
-    parallel_ranges(next.size(), next.size() >= 65536 ? threads : 1, [&](std::size_t a0, std::size_t a1) {
+    parallel_ranges(next.size(), parts_for(next.size()), [&](std::size_t a0, std::size_t a1) {
       for (std::size_t a = a0; a < a1; ++a) done[next[a]] = 0;
     });
     layer.swap(next);
@@ -1252,20 +1254,19 @@ void relowpass_planes(const Volume& v, const std::vector<std::uint8_t>& scanned,
   Volume slab = v.with_data(std::vector<float>(sd[0] * sd[1] * sd[2]), v.source_type);
   slab.dims = sd;
   std::vector<std::uint8_t> mask(slab.data.size());
-  // Voxel (x, y, z) of the slab is (x, y, z) + k0 along ax of the volume.
+  // Voxel (x, y, z) of the slab is (x, y, z) + k0 along ax of the volume:
+  // f(at in the volume, at in the slab) for the slab's x-rows.
   const std::size_t offset = k0 * stride[ax];
-  for (std::size_t z = 0; z < sd[2]; ++z)
-    for (std::size_t y = 0; y < sd[1]; ++y) {
-      const std::size_t from = offset + (z * d[1] + y) * d[0], to = (z * sd[1] + y) * sd[0];
-      std::copy_n(v.data.data() + from, sd[0], slab.data.data() + to);
-      std::copy_n(scanned.data() + from, sd[0], mask.data() + to);
-    }
+  const auto each_row = [&](auto&& f) {
+    for (std::size_t z = 0; z < sd[2]; ++z)
+      for (std::size_t y = 0; y < sd[1]; ++y) f(offset + (z * d[1] + y) * d[0], (z * sd[1] + y) * sd[0]);
+  };
+  each_row([&](std::size_t from, std::size_t to) {
+    std::copy_n(v.data.data() + from, sd[0], slab.data.data() + to);
+    std::copy_n(scanned.data() + from, sd[0], mask.data() + to);
+  });
   const HostVector<float> part = lowpass_across_beam(slab, &mask, ax, sigma_mm, threads);
-  for (std::size_t z = 0; z < sd[2]; ++z)
-    for (std::size_t y = 0; y < sd[1]; ++y) {
-      const std::size_t from = offset + (z * d[1] + y) * d[0], to = (z * sd[1] + y) * sd[0];
-      std::copy_n(part.data() + to, sd[0], lp.data() + from);
-    }
+  each_row([&](std::size_t from, std::size_t to) { std::copy_n(part.data() + to, sd[0], lp.data() + from); });
 }
 
 }  // namespace

@@ -16,7 +16,6 @@
 #include <utility>
 #include <vector>
 
-
 namespace softshell {
 
 // The threads to use: `requested` when positive, else every core.
