@@ -7,7 +7,7 @@
 // (the difference of two solves one iteration apart). Every kernel result is
 // checked against the host reference (bench.hpp) before it is timed.
 //
-//   softshell_bench_solver [--size N] [--reps R] [--device D] [--slab P] [--sweeps S] [--trace]
+//   softshell_bench_solver [--size N] [--reps R] [--device D] [--slab P] [--sweeps S] [--compact 0|1] [--ab ROUNDS] [--trace]
 //
 // Byte model: docs/benchmarks.md ("Byte model"). Times are the minimum of R.
 #include <algorithm>
@@ -34,7 +34,7 @@ using namespace softshell;
 namespace {
 
 int usage() {
-  std::cerr << "usage: softshell_bench_solver [--size N] [--reps R] [--device I|NAME] [--slab P] [--sweeps S] [--trace]\n";
+  std::cerr << "usage: softshell_bench_solver [--size N] [--reps R] [--device I|NAME] [--slab P] [--sweeps S] [--compact 0|1] [--ab ROUNDS] [--trace]\n";
   return 2;
 }
 
@@ -130,7 +130,7 @@ int main(int argc, char** argv) {
   int size = 128, reps = 10;
   std::string device;
   bool trace = false;
-  int slab = 0, sweeps = 0;
+  int slab = 0, sweeps = 0, compact = 1, ab = 0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") return usage(), 0;
@@ -141,6 +141,8 @@ int main(int argc, char** argv) {
     else if (a == "--trace") trace = true;
     else if (a == "--slab") slab = std::atoi(argv[++i]);
     else if (a == "--sweeps") sweeps = std::atoi(argv[++i]);
+    else if (a == "--compact") compact = std::atoi(argv[++i]);
+    else if (a == "--ab") ab = std::atoi(argv[++i]);
     else {
       std::cerr << "softshell_bench_solver: unknown option " << a << "\n";
       return usage();
@@ -202,20 +204,49 @@ int main(int argc, char** argv) {
         std::printf("(tests)\n");
     };
 
-    for (int rev = 0; rev < 2; ++rev) {
-      // Check one sweep against the host's, then time.
+    // A sweep each way, checked against the host's sweep of `h` (the matrix
+    // it relaxes on), then timed.
+    auto sweep_rows = [&](const HostStencil& h, auto relax, double bpv, const char* fwd, const char* bwd) {
+      for (int rev = 0; rev < 2; ++rev) {
+        rt.queue().enqueueWriteBuffer(x, CL_TRUE, 0, bytes, u0.data());
+        relax(rev).second.wait();
+        std::vector<float> got(N), want = u0;
+        rt.queue().enqueueReadBuffer(x, CL_TRUE, 0, bytes, got.data());
+        host_gs_slab_sweep(h, want, sys.gs_slab(), rev);
+        const double check = max_relative(got, std::vector<double>(want.begin(), want.end()));
+        const double s = best_of(reps, [&] {
+          const auto span = relax(rev);
+          span.second.wait();
+          return event_span_seconds(span.first, span.second);
+        });
+        row(rev ? bwd : fwd, s, bpv, check);
+      }
+    };
+    // r = b - A x from u0 into y, checked against the host's residual of `h`, then timed.
+    auto residual_row = [&](const char* name, const HostStencil& h, auto residual, double bpv) {
       rt.queue().enqueueWriteBuffer(x, CL_TRUE, 0, bytes, u0.data());
-      sys.relax_gs(sys.b(), x, 1, rev).second.wait();
-      std::vector<float> got(N), want = u0;
-      rt.queue().enqueueReadBuffer(x, CL_TRUE, 0, bytes, got.data());
-      host_gs_slab_sweep(hs, want, sys.gs_slab(), rev);
-      const double check = max_relative(got, std::vector<double>(want.begin(), want.end()));
-      const double s = best_of(reps, [&] {
-        const auto span = sys.relax_gs(sys.b(), x, 1, rev);
-        span.second.wait();
-        return event_span_seconds(span.first, span.second);
-      });
-      row(rev ? "sweep (reverse)" : "sweep (forward)", s, 52, check);
+      std::vector<double> ref = host_apply(h, u0);
+      for (std::size_t i = 0; i < N; ++i) ref[i] = double(h.b[i]) - ref[i];
+      residual().wait();
+      std::vector<float> got(N);
+      rt.queue().enqueueReadBuffer(y, CL_TRUE, 0, bytes, got.data());
+      row(name, best_of(reps, [&] {
+            cl::Event e = residual();
+            e.wait();
+            return event_seconds(e);
+          }),
+          bpv, max_relative(got, ref));
+    };
+    sweep_rows(hs, [&](int rev) { return sys.relax_gs(sys.b(), x, 1, rev); }, 52, "sweep (forward)", "sweep (reverse)");
+    if (sys.gs_order() == GsOrder::Slabs) {
+      // The preconditioner's sweeps and residual on the compact stencil
+      // (DeviceSystem::build_compact), checked against the host's on the
+      // compact matrix as downloaded.
+      sys.build_compact();
+      const HostStencil hc = compact_host_stencil(sys);
+      sweep_rows(hc, [&](int rev) { return sys.relax_gs_compact(sys.b(), x, 1, rev); }, 38, "sweep compact (forward)",
+             "sweep compact (reverse)");
+      residual_row("residual compact", hc, [&] { return sys.residual_compact(sys.b(), x, y); }, 38);
     }
     {
       // The same forward sweep in native C++ (NativeSweep), checked the same way.
@@ -244,16 +275,7 @@ int main(int argc, char** argv) {
             return event_seconds(e);
           }),
           48, check);
-      std::vector<double> ref = host_apply(hs, u0);
-      for (std::size_t i = 0; i < N; ++i) ref[i] = double(hs.b[i]) - ref[i];
-      sys.residual(sys.b(), x, y).wait();
-      rt.queue().enqueueReadBuffer(y, CL_TRUE, 0, bytes, got.data());
-      row("residual", best_of(reps, [&] {
-            cl::Event e = sys.residual(sys.b(), x, y);
-            e.wait();
-            return event_seconds(e);
-          }),
-          52, max_relative(got, ref));
+      residual_row("residual", hs, [&] { return sys.residual(sys.b(), x, y); }, 52);
     }
 
     // The grid transfers between the fine level and the next: the CPU's row
@@ -315,6 +337,7 @@ int main(int argc, char** argv) {
     // The whole solve and one PCG iteration.
     SolverParams sp;
     if (sweeps > 0) sp.pre_sweeps = sp.post_sweeps = sweeps;
+    sp.compact_smoother = compact != 0;
     MultigridSolver mg(sys, sp);
     SolveReport rep;
     mg.solve(&rep);
@@ -397,6 +420,51 @@ int main(int argc, char** argv) {
       }
       std::printf("re-classification: %.1f ms (update %.1f ms, %d cycles) vs cold %.1f ms (%d cycles): %.2f of cold\n",
                   warm * 1e3, upd * 1e3, warm_cycles, cold * 1e3, cold_cycles, warm / cold);
+    }
+    if (ab > 0) {
+      // --ab ROUNDS: the float32 and the compact smoother (SolverParams::
+      // compact_smoother) interleaved in one process, round by round: a
+      // re-classification (v_iso x 1.05, warm, as above) and a cold
+      // classification each (a one-shot classification never relaxes on the
+      // compact stencil: the two cold columns are the same code, a measure of
+      // the noise); min and median per setting. On a shared machine whose
+      // bandwidth drifts from minute to minute this is the fair A/B.
+      const Volume& v = ph.volume;
+      VariationalParams p0;
+      p0.v_iso = vp.v_iso;
+      VariationalParams p1 = p0;
+      p1.v_iso = 1.05 * p0.v_iso;
+      SolverParams spc[2] = {sp, sp};
+      spc[0].compact_smoother = false, spc[1].compact_smoother = true;
+      std::vector<std::unique_ptr<VariationalClassifier>> cls;
+      for (int k = 0; k < 2; ++k) {
+        cls.push_back(std::make_unique<VariationalClassifier>(rt, v, p0, spc[k]));
+        cls.back()->keep_resolve_start(true);
+        SolveReport r;
+        cls.back()->solve(&r);
+      }
+      std::vector<double> tw[2], tc[2];
+      for (int round = 0; round < ab; ++round)
+        for (int k = 0; k < 2; ++k) {
+          SolveReport r;
+          ClassifyTiming t;
+          classify_variational(rt, v, p1, spc[k], &r, nullptr, nullptr, &t);
+          tc[k].push_back(t.setup + t.solve);
+          const auto t0 = std::chrono::steady_clock::now();
+          cls[std::size_t(k)]->update(p1);
+          cls[std::size_t(k)]->solve(&r, nullptr, true);
+          tw[k].push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+          cls[std::size_t(k)]->update(p0);
+          cls[std::size_t(k)]->solve(&r, nullptr, true);
+        }
+      auto med = [](std::vector<double> x) {
+        std::sort(x.begin(), x.end());
+        return x[x.size() / 2];
+      };
+      for (int k = 0; k < 2; ++k)
+        std::printf("A/B %-8s re-classification min %.1f median %.1f ms, cold min %.1f median %.1f ms (%d rounds)\n",
+                    k ? "compact" : "float32", *std::min_element(tw[k].begin(), tw[k].end()) * 1e3, med(tw[k]) * 1e3,
+                    *std::min_element(tc[k].begin(), tc[k].end()) * 1e3, med(tc[k]) * 1e3, ab);
     }
     return 0;
   } catch (const std::exception& e) {

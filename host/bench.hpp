@@ -120,6 +120,12 @@ struct DeviceBench {
   // yardstick of the *_host fractions (GB/s by the byte model / host copy).
   HostStream host;
   double sweep_fraction_host = 0, apply_fraction_host = 0;
+  // The same forward sweep on the compact stencil, where the solver uses it
+  // (the slab ordering): its time, GB/s by ByteModel::sweep_compact, that
+  // against the host's copy, and its check against the host's sweep of the
+  // compact matrix (0 and an empty time where it is not used).
+  Timing sweep_compact;
+  double sweep_compact_gbps = 0, sweep_compact_fraction_host = 0, sweep_compact_check = 0;
   // The solve against its bandwidth bound, on the peers' system: a built
   // MultigridSolver's cold solve (FMG + PCG, no hierarchy build; min over
   // repeats) against SolveReport::bytes / host copy bandwidth (the bound), and
@@ -182,6 +188,9 @@ struct BenchReport {
 struct ByteModel {
   static constexpr double sweep = STENCIL_COEFS * 4 + 4 + 4 + 4;  // coefficients, b, u read, u write = 52
   static constexpr double apply = STENCIL_COEFS * 4 + 4 + 4;      // coefficients, x read, y write = 48
+  // The preconditioner's sweep on the compact stencil (DeviceSystem::build_compact):
+  // diagonal, its correction, 9 bfloat16 couplings, b, u read, u write = 38
+  static constexpr double sweep_compact = 4 + 4 + (STENCIL_COEFS - 1) * 2 + 4 + 4 + 4;
 };
 
 // Runs the benchmark. Throws DeviceError only when a requested device does
@@ -209,6 +218,10 @@ struct HostStencil {
 
 // A device system's stencil, right-hand side and fixed flags, downloaded.
 HostStencil host_stencil(const DeviceSystem& sys);
+// The same with the compact stencil the preconditioner relaxes on
+// (DeviceSystem::build_compact, built): couplings as their bfloat16 values,
+// the diagonal plus its correction.
+HostStencil compact_host_stencil(const DeviceSystem& sys);
 // The volume in normalised units (IntensityMap::to_unit), as DeviceSystem takes it.
 Volume normalised(const Volume& v);
 // v_iso half-way between a phantom's fluid and tissue medians, normalised.

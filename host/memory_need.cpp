@@ -27,6 +27,13 @@ namespace {
 // "Memory").
 constexpr double kVariationalSystem = (4 + 6 + STENCIL_COEFS) * 4.0 + 1.0;
 constexpr double kVariationalFine = kVariationalSystem + 3 * 4.0 + 3 * 4.0;
+// The smoother's compact stencil (9 bfloat16 and a float per voxel,
+// DeviceSystem::build_compact) is built at the first solve, where the
+// conjugate gradients' 5 floats have replaced T's 6: the solve's buffers then
+// exceed the setup's peak by this much. It is optional (the solve runs
+// without it, slower): built only where it fits (compact_smoother_fits).
+constexpr double kCompactStencil = (STENCIL_COEFS - 1) * 2.0 + 4.0;
+constexpr double kCompactOverPeak = kCompactStencil + 5 * 4.0 - 6 * 4.0;
 constexpr double kVariationalCoarse = (kVariationalSystem + 3 * 4.0) / 7.0;
 // Levoy: the input, its lowpass and the filter's scratch, three gradient
 // components and the opacity, one float each.
@@ -63,6 +70,14 @@ MemoryNeed classify_memory_need(const Dims3& dims, Classifier method, bool mask,
   m.device = std::uint64_t(n * m.device_per_voxel);
   m.host = std::uint64_t(n * m.host_per_voxel);
   return m;
+}
+
+bool compact_smoother_fits(const DeviceInfo& d, std::size_t voxels) {
+  const double n = double(voxels);
+  const double device = n * (kVariationalFine + kVariationalCoarse + kCompactOverPeak);
+  // On a CPU device the buffers are host memory, beside the host's volume and result.
+  if (d.type == "CPU") return device + n * 2 * kHostVolume <= 0.75 * double(usable_memory_bytes());
+  return device <= double(d.global_mem);
 }
 
 void check_classify_memory(const Runtime& rt, const std::string& path, const Dims3& dims, Classifier method,

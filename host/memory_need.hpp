@@ -34,6 +34,15 @@ enum class Classifier { Variational, Levoy };
 // solve is refined in float64 (SolverParams::tol below 1e-4).
 MemoryNeed classify_memory_need(const Dims3& dims, Classifier method, bool mask, bool refine = false);
 
+// Whether the solver's compact stencil for the smoother (22 bytes per voxel
+// more during the solve, DeviceSystem::build_compact) fits beside the rest of
+// a classification of `voxels` on this device, under the rule of
+// check_classify_memory: where it does not, the solver relaxes on the
+// float32 stencil (slower, the same answer) and a volume that fits without
+// it is still classified.
+struct DeviceInfo;
+bool compact_smoother_fits(const DeviceInfo& device, std::size_t voxels);
+
 // Throws InputError (exit 2) naming `path`, the need and the limit, when the
 // need does not fit: host memory (75 % of usable_memory_bytes(); on a CPU
 // device its buffers are host memory too), the device's global memory, or

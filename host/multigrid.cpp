@@ -13,6 +13,7 @@
 #include <stdexcept>
 #include <thread>
 
+#include "memory_need.hpp"
 #include "variational.hpp"
 #include "progress.hpp"
 
@@ -25,6 +26,11 @@ namespace bytes_per_voxel {
 constexpr double sweep = STENCIL_COEFS * 4 + 4 + 4 + 4;  // coefficients, rhs, u read, u write
 constexpr double jacobi = sweep + 8;                     // + the copy back from tmp
 constexpr double residual = STENCIL_COEFS * 4 + 4 + 4 + 4;  // coefficients, rhs, x, r write
+// The compact stencil (DeviceSystem::build_compact): the diagonal, its
+// correction, nine bfloat16 couplings.
+constexpr double compact_coefs = 4 + 4 + (STENCIL_COEFS - 1) * 2;
+constexpr double sweep_compact = compact_coefs + 4 + 4 + 4;
+constexpr double residual_compact = compact_coefs + 4 + 4 + 4;
 constexpr double apply = STENCIL_COEFS * 4 + 4 + 4;
 constexpr double fill = 4, copy = 8, dot = 8, norm = 4, axpby = 12;
 }  // namespace bytes_per_voxel
@@ -58,6 +64,25 @@ class Multigrid {
 
   int levels() const { return int(levels_.size()); }
   const SolverParams& params() const { return sp_; }
+  // The preconditioner's fine level on the compact stencil (SolverParams::
+  // compact_smoother): only under the conjugate gradients, which apply the
+  // float32 operator (plain V-cycles would converge to the compact system's
+  // solution), with the slab Gauss-Seidel, when allowed (allow_compact:
+  // VariationalClassifier allows it for warm re-solves) and where its 22
+  // bytes per voxel fit (compact_smoother_fits). Built at the first solve
+  // that uses it.
+  bool compact_in_use() const { return compact_; }
+  void allow_compact(bool on) {
+    compact_allowed_ = on;
+    if (!on) compact_ = false;  // the copy stays built: allowing it again costs nothing
+  }
+  void use_compact() {
+    if (compact_ || !compact_allowed_ || !sp_.compact_smoother || !sp_.krylov || sp_.jacobi ||
+        fine().sys->gs_order() != GsOrder::Slabs || !compact_smoother_fits(rt_.info(), fine().sys->voxels()))
+      return;
+    fine().sys->build_compact();
+    compact_ = true;
+  }
   // ||b|| of the fine level: set at the start of every solve (b changes with
   // the pointwise parameters).
   double b_norm() const { return b_norm_; }
@@ -78,6 +103,11 @@ class Multigrid {
 
   void smooth(int l, int sweeps, bool reverse) {
     Level& L = levels_[l];
+    if (l == 0 && compact_) {
+      count(*L.sys, bytes_per_voxel::sweep_compact, sweeps);
+      L.sys->relax_gs_compact(L.rhs, L.u, sweeps, reverse);
+      return;
+    }
     count(*L.sys, sp_.jacobi ? bytes_per_voxel::jacobi : bytes_per_voxel::sweep, sweeps);
     if (sp_.jacobi)
       L.sys->relax_jacobi(L.rhs, L.u, L.tmp, sp_.jacobi_weight, sweeps);
@@ -100,8 +130,13 @@ class Multigrid {
     }
     Level& C = levels_[l + 1];
     smooth(l, sp_.pre_sweeps, false);
-    L.sys->residual(L.rhs, L.u, L.r);
-    count(*L.sys, bytes_per_voxel::residual);
+    if (l == 0 && compact_) {
+      L.sys->residual_compact(L.rhs, L.u, L.r);
+      count(*L.sys, bytes_per_voxel::residual_compact);
+    } else {
+      L.sys->residual(L.rhs, L.u, L.r);
+      count(*L.sys, bytes_per_voxel::residual);
+    }
     restrict_residual(L, C);
     rt_.queue().enqueueFillBuffer(C.u, 0.0f, 0, C.sys->voxels() * sizeof(float));
     count(*C.sys, bytes_per_voxel::fill);
@@ -196,6 +231,8 @@ class Multigrid {
   SolverParams sp_;
   Runtime& rt_;
   bool rows_;                     // CPU device: the transfers' row kernels
+  bool compact_ = false;          // use_compact()
+  bool compact_allowed_ = true;   // allow_compact()
   cl::Kernel restrict_, prolong_;  // created once: the V-cycle launches them every level
   double b_norm_ = 0;               // ||b|| of the fine level, fixed for the solve
   std::vector<Level> levels_;
@@ -410,6 +447,8 @@ const cl::Buffer& MultigridSolver::solution() const { return impl_->fine().u; }
 int MultigridSolver::levels() const { return impl_->levels(); }
 const SolverParams& MultigridSolver::params() const { return impl_->params(); }
 void MultigridSolver::update_point() { impl_->update_point(); }
+void MultigridSolver::allow_compact_smoother(bool on) { impl_->allow_compact(on); }
+bool MultigridSolver::compact_smoother_in_use() const { return impl_->compact_in_use(); }
 void MultigridSolver::load_solution(const cl::Buffer& u) {
   Impl& mg = *impl_;
   const std::size_t bytes = mg.sys.voxels() * sizeof(float);
@@ -431,6 +470,7 @@ std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector
   const std::size_t n = fine.voxels();
   SolveReport rep;
   rep.levels = mg.levels();
+  mg.use_compact();
   mg.bytes = 0;
   mg.u64.clear();
   mg.measure_b();
@@ -520,6 +560,7 @@ VariationalClassifier::VariationalClassifier(Runtime& rt, const Volume& v, const
   vn.data.clear();
   vn.data.shrink_to_fit();
   mg_ = std::make_unique<MultigridSolver>(*sys_, sp);
+  mg_->allow_compact_smoother(false);  // warm re-solves only (keep_resolve_start)
   // The hierarchy is built: the fine level's tensor is not read again
   // (re-solves update mu, rho, the diagonal and b only).
   sys_->release_tensor();
@@ -587,6 +628,8 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
   }
   const bool from_last = warm && !linear_in && keep && kept_linear_;
   const bool extrapolate = from_last && kept_steps_;
+  // Warm re-solves relax on the compact stencil (keep_resolve_start).
+  mg_->allow_compact_smoother(from_last);
   kept_linear_ = kept_steps_ = false;
   if (from_last) mg_->load_solution(kept_[0]);
   std::vector<float> u = steps > 0 ? mg_->solve(report, linear_in, from_last, loose)

@@ -4,6 +4,7 @@
 #include "variational.hpp"
 
 #include <algorithm>
+#include <cstring>
 #include <cmath>
 #include <stdexcept>
 
@@ -395,6 +396,44 @@ std::pair<cl::Event, cl::Event> DeviceSystem::relax_gs(const cl::Buffer& rhs, co
   return span;
 }
 
+void DeviceSystem::build_compact() {
+  if (has_compact()) return;
+  const std::size_t slices = STENCIL_SLICE(voxels()) * (STENCIL_COEFS - 1);
+  rt_.check_allocation(slices * sizeof(std::uint16_t), "the smoother's compact stencil");
+  compact_h_ = rt_.buffer(slices * sizeof(std::uint16_t));
+  compact_delta_ = rt_.buffer(voxels() * sizeof(float));
+  cl::Kernel k = rt_.kernel(kSystem, "system_compact");
+  Runtime::set_args(k, coef_, compact_h_, compact_delta_, grid_);
+  rt_.enqueue_3d(k, grid_);
+  gs_slabs_compact_ = rt_.kernel(kSystem, "relax_gs_slabs_compact");
+  residual_compact_ = rt_.kernel(kSystem, "system_residual_compact");
+}
+
+std::pair<cl::Event, cl::Event> DeviceSystem::relax_gs_compact(const cl::Buffer& rhs, const cl::Buffer& x, int sweeps,
+                                                               bool reverse) const {
+  if (!has_compact()) throw std::logic_error("DeviceSystem::relax_gs_compact: build_compact() first");
+  std::pair<cl::Event, cl::Event> span;
+  const int slab = gs_slab();
+  const cl::NDRange global((grid_.nz + 2 * slab - 1) / (2 * slab));
+  for (int s = 0; s < sweeps; ++s)
+    for (int c = 0; c < 2; ++c) {
+      Runtime::set_args(gs_slabs_compact_, coef_, compact_delta_, compact_h_, rhs, x,
+                        static_cast<cl_int>(reverse ? 1 - c : c), static_cast<cl_int>(reverse),
+                        static_cast<cl_int>(slab), grid_);
+      cl::Event e;
+      rt_.queue().enqueueNDRangeKernel(gs_slabs_compact_, cl::NullRange, global, cl::NDRange(1), nullptr, &e);
+      if (!span.first()) span.first = e;
+      span.second = e;
+    }
+  return span;
+}
+
+cl::Event DeviceSystem::residual_compact(const cl::Buffer& rhs, const cl::Buffer& x, const cl::Buffer& r) const {
+  if (!has_compact()) throw std::logic_error("DeviceSystem::residual_compact: build_compact() first");
+  Runtime::set_args(residual_compact_, coef_, compact_delta_, compact_h_, rhs, x, r, grid_);
+  return rt_.enqueue_3d(residual_compact_, grid_);
+}
+
 void DeviceSystem::relax_jacobi(const cl::Buffer& rhs, const cl::Buffer& x, const cl::Buffer& tmp, double w,
                                 int sweeps) const {
   for (int s = 0; s < sweeps; ++s) {
@@ -474,9 +513,27 @@ std::vector<float> DeviceSystem::download_coefficients() const {
 
 std::vector<float> DeviceSystem::download_b() const { return download<float>(rt_, b_, voxels()); }
 
+std::vector<std::uint16_t> DeviceSystem::download_compact() const {
+  if (!has_compact()) throw std::logic_error("DeviceSystem::download_compact: build_compact() first");
+  const std::size_t n = voxels();
+  std::vector<std::uint16_t> h(n * (STENCIL_COEFS - 1));
+  for (std::size_t k = 0; k + 1 < STENCIL_COEFS; ++k)
+    rt_.queue().enqueueReadBuffer(compact_h_, CL_FALSE, k * STENCIL_SLICE(n) * sizeof(std::uint16_t),
+                                  n * sizeof(std::uint16_t), h.data() + k * n);
+  rt_.queue().finish();
+  return h;
+}
+
+std::vector<float> DeviceSystem::download_compact_delta() const {
+  if (!has_compact()) throw std::logic_error("DeviceSystem::download_compact_delta: build_compact() first");
+  return download<float>(rt_, compact_delta_, voxels());
+}
+
 std::size_t DeviceSystem::memory_bytes() const {
-  // mu, rho, b, dT, T (6, until released), the stencil, fixed; v, v~, |grad v|^2 when updatable
-  return voxels() * ((4 + (has_tensor() ? 6 : 0) + STENCIL_COEFS + (updatable() ? 3 : 0)) * sizeof(float) + 1);
+  // mu, rho, b, dT, T (6, until released), the stencil, fixed; v, v~, |grad v|^2 when updatable;
+  // the compact stencil (9 bfloat16 and a float) once built
+  return voxels() * ((4 + (has_tensor() ? 6 : 0) + STENCIL_COEFS + (updatable() ? 3 : 0)) * sizeof(float) + 1 +
+                     (has_compact() ? (STENCIL_COEFS - 1) * 2 + 4 : 0));
 }
 
 }  // namespace softshell

@@ -208,6 +208,20 @@ class DeviceSystem {
   void set_gs_slab(int planes) { gs_slab_ = planes; }  // 0: the default (1)
   // Weighted Jacobi sweeps; `tmp` is scratch of the same size.
   void relax_jacobi(const cl::Buffer& rhs, const cl::Buffer& x, const cl::Buffer& tmp, double w, int sweeps) const;
+  // The smoother's compact copy of the stencil (kernels/system.cl,
+  // system_compact; docs/solver.md, "A compact stencil for the smoother"):
+  // the off-diagonals in bfloat16 and a diagonal correction that keeps every
+  // row sum, 22 bytes per voxel besides the float32 stencil. Built from the
+  // stencil as it is (the pointwise updates change only the diagonal, which
+  // the compact form reads from the stencil itself); idempotent. The slab
+  // sweep (GsOrder::Slabs) and the residual on it:
+  void build_compact();
+  bool has_compact() const { return bool(compact_h_()); }
+  std::pair<cl::Event, cl::Event> relax_gs_compact(const cl::Buffer& rhs, const cl::Buffer& x, int sweeps,
+                                                   bool reverse) const;
+  cl::Event residual_compact(const cl::Buffer& rhs, const cl::Buffer& x, const cl::Buffer& r) const;
+  std::vector<std::uint16_t> download_compact() const;  // 9 * N, SoA (k - 1) * N + p
+  std::vector<float> download_compact_delta() const;
   void zero_fixed(const cl::Buffer& x) const;
   double norm(const cl::Buffer& x) const;  // Euclidean, deterministic
   double dot(const cl::Buffer& x, const cl::Buffer& y) const;  // deterministic
@@ -236,6 +250,7 @@ class DeviceSystem {
   Runtime& rt_;
   GridDesc grid_;
   cl::Buffer mu_, rho_, fixed_, coef_, b_, dT_, partial_;
+  cl::Buffer compact_h_, compact_delta_;  // build_compact()
   std::array<cl::Buffer, 6> T_;
   std::array<cl::Buffer, 3> sources_;  // v, v~, |grad v|^2 of a volume-built level (for update_point)
   VariationalParams resolved_;
@@ -244,6 +259,7 @@ class DeviceSystem {
   bool strided_dot_ = false;
   int gs_slab_ = 0;
   mutable cl::Kernel apply_, residual_, gs_, gs_slabs_, jacobi_, zero_fixed_, dot_, axpby_;
+  mutable cl::Kernel gs_slabs_compact_, residual_compact_;
 };
 
 // Multigrid solver settings and report (docs/numerics.md, "Multigrid").
@@ -268,6 +284,12 @@ struct SolverParams {
   // only give the next linearisation point; 0 takes tol (the reference the
   // bench measures re-solves against: sharpening from converged solves).
   double sharpen_tol = 5e-2;
+  // The conjugate gradients' preconditioner relaxes on a compact copy of the
+  // fine level's stencil (bfloat16 couplings; DeviceSystem::build_compact)
+  // where the slab Gauss-Seidel runs (CPUs) and the copy fits: fewer bytes
+  // per sweep, the float32 system's answer (docs/solver.md). A
+  // VariationalClassifier uses it in warm re-solves only.
+  bool compact_smoother = true;
 };
 
 struct SolveReport {
@@ -303,6 +325,11 @@ class MultigridSolver {
   void load_solution(const cl::Buffer& u);
   // After fine.update_point(): carries the new mu and rho down every level.
   void update_point();
+  // Whether the next solves may relax on the compact stencil
+  // (SolverParams::compact_smoother still decides; on by default;
+  // VariationalClassifier allows it for re-solving classifiers only).
+  void allow_compact_smoother(bool on);
+  bool compact_smoother_in_use() const;  // the last solve relaxed on the compact stencil
   // The float64 solution of the last solve when it was refined (tol below
   // 1e-4; its float32 rounding is what solve() returned), else empty.
   const std::vector<double>& solution64() const;
@@ -375,6 +402,7 @@ class VariationalClassifier {
   double setup_seconds() const { return setup_seconds_; }    // the constructor, hierarchy included
   double update_seconds() const { return update_seconds_; }  // the last update()
   int levels() const { return mg_->levels(); }
+  bool compact_smoother_in_use() const { return mg_->compact_smoother_in_use(); }
   // Keeps the solution of every stage of each solve on the device (the
   // linear solve and each sharpening step: sharpen_iterations + 2 floats per
   // voxel with a scratch buffer, less than the tangential tensor freed after
@@ -383,6 +411,12 @@ class VariationalClassifier {
   // multigrid, and the last sharpening step from the new step before it plus
   // the last solve's change over the step (docs/numerics.md, "Re-solving").
   // Off by default: one-shot classifications never re-solve.
+  // Its warm re-solves also relax on the compact stencil
+  // (SolverParams::compact_smoother, where it fits: 22 bytes per voxel).
+  // Cold solves do not: over a one-shot classification's few iterations the
+  // copy's build and first touch cost about what its fewer bytes save
+  // (docs/solver.md), and a cold solve stays the bits of `classify` with the
+  // same parameters (the viewer's saved u and `classify --params`).
   void keep_resolve_start(bool on) {
     keep_start_ = on;
     if (!on) kept_.clear(), scratch_ = cl::Buffer(), kept_linear_ = kept_steps_ = false;

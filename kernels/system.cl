@@ -338,112 +338,113 @@ __kernel void relax_gs_colour(__global const float* restrict coef, __global cons
  * off-diagonal terms) / A[p][p] and l_p = A[p][prev] / A[p][p]. */
 #define GS_ROW_CHUNK 128
 
-/* x = 1 .. nx - 2 of an interior row (y, z interior). */
-__attribute__((always_inline)) inline void gs_row(__global const float* restrict coef,
-                                                  __global const float* restrict bv, __global float* xv,
-                                                  const GridDesc g, const size_t row, const int reverse) {
-  const size_t N = STENCIL_SLICE(grid_voxels(g));
-  const long sy = g.nx, sz = (long)g.nx * g.ny;
-  const int n = g.nx - 2;
-  for (int done = 0; done < n; done += GS_ROW_CHUNK) {
-    const int m = min(GS_ROW_CHUNK, n - done);
-    const size_t p0 = row + (size_t)(reverse ? g.nx - 1 - done - m : 1 + done); /* lowest x of the chunk */
-    float r[GS_ROW_CHUNK], l[GS_ROW_CHUNK];
-    for (int j = 0; j < m; ++j) {
-      const int i = reverse ? m - 1 - j : j;
-      const size_t p = p0 + i;
-      /* The x-neighbour visited later: still its old value. */
-      float acc = reverse ? -coef[N + p - 1] * xv[p - 1] : -coef[N + p] * xv[p + 1];
-#define TERM(K, DX, DY, DZ)                                          \
-  if (K > 1) {                                                       \
-    const long off = (long)(DX) + (long)(DY) * sy + (long)(DZ) * sz; \
-    acc = fma(-coef[K * N + p], xv[p + off], acc);                   \
-    acc = fma(-coef[K * N + p - off], xv[p - off], acc);             \
-  }
-      STENCIL_OFFSETS(TERM)
-#undef TERM
-      const float inv = 1.0f / coef[p];
-      r[i] = (bv[p] + acc) * inv;
-      l[i] = (reverse ? coef[N + p] : coef[N + p - 1]) * inv;
-    }
-    /* The serial part, in blocks of 4: with u_prev the value before the block,
-     * u_k = m_k u_prev + d_k (m_0 = -l_0, d_0 = r_0, m_k = -l_k m_(k-1),
-     * d_k = r_k - l_k d_(k-1)), so the chain through u_prev is one fma per 4
-     * voxels; m and d do not wait for it (the plain recurrence, one dependent
-     * fma per voxel, bounded the sweep: 1.15-1.2x slower at 105^3). The
-     * same values up to rounding (the host reference is the plain recurrence
-     * in float64, checked to 1e-5). */
-    if (reverse) {
-      float u = xv[p0 + m];
-      int i = m - 1;
-      for (; i >= 3; i -= 4) {
-        const float m0 = -l[i], d0 = r[i];
-        const float m1 = -l[i - 1] * m0, d1 = fma(-l[i - 1], d0, r[i - 1]);
-        const float m2 = -l[i - 2] * m1, d2 = fma(-l[i - 2], d1, r[i - 2]);
-        const float m3 = -l[i - 3] * m2, d3 = fma(-l[i - 3], d2, r[i - 3]);
-        xv[p0 + i] = fma(m0, u, d0);
-        xv[p0 + i - 1] = fma(m1, u, d1);
-        xv[p0 + i - 2] = fma(m2, u, d2);
-        u = fma(m3, u, d3);
-        xv[p0 + i - 3] = u;
-      }
-      for (; i >= 0; --i) {
-        u = fma(-l[i], u, r[i]);
-        xv[p0 + i] = u;
-      }
-    } else {
-      float u = xv[p0 - 1];
-      int i = 0;
-      for (; i + 3 < m; i += 4) {
-        const float m0 = -l[i], d0 = r[i];
-        const float m1 = -l[i + 1] * m0, d1 = fma(-l[i + 1], d0, r[i + 1]);
-        const float m2 = -l[i + 2] * m1, d2 = fma(-l[i + 2], d1, r[i + 2]);
-        const float m3 = -l[i + 3] * m2, d3 = fma(-l[i + 3], d2, r[i + 3]);
-        xv[p0 + i] = fma(m0, u, d0);
-        xv[p0 + i + 1] = fma(m1, u, d1);
-        xv[p0 + i + 2] = fma(m2, u, d2);
-        u = fma(m3, u, d3);
-        xv[p0 + i + 3] = u;
-      }
-      for (; i < m; ++i) {
-        u = fma(-l[i], u, r[i]);
-        xv[p0 + i] = u;
-      }
-    }
-  }
+/* The sweep on the stencil as assembled (float32). */
+#define GS_NAME(f) f
+#define GS_COEF_PARAMS __global const float* restrict coef
+#define GS_COEF_ARGS coef
+#define GS_OFFD(k, q) coef[(k) * N + (q)]
+#define GS_DIAG(q) coef[q]
+#include "gs_slabs.h"
+#undef GS_NAME
+#undef GS_COEF_PARAMS
+#undef GS_COEF_ARGS
+#undef GS_OFFD
+#undef GS_DIAG
+
+/* ------------------------------------------- the smoother's compact stencil */
+
+/* The smoother's copy of the stencil (docs/solver.md, "A compact stencil for
+ * the smoother"): the nine off-diagonal slices rounded to bfloat16 (the upper
+ * 16 bits of a float, to nearest even; 8 significant bits), and per row
+ * delta, minus the sum of that row's rounding errors (both directions of each
+ * coupling), added to its diagonal so that every row sum, and so A applied to
+ * a constant, stays what it was. The sweep reads 26 bytes of coefficients per
+ * voxel instead of 40. It serves the conjugate gradients' preconditioner
+ * only: the V-cycle there relaxes and takes residuals on this matrix (a
+ * symmetric operator of its own), while the conjugate gradients apply the
+ * float32 one, so the answer is the float32 system's to the same tolerance.
+ * (Storing the float32 couplings as two 16-bit halves instead, the upper one
+ * serving as the bfloat16, would have cost no memory, but the float32 kernels
+ * reading 19 streams ran 1.3-1.5x slower.) */
+__attribute__((always_inline)) inline float bf16_value(const ushort h) { return as_float((uint)h << 16); }
+
+__attribute__((always_inline)) inline ushort bf16_round(const float a) {
+  const uint u = as_uint(a);
+  if (isnan(a)) return (ushort)((u >> 16) | 0x40u); /* stays a NaN */
+  const uint r = (u + 0x7fffu + ((u >> 16) & 1u)) >> 16;
+  /* A finite value that rounds past the largest bfloat16: the largest. */
+  if ((r & 0x7f80u) == 0x7f80u && !isinf(a)) return (ushort)(((u >> 16) & 0x8000u) | 0x7f7fu);
+  return (ushort)r;
 }
 
-/* Any x-row: a fixed row (y or z on the boundary) has identity rows and no
- * couplings; an interior row's two ends are fixed and coupled to nothing. */
-__attribute__((always_inline)) inline void gs_any_row(__global const float* restrict coef,
-                                                      __global const float* restrict bv, __global float* xv,
-                                                      const GridDesc g, const int y, const int z, const int reverse) {
-  const size_t row = (size_t)g.nx * ((size_t)y + (size_t)g.ny * z);
-  if (y == 0 || z == 0 || y == g.ny - 1 || z == g.nz - 1) {
-    for (int x = 0; x < g.nx; ++x) xv[row + x] = bv[row + x] / coef[row + x];
+/* ch[(k - 1) N + p] for k = 1..9 and delta[p], from coef. The rounding errors of
+ * row p's couplings stored at its neighbours (p - off) are recomputed there:
+ * the same function of the same float, so the two rows of a coupling agree. */
+__kernel void system_compact(__global const float* restrict coef, __global ushort* restrict ch,
+                             __global float* restrict delta, const GridDesc g) {
+  const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
+  if (!grid_contains(g, x, y, z)) return;
+  const size_t N = STENCIL_SLICE(grid_voxels(g));
+  const size_t p = grid_index(g, x, y, z);
+  const long sy = g.nx, sz = (long)g.nx * g.ny;
+  const bool inner = !on_boundary(g, x, y, z);
+  float d = 0.0f;
+#define COMPACT(K, DX, DY, DZ)                                                 \
+  if (K > 0) {                                                                 \
+    const float a = coef[K * N + p];                                           \
+    const ushort h = bf16_round(a);                                            \
+    ch[(K - 1) * N + p] = h;                                                   \
+    if (inner) {                                                               \
+      const long off = (long)(DX) + (long)(DY) * sy + (long)(DZ) * sz;        \
+      const float an = coef[K * N + p - off];                                  \
+      d += (bf16_value(h) - a) + (bf16_value(bf16_round(an)) - an);           \
+    }                                                                          \
+  }
+  STENCIL_OFFSETS(COMPACT)
+#undef COMPACT
+  delta[p] = -d;
+}
+
+/* The sweep on the compact stencil. */
+#define GS_NAME(f) f##_compact
+#define GS_COEF_PARAMS                                                       \
+  __global const float* restrict coef, __global const float* restrict delta, \
+      __global const ushort* restrict ch
+#define GS_COEF_ARGS coef, delta, ch
+#define GS_OFFD(k, q) bf16_value(ch[((k) - 1) * N + (q)])
+#define GS_DIAG(q) (coef[q] + delta[q])
+#include "gs_slabs.h"
+#undef GS_NAME
+#undef GS_COEF_PARAMS
+#undef GS_COEF_ARGS
+#undef GS_OFFD
+#undef GS_DIAG
+
+/* r = rhs - A~ x on the compact stencil (the V-cycle's residual on the fine
+ * level, where it relaxes on A~). */
+__kernel void system_residual_compact(__global const float* restrict coef, __global const float* restrict delta,
+                                      __global const ushort* restrict ch, __global const float* restrict bv,
+                                      __global const float* restrict xv, __global float* restrict rv,
+                                      const GridDesc g) {
+  const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
+  if (!grid_contains(g, x, y, z)) return;
+  const size_t p = grid_index(g, x, y, z);
+  if (on_boundary(g, x, y, z)) {
+    rv[p] = bv[p] - coef[p] * xv[p];
     return;
   }
-  xv[row] = bv[row] / coef[row];
-  xv[row + g.nx - 1] = bv[row + g.nx - 1] / coef[row + g.nx - 1];
-  if (reverse)
-    gs_row(coef, bv, xv, g, row, 1);
-  else
-    gs_row(coef, bv, xv, g, row, 0);
-}
-
-__kernel void relax_gs_slabs(__global const float* restrict coef, __global const float* restrict bv,
-                             __global float* xv, const int colour, const int reverse, const int slab,
-                             const GridDesc g) {
-  const int z0 = (2 * (int)get_global_id(0) + colour) * slab;
-  if (z0 >= g.nz) return;
-  const int z1 = min(z0 + slab, g.nz);
-  if (reverse) {
-    for (int z = z1 - 1; z >= z0; --z)
-      for (int y = g.ny - 1; y >= 0; --y) gs_any_row(coef, bv, xv, g, y, z, 1);
-  } else {
-    for (int z = z0; z < z1; ++z)
-      for (int y = 0; y < g.ny; ++y) gs_any_row(coef, bv, xv, g, y, z, 0);
+  const size_t N = STENCIL_SLICE(grid_voxels(g));
+  const long sy = g.nx, sz = (long)g.nx * g.ny;
+  float acc = (coef[p] + delta[p]) * xv[p];
+#define TERM(K, DX, DY, DZ)                                                    \
+  if (K > 0) {                                                                 \
+    const long off = (long)(DX) + (long)(DY) * sy + (long)(DZ) * sz;           \
+    acc = fma(bf16_value(ch[(K - 1) * N + p]), xv[p + off], acc);              \
+    acc = fma(bf16_value(ch[(K - 1) * N + p - off]), xv[p - off], acc);        \
   }
+  STENCIL_OFFSETS(TERM)
+#undef TERM
+  rv[p] = bv[p] - acc;
 }
 
 /* Weighted Jacobi: x_new = x + w (b - A x) / diag. */

@@ -243,6 +243,126 @@ TEST(BenchPieces, HostSlabSweepIsTheDeviceSweep) {
   }
 }
 
+// ---- the smoother's compact stencil (DeviceSystem::build_compact)
+
+// The nearest bfloat16 of a finite float by a route of its own: the two
+// bfloat16 values around it (its upper 16 bits, and the next one away from
+// zero), the nearer in float64, a tie to the even one.
+std::uint16_t nearest_bf16(float a) {
+  std::uint32_t bits;
+  std::memcpy(&bits, &a, sizeof bits);
+  const std::uint32_t lo = bits & 0xffff0000u, hi = lo + 0x10000u;
+  float flo, fhi;
+  std::memcpy(&flo, &lo, sizeof flo);
+  std::memcpy(&fhi, &hi, sizeof fhi);
+  const double dlo = std::abs(double(a) - flo), dhi = std::abs(double(fhi) - a);
+  if (dlo < dhi) return std::uint16_t(lo >> 16);
+  if (dhi < dlo) return std::uint16_t(hi >> 16);
+  return ((lo >> 16) & 1u) ? std::uint16_t(hi >> 16) : std::uint16_t(lo >> 16);
+}
+
+float bf16_float(std::uint16_t h) {
+  const std::uint32_t bits = std::uint32_t(h) << 16;
+  float f;
+  std::memcpy(&f, &bits, sizeof f);
+  return f;
+}
+
+TEST(CompactStencil, CouplingsAreTheNearestBfloat16AndEveryRowSumIsKept) {
+  // Every coupling is the float32 one rounded to the nearest bfloat16
+  // (within 2^-8 of it, relative), and each row's diagonal correction makes
+  // its row sum that of the float32 row (A~ 1 = A 1), in float64 up to the
+  // float32 rounding of the correction itself. Fixed rows are left alone.
+  SmallSystem s = small_system(20);
+  s.sys->build_compact();
+  ASSERT_TRUE(s.sys->has_compact());
+  const std::vector<std::uint16_t> h = s.sys->download_compact();
+  const std::vector<float> delta = s.sys->download_compact_delta();
+  const HostStencil& a = s.hs;
+  const std::size_t n = a.voxels();
+  ASSERT_EQ(h.size(), n * (STENCIL_COEFS - 1));
+  std::size_t rounded = 0;
+  for (std::size_t i = 0; i < h.size(); ++i) {
+    const float c = a.coef[n + i];
+    ASSERT_EQ(h[i], nearest_bf16(c)) << "coupling " << i / n + 1 << " at voxel " << i % n << ": " << c;
+    EXPECT_LE(std::abs(double(bf16_float(h[i])) - c), std::ldexp(std::abs(double(c)), -8));
+    rounded += bf16_float(h[i]) != c;
+  }
+  EXPECT_GT(rounded, n);  // not a stencil bfloat16 holds exactly
+  const GridDesc g = a.grid;
+  const long sy = g.nx, sz = long(g.nx) * g.ny;
+  const long off[STENCIL_COEFS] = {
+#define SOFTSHELL_OFF(K, DX, DY, DZ) (DX) + (DY) * sy + (DZ) * sz,
+      STENCIL_OFFSETS(SOFTSHELL_OFF)
+#undef SOFTSHELL_OFF
+  };
+  std::size_t corrected = 0;
+  double worst = 0;
+  for (int z = 0; z < g.nz; ++z)
+    for (int y = 0; y < g.ny; ++y)
+      for (int x = 0; x < g.nx; ++x) {
+        const std::size_t p = std::size_t(x) + std::size_t(g.nx) * (std::size_t(y) + std::size_t(g.ny) * z);
+        if (a.fixed[p]) {
+          EXPECT_EQ(delta[p], 0.0f) << "fixed voxel " << p;
+          continue;
+        }
+        double sum = a.coef[p], sum_c = double(a.coef[p]) + delta[p], scale = std::abs(double(a.coef[p]));
+        for (int k = 1; k < STENCIL_COEFS; ++k) {
+          const std::size_t up = (k - 1) * n + p, down = (k - 1) * n + std::size_t(long(p) - off[k]);
+          sum += double(a.coef[k * n + p]) + a.coef[k * n + std::size_t(long(p) - off[k])];
+          sum_c += double(bf16_float(h[up])) + bf16_float(h[down]);
+          scale += std::abs(double(a.coef[k * n + p])) + std::abs(double(a.coef[k * n + std::size_t(long(p) - off[k])]));
+        }
+        worst = std::max(worst, std::abs(sum_c - sum) / scale);
+        corrected += delta[p] != 0.0f;
+      }
+  EXPECT_LT(worst, 1e-6);
+  EXPECT_GT(corrected, n / 4);
+}
+
+TEST(CompactStencil, SweepsAndResidualAreTheHostsOnTheCompactMatrix) {
+  // The compact sweep (forward twice, then reverse) and residual against the
+  // float64 host sweep and apply of the compact matrix as downloaded, for
+  // slabs that do and do not divide nz. The compact matrix differs from the
+  // float32 one by more than the tolerance here, so a kernel that read the
+  // float32 couplings would fail.
+  SmallSystem s = small_system(20);
+  Runtime& rt = runtime();
+  s.sys->set_gs_order(GsOrder::Slabs);
+  s.sys->build_compact();
+  const HostStencil hc = compact_host_stencil(*s.sys);
+  const std::size_t n = s.hs.voxels();
+  for (int slab : {1, 3, 0}) {
+    s.sys->set_gs_slab(slab);
+    const int used = s.sys->gs_slab();
+    SCOPED_TRACE("slab " + std::to_string(used));
+    std::vector<float> u(n, 0.0f), u32(n, 0.0f);
+    cl::Buffer x = test::upload(rt, u);
+    s.sys->relax_gs_compact(s.sys->b(), x, 2, false);
+    s.sys->relax_gs_compact(s.sys->b(), x, 1, true);
+    for (const bool rev : {false, false, true}) host_gs_slab_sweep(hc, u, used, rev), host_gs_slab_sweep(s.hs, u32, used, rev);
+    const std::vector<float> dev = test::download(rt, x, n);
+    ASSERT_GT(*std::max_element(u.begin(), u.end()), 0.0f);
+    EXPECT_LT(test::max_relative_deviation(dev, u), 1e-5);
+    EXPECT_GT(test::max_relative_deviation(u32, u), 1e-4);  // the two matrices' sweeps differ
+  }
+  std::mt19937 rng{unsigned(test::seed())};
+  std::uniform_real_distribution<float> U(-1.0f, 1.0f);
+  std::vector<float> v(n);
+  for (std::size_t i = 0; i < n; ++i) v[i] = s.hs.fixed[i] ? 0.0f : U(rng);
+  cl::Buffer xv = test::upload(rt, v), r = rt.buffer(n * sizeof(float));
+  s.sys->residual_compact(s.sys->b(), xv, r).wait();
+  const std::vector<float> got = test::download(rt, r, n);
+  const std::vector<double> av = host_apply(hc, v);
+  double worst = 0, scale = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double want = double(hc.b[i]) - av[i];
+    worst = std::max(worst, std::abs(got[i] - want)), scale = std::max(scale, std::abs(want));
+  }
+  ASSERT_GT(scale, 0.0);
+  EXPECT_LT(worst, 1e-5 * scale);
+}
+
 TEST(BenchPieces, SlabSweepOfOnePlaneIsTheZebraPlaneGaussSeidel) {
   // The host reference itself: a reverse sweep is not a forward one (the
   // orderings differ), and slab 1 is Gauss-Seidel by 2 colours of z-planes
@@ -405,6 +525,15 @@ TEST_F(CliTest, BenchQuickJsonHasTheStableKeysAndSaneValues) {
                 1e-4 * number(d, "sweep_fraction_host"));
     EXPECT_NEAR(number(d, "apply_fraction_host"), number(d, "apply_gbps") / host_copy,
                 1e-4 * number(d, "apply_fraction_host"));
+    // The compact stencil's sweep, where the solver relaxes on it (the slab
+    // ordering of CPU devices): checked against the host, GB/s by its bytes.
+    for (const char* key : {"sweep_compact_gbps", "sweep_compact_fraction_host", "sweep_compact_check"})
+      EXPECT_TRUE(d.has(key)) << key;
+    if (number(d, "sweep_compact_gbps") > 0) {
+      EXPECT_LE(number(d, "sweep_compact_check"), 1e-4);
+      EXPECT_NEAR(number(d, "sweep_compact_fraction_host"), number(d, "sweep_compact_gbps") / host_copy,
+                  1e-4 * number(d, "sweep_compact_fraction_host"));
+    }
     // The solve against its bound: bytes per voxel between a V-cycle's worth
     // and far beyond any sensible solve; the ratio is time / (bytes / copy).
     const Json& sb = d["solve_bound"];

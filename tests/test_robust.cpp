@@ -853,6 +853,23 @@ TEST(RobustMemory, DeviceLimitsAreCheckedWithTheNumbers) {
   }
   // Levoy's largest buffer is one float per voxel.
   EXPECT_NO_THROW(check_classify_memory(gpu, "v.nrrd", {256, 256, 256}, Classifier::Levoy, false));
+  // The smoother's compact stencil is built only where it fits beside the
+  // rest: 18 bytes per voxel above the classification's peak (22 of its
+  // own, less the 4 that the tensor freed and the conjugate gradients did
+  // not take); a volume that fits without it is classified without it.
+  {
+    const std::size_t n = 200 * 200 * 200;
+    const MemoryNeed need = classify_memory_need({200, 200, 200}, Classifier::Variational, false);
+    DeviceInfo small = gpu;
+    small.global_mem = cl_ulong(need.device + 9 * n);
+    EXPECT_FALSE(compact_smoother_fits(small, n));
+    small.global_mem = cl_ulong(need.device + 19 * n);
+    EXPECT_TRUE(compact_smoother_fits(small, n));
+    DeviceInfo cpu = gpu;
+    cpu.type = "CPU";
+    EXPECT_TRUE(compact_smoother_fits(cpu, 105 * 105 * 105));
+    EXPECT_FALSE(compact_smoother_fits(cpu, std::size_t(1) << 40));
+  }
   // Refinement in float64 (--tol below 1e-4) adds its host arrays.
   EXPECT_NEAR(classify_memory_need({100, 100, 100}, Classifier::Variational, true, true).host_per_voxel -
                   classify_memory_need({100, 100, 100}, Classifier::Variational, true, false).host_per_voxel,
