@@ -370,26 +370,36 @@ void bench_sweep_apply(Runtime& rt, DeviceBench& db, int size, int reps) {
   const bool slabs = sys.gs_order() == GsOrder::Slabs;
   db.sweep_order =
       !slabs ? "8 colours" : sys.gs_slab() == 1 ? "row order" : "slabs of " + std::to_string(sys.gs_slab());
-  auto sweep = [&] {
-    const auto span = sys.relax_gs(sys.b(), x, 1, false);
-    span.second.wait();
-    return event_span_seconds(span.first, span.second);
-  };
-  sweep();  // warm-up (and a non-trivial u for the checks)
+  // Forward sweeps of x by `relax` (a function of x returning the event
+  // span): `reps` times, x read before and after the first (for the checks).
   std::vector<float> before(N), after(N);
-  std::vector<double> ts, ta;
-  for (int r = 0; r < reps; ++r) {
-    if (r == 0) rt.queue().enqueueReadBuffer(x, CL_TRUE, 0, bytes, before.data());
-    ts.push_back(sweep());
-    if (r == 0) rt.queue().enqueueReadBuffer(x, CL_TRUE, 0, bytes, after.data());
-  }
+  auto timed_sweeps = [&](auto relax) {
+    std::vector<double> t;
+    for (int r = 0; r < reps; ++r) {
+      if (r == 0) rt.queue().enqueueReadBuffer(x, CL_TRUE, 0, bytes, before.data());
+      const auto span = relax();
+      span.second.wait();
+      t.push_back(event_span_seconds(span.first, span.second));
+      if (r == 0) rt.queue().enqueueReadBuffer(x, CL_TRUE, 0, bytes, after.data());
+    }
+    return t;
+  };
+  // The largest deviation of the device's first sweep (`after`) from the
+  // host's (`before`, swept on the host), relative to the host's largest value.
+  double dev = 0, scale = 0;
+  auto sweep_deviation = [&] {
+    dev = 0, scale = 0;
+    for (std::size_t i = 0; i < N; ++i) dev = std::max(dev, double(std::abs(before[i] - after[i]))), scale = std::max(scale, double(std::abs(before[i])));
+    return scale > 0 ? dev / scale : dev;
+  };
+  auto sweep = [&] { return sys.relax_gs(sys.b(), x, 1, false); };
+  sweep().second.wait();  // warm-up (and a non-trivial u for the checks)
+  std::vector<double> ts = timed_sweeps(sweep), ta;
   if (slabs)
     host_gs_slab_sweep(hs, before, sys.gs_slab(), false);
   else
     host_gs_colour_sweep(hs, before);
-  double dev = 0, scale = 0;
-  for (std::size_t i = 0; i < N; ++i) dev = std::max(dev, double(std::abs(before[i] - after[i]))), scale = std::max(scale, double(std::abs(before[i])));
-  db.sweep_check = scale > 0 ? dev / scale : dev;
+  db.sweep_check = sweep_deviation();
   check(db, scale > 0 && db.sweep_check <= 1e-4,
         std::string("sweep: device differs from the host ") + (slabs ? "row/slab" : "8-colour") +
             " Gauss-Seidel by " + std::to_string(db.sweep_check) + " (relative)");
@@ -419,18 +429,9 @@ void bench_sweep_apply(Runtime& rt, DeviceBench& db, int size, int reps) {
   // The preconditioner's sweep on the compact stencil, from the same u.
   sys.build_compact();
   const HostStencil hc = compact_host_stencil(sys);
-  std::vector<double> tc;
-  for (int r = 0; r < reps; ++r) {
-    if (r == 0) rt.queue().enqueueReadBuffer(x, CL_TRUE, 0, bytes, before.data());
-    const auto span = sys.relax_gs_compact(sys.b(), x, 1, false);
-    span.second.wait();
-    tc.push_back(event_span_seconds(span.first, span.second));
-    if (r == 0) rt.queue().enqueueReadBuffer(x, CL_TRUE, 0, bytes, after.data());
-  }
+  const std::vector<double> tc = timed_sweeps([&] { return sys.relax_gs_compact(sys.b(), x, 1, false); });
   host_gs_slab_sweep(hc, before, sys.gs_slab(), false);
-  dev = 0, scale = 0;
-  for (std::size_t i = 0; i < N; ++i) dev = std::max(dev, double(std::abs(before[i] - after[i]))), scale = std::max(scale, double(std::abs(before[i])));
-  db.sweep_compact_check = scale > 0 ? dev / scale : dev;
+  db.sweep_compact_check = sweep_deviation();
   check(db, scale > 0 && db.sweep_compact_check <= 1e-4,
         "compact sweep: device differs from the host's sweep of the compact matrix by " +
             std::to_string(db.sweep_compact_check) + " (relative)");

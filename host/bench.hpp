@@ -190,7 +190,7 @@ struct ByteModel {
   static constexpr double apply = STENCIL_COEFS * 4 + 4 + 4;      // coefficients, x read, y write = 48
   // The preconditioner's sweep on the compact stencil (DeviceSystem::build_compact):
   // diagonal, its correction, 9 bfloat16 couplings, b, u read, u write = 38
-  static constexpr double sweep_compact = 4 + 4 + (STENCIL_COEFS - 1) * 2 + 4 + 4 + 4;
+  static constexpr double sweep_compact = 4 + STENCIL_COMPACT_BYTES + 4 + 4 + 4;
 };
 
 // Runs the benchmark. Throws DeviceError only when a requested device does

@@ -32,8 +32,7 @@ constexpr double kVariationalFine = kVariationalSystem + 3 * 4.0 + 3 * 4.0;
 // conjugate gradients' 5 floats have replaced T's 6: the solve's buffers then
 // exceed the setup's peak by this much. It is optional (the solve runs
 // without it, slower): built only where it fits (compact_smoother_fits).
-constexpr double kCompactStencil = (STENCIL_COEFS - 1) * 2.0 + 4.0;
-constexpr double kCompactOverPeak = kCompactStencil + 5 * 4.0 - 6 * 4.0;
+constexpr double kCompactOverPeak = STENCIL_COMPACT_BYTES + 5 * 4.0 - 6 * 4.0;
 constexpr double kVariationalCoarse = (kVariationalSystem + 3 * 4.0) / 7.0;
 // Levoy: the input, its lowpass and the filter's scratch, three gradient
 // components and the opacity, one float each.

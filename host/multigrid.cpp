@@ -26,9 +26,10 @@ namespace bytes_per_voxel {
 constexpr double sweep = STENCIL_COEFS * 4 + 4 + 4 + 4;  // coefficients, rhs, u read, u write
 constexpr double jacobi = sweep + 8;                     // + the copy back from tmp
 constexpr double residual = STENCIL_COEFS * 4 + 4 + 4 + 4;  // coefficients, rhs, x, r write
-// The compact stencil (DeviceSystem::build_compact): the diagonal, its
-// correction, nine bfloat16 couplings.
-constexpr double compact_coefs = 4 + 4 + (STENCIL_COEFS - 1) * 2;
+// The compact stencil (DeviceSystem::build_compact): the diagonal, read from
+// the float32 stencil, and the compact copy (its correction, nine bfloat16
+// couplings).
+constexpr double compact_coefs = 4 + STENCIL_COMPACT_BYTES;
 constexpr double sweep_compact = compact_coefs + 4 + 4 + 4;
 constexpr double residual_compact = compact_coefs + 4 + 4 + 4;
 constexpr double apply = STENCIL_COEFS * 4 + 4 + 4;
@@ -560,7 +561,6 @@ VariationalClassifier::VariationalClassifier(Runtime& rt, const Volume& v, const
   vn.data.clear();
   vn.data.shrink_to_fit();
   mg_ = std::make_unique<MultigridSolver>(*sys_, sp);
-  mg_->allow_compact_smoother(false);  // warm re-solves only (keep_resolve_start)
   // The hierarchy is built: the fine level's tensor is not read again
   // (re-solves update mu, rho, the diagonal and b only).
   sys_->release_tensor();

@@ -365,6 +365,28 @@ int DeviceSystem::gs_slab() const {
   return gs_slab_ > 0 ? gs_slab_ : 1;
 }
 
+std::pair<cl::Event, cl::Event> DeviceSystem::slab_sweeps(cl::Kernel& k, cl_uint first, const cl::Buffer& rhs,
+                                                          const cl::Buffer& x, int sweeps, bool reverse) const {
+  // One work-item (and work-group) per slab of a colour.
+  const int slab = gs_slab();
+  const cl::NDRange global((grid_.nz + 2 * slab - 1) / (2 * slab));
+  k.setArg(first, rhs);
+  k.setArg(first + 1, x);
+  k.setArg(first + 3, static_cast<cl_int>(reverse));
+  k.setArg(first + 4, static_cast<cl_int>(slab));
+  k.setArg(first + 5, grid_);
+  std::pair<cl::Event, cl::Event> span;
+  for (int s = 0; s < sweeps; ++s)
+    for (int c = 0; c < 2; ++c) {
+      k.setArg(first + 2, static_cast<cl_int>(reverse ? 1 - c : c));
+      cl::Event e;
+      rt_.queue().enqueueNDRangeKernel(k, cl::NullRange, global, cl::NDRange(1), nullptr, &e);
+      if (!span.first()) span.first = e;
+      span.second = e;
+    }
+  return span;
+}
+
 std::pair<cl::Event, cl::Event> DeviceSystem::relax_gs(const cl::Buffer& rhs, const cl::Buffer& x, int sweeps,
                                                        bool reverse) const {
   std::pair<cl::Event, cl::Event> span;
@@ -373,18 +395,8 @@ std::pair<cl::Event, cl::Event> DeviceSystem::relax_gs(const cl::Buffer& rhs, co
     span.second = e;
   };
   if (gs_order_ == GsOrder::Slabs) {
-    // One work-item (and work-group) per slab of a colour.
-    const int slab = gs_slab();
-    const cl::NDRange global((grid_.nz + 2 * slab - 1) / (2 * slab));
-    for (int s = 0; s < sweeps; ++s)
-      for (int c = 0; c < 2; ++c) {
-        Runtime::set_args(gs_slabs_, coef_, rhs, x, static_cast<cl_int>(reverse ? 1 - c : c),
-                          static_cast<cl_int>(reverse), static_cast<cl_int>(slab), grid_);
-        cl::Event e;
-        rt_.queue().enqueueNDRangeKernel(gs_slabs_, cl::NullRange, global, cl::NDRange(1), nullptr, &e);
-        launched(e);
-      }
-    return span;
+    gs_slabs_.setArg(0, coef_);
+    return slab_sweeps(gs_slabs_, 1, rhs, x, sweeps, reverse);
   }
   GridDesc half = grid_;  // one work-item per voxel of a colour
   half.nx = (grid_.nx + 1) / 2, half.ny = (grid_.ny + 1) / 2, half.nz = (grid_.nz + 1) / 2;
@@ -412,20 +424,10 @@ void DeviceSystem::build_compact() {
 std::pair<cl::Event, cl::Event> DeviceSystem::relax_gs_compact(const cl::Buffer& rhs, const cl::Buffer& x, int sweeps,
                                                                bool reverse) const {
   if (!has_compact()) throw std::logic_error("DeviceSystem::relax_gs_compact: build_compact() first");
-  std::pair<cl::Event, cl::Event> span;
-  const int slab = gs_slab();
-  const cl::NDRange global((grid_.nz + 2 * slab - 1) / (2 * slab));
-  for (int s = 0; s < sweeps; ++s)
-    for (int c = 0; c < 2; ++c) {
-      Runtime::set_args(gs_slabs_compact_, coef_, compact_delta_, compact_h_, rhs, x,
-                        static_cast<cl_int>(reverse ? 1 - c : c), static_cast<cl_int>(reverse),
-                        static_cast<cl_int>(slab), grid_);
-      cl::Event e;
-      rt_.queue().enqueueNDRangeKernel(gs_slabs_compact_, cl::NullRange, global, cl::NDRange(1), nullptr, &e);
-      if (!span.first()) span.first = e;
-      span.second = e;
-    }
-  return span;
+  gs_slabs_compact_.setArg(0, coef_);
+  gs_slabs_compact_.setArg(1, compact_delta_);
+  gs_slabs_compact_.setArg(2, compact_h_);
+  return slab_sweeps(gs_slabs_compact_, 3, rhs, x, sweeps, reverse);
 }
 
 cl::Event DeviceSystem::residual_compact(const cl::Buffer& rhs, const cl::Buffer& x, const cl::Buffer& r) const {
@@ -533,7 +535,7 @@ std::size_t DeviceSystem::memory_bytes() const {
   // mu, rho, b, dT, T (6, until released), the stencil, fixed; v, v~, |grad v|^2 when updatable;
   // the compact stencil (9 bfloat16 and a float) once built
   return voxels() * ((4 + (has_tensor() ? 6 : 0) + STENCIL_COEFS + (updatable() ? 3 : 0)) * sizeof(float) + 1 +
-                     (has_compact() ? (STENCIL_COEFS - 1) * 2 + 4 : 0));
+                     (has_compact() ? STENCIL_COMPACT_BYTES : 0));
 }
 
 }  // namespace softshell

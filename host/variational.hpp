@@ -246,6 +246,11 @@ class DeviceSystem {
  private:
   DeviceSystem(Runtime& rt, const GridDesc& g);  // allocates
   void assemble();
+  // The slab ordering's launches of `k` (relax_gs_slabs or its compact form),
+  // whose arguments before rhs are the stencil's, set by the caller: `first`
+  // is rhs's index; then x, colour, reverse, slab, grid.
+  std::pair<cl::Event, cl::Event> slab_sweeps(cl::Kernel& k, cl_uint first, const cl::Buffer& rhs,
+                                              const cl::Buffer& x, int sweeps, bool reverse) const;
 
   Runtime& rt_;
   GridDesc grid_;
@@ -327,7 +332,7 @@ class MultigridSolver {
   void update_point();
   // Whether the next solves may relax on the compact stencil
   // (SolverParams::compact_smoother still decides; on by default;
-  // VariationalClassifier allows it for re-solving classifiers only).
+  // VariationalClassifier allows it for its warm re-solves only).
   void allow_compact_smoother(bool on);
   bool compact_smoother_in_use() const;  // the last solve relaxed on the compact stencil
   // The float64 solution of the last solve when it was refined (tol below

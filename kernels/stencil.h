@@ -27,6 +27,11 @@
  * one"). The host's downloads return the slices packed (k * N + p). */
 #define STENCIL_SLICE(n) (((n) + 1023) / 1024 * 1024 + 112)
 
+/* Bytes per voxel of the smoother's compact copy of the stencil (kernels/
+ * system.cl, system_compact): the nine couplings in bfloat16 and the
+ * diagonal's correction, a float. */
+#define STENCIL_COMPACT_BYTES ((STENCIL_COEFS - 1) * 2 + 4)
+
 #define STENCIL_OFFSETS(X)                                                    \
   X(0, 0, 0, 0) X(1, 1, 0, 0) X(2, -1, 1, 0) X(3, 0, 1, 0) X(4, 1, 1, 0)    \
   X(5, 0, -1, 1) X(6, -1, 0, 1) X(7, 0, 0, 1) X(8, 1, 0, 1) X(9, 0, 1, 1)
