@@ -114,6 +114,9 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "near_stay") nf.stay_mm = x;
   else if (k == "iso_fraction") ap.local_fraction = x;
   else if (k == "iso_field_sigma") ap.field_sigma_mm = x;
+  else if (k == "iso_clip_fraction") ap.clip_fraction = x;
+  else if (k == "iso_clip_share") ap.clip_share = x;
+  else if (k == "iso_clip_margin") ap.clip_margin = x;
   else return set_variational_param(p, k, x);
   return true;
 }
@@ -225,7 +228,7 @@ int main(int argc, char** argv) {
   std::string physics = "random";
   int size = 96;
   double tol_mm = 0;
-  bool variational_only = false;
+  bool variational_only = false, defaults_only = false;  // --defaults-only: the default variant alone, no baselines
   BoneCueParams cue;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -237,6 +240,7 @@ int main(int argc, char** argv) {
     else if (a == "--physics") physics = next();
     else if (a == "--tolerance-mm") tol_mm = std::stod(next());
     else if (a == "--variational-only") variational_only = true;
+    else if (a == "--defaults-only") variational_only = true, defaults_only = true;
     else if (a == "--set") {
       for (const std::string& kv : split(next(), ',')) {
         const std::size_t eq = kv.find('=');
@@ -301,8 +305,8 @@ int main(int argc, char** argv) {
       }
     } else {
       std::fprintf(stderr, "usage: softshell_study_shells [--train S,S..] [--test S,S..] [--shapes face,spine] "
-                           "[--size N] [--physics NAME] [--tolerance-mm MM] [--variational-only] "
-                           "[--set iso_fraction=..,iso_field_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
+                           "[--size N] [--physics NAME] [--tolerance-mm MM] [--variational-only] [--defaults-only] "
+                           "[--set iso_fraction=..,iso_clip_fraction=..,iso_field_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
                            "... (bench/param_keys.hpp)] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..] "
                            "[--shadow-walls on|off] [--walls beam_cos=..,reach=..,smooth=..,sigma=..,gap=..] [--wall-ref weighted|data]\n");
       return 2;
@@ -380,6 +384,7 @@ int main(int argc, char** argv) {
                     {"variational, --bone-cue auto", BoneCueMode::Auto},
                     {"variational, --bone-cue on", BoneCueMode::On}};
     for (const auto& variant : variants) {
+      if (defaults_only && variant.mode != BoneCueMode::Off) continue;
       Row r{variant.name, "none (automatic)", {}};
       double seconds = 0;
       for (const Case& c : testing) {

@@ -235,6 +235,13 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   for (int axis = 0; axis < 3; ++axis)
     w[std::size_t(axis)] = gaussian_weights(std::max(1.0, params.sigma_mm / v.spacing[axis]), 3.0);
   const std::size_t plane = d[0] * d[1];
+  // Per plane, for the rule on clipped echoes (below): the largest scanned
+  // sample, how many samples equal it, and how many are scanned; taken while
+  // the plane is in cache.
+  constexpr float kNone = -std::numeric_limits<float>::infinity();
+  const bool want_top = params.rule == AutoIsoRule::Local;
+  std::vector<float> plane_top(want_top ? d[2] : 0, kNone);
+  std::vector<std::size_t> plane_at_top(plane_top.size(), 0), plane_scanned(plane_top.size(), 0);
   blur_3d(num.data(), mask ? den.data() : nullptr, d, w[0], w[1], w[2], threads, [&](std::size_t z) {
     const std::size_t i0 = z * plane, i1 = i0 + plane;
     if (mask) {
@@ -245,6 +252,18 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     } else {
       std::copy(v.data.begin() + std::ptrdiff_t(i0), v.data.begin() + std::ptrdiff_t(i1), num.data() + i0);
     }
+    if (!want_top) return;
+    float top = kNone;
+    std::size_t at_top = 0, scanned = plane;
+    if (mask) {
+      scanned = 0;
+      for (std::size_t i = i0; i < i1; ++i) top = std::max(top, den[i] > 0.0f ? num[i] : kNone);
+      for (std::size_t i = i0; i < i1; ++i) at_top += (den[i] > 0.0f) & (num[i] == top), scanned += den[i] > 0.0f;
+    } else {
+      for (std::size_t i = i0; i < i1; ++i) top = std::max(top, num[i]);
+      for (std::size_t i = i0; i < i1; ++i) at_top += num[i] == top;
+    }
+    plane_top[z] = top, plane_at_top[z] = at_top, plane_scanned[z] = scanned;
   });
   // Voxels that count: inside, scanned with their six neighbours; a flag
   // per voxel (1: usable; 0 on the volume's faces), formed a row at a time
@@ -374,6 +393,9 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   const float edge_threshold = kth_nonnegative(gfield, n, kth, threads);
   std::vector<float> crests, locals;
   std::vector<std::size_t> local_at;
+  float clip_level = std::numeric_limits<float>::infinity();
+  double clipped_share = 0;
+  std::size_t clipped_edges = 0;
   // Climbs v~ from voxel (x, y, z) through the 26 neighbours, up (sign 1) or
   // down (sign -1), at most climb_steps; returns the voxel reached.
   // The 26 neighbours as index offsets, in the order (dz, dy, dx) ascending:
@@ -438,10 +460,29 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     struct Found {
       std::vector<float> crests, locals;
       std::vector<std::size_t> local_at;
+      std::size_t clipped = 0;
     };
     // The strong edges crowd into some planes: chunks of a few planes each,
     // handed to the threads as they become free.
     const int chunks = std::max(1, int(inner_planes / 4));
+    // Clipped echoes (docs/real-data.md, "Clipped echoes"): where the data
+    // sit at their ceiling (the largest scanned sample) on at least
+    // clip_share of the scanned samples, an edge whose crest lies within
+    // clip_margin of v~'s range of that ceiling was cut off by the display's
+    // log compression; its true crest is higher, and the boundary lies
+    // nearer the crest than local_fraction of the visible contrast.
+    if (want_top) {
+      float top = kNone;
+      std::size_t at_top = 0, scanned = 0;
+      for (std::size_t z = 0; z < d[2]; ++z) {
+        scanned += plane_scanned[z];
+        if (plane_top[z] > top) top = plane_top[z], at_top = 0;
+        if (plane_top[z] == top) at_top += plane_at_top[z];
+      }
+      const double share = scanned ? double(at_top) / double(scanned) : 0.0;
+      clipped_share = share;
+      if (scanned && share >= params.clip_share) clip_level = float(double(top) - params.clip_margin * (hi - lo));
+    }
     std::vector<Found> found(std::size_t(range_count(inner_planes, chunks)));
     parallel_chunks(inner_planes, threads, chunks, [&](int k, std::size_t a, std::size_t b) {
       Found& f = found[std::size_t(k)];
@@ -454,7 +495,10 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
             f.crests.push_back(crest);
             if (params.rule == AutoIsoRule::Local) {
               const float trough = num[climb(x, y, z, -1.0f)];
-              f.locals.push_back(float(trough + params.local_fraction * (crest - trough)));
+              const bool clipped = crest >= clip_level;
+              f.clipped += clipped;
+              const double fraction = clipped ? params.clip_fraction : params.local_fraction;
+              f.locals.push_back(float(trough + fraction * (crest - trough)));
               f.local_at.push_back(i);
             }
           }
@@ -463,6 +507,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
       crests.insert(crests.end(), f.crests.begin(), f.crests.end());
       locals.insert(locals.end(), f.locals.begin(), f.locals.end());
       local_at.insert(local_at.end(), f.local_at.begin(), f.local_at.end());
+      clipped_edges += f.clipped;
     }
   }
   if (crests.empty())  // no usable voxel has a gradient (e.g. a one-voxel checkerboard)
@@ -570,6 +615,9 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     report->count = std::move(count);
     report->voxels = used;
     report->local_iso = local_iso;
+    report->clipped_share = clipped_share;
+    report->clip_level = clip_level;
+    report->clipped_edges = clipped_edges;
     report->field = std::move(field);
   }
   return iso;

@@ -48,6 +48,13 @@ struct AutoIsoParams {
   double local_fraction = 0.75; // Local: where between trough and crest the surface lies
   double field_sigma_mm = 4.0;  // Local: spread of the edges' isovalues into a field
   double field_prior = 0.5;     // Local: weight of the global median in the field (edges per Gaussian volume)
+  // Local, clipped echoes: an edge whose crest reaches the data's ceiling
+  // takes clip_fraction instead of local_fraction. The data clip when at
+  // least clip_share of the scanned samples equal the largest one; a crest
+  // (of v~) is clipped within clip_margin of v~'s range below that sample.
+  double clip_fraction = 0.9;
+  double clip_share = 0.01;
+  double clip_margin = 0.03;
   bool want_field = false;      // Local: fill AutoIsoReport::field (or level auto_iso's `level`)
   int threads = 0;              // host threads (0: every core); the results are the same for any count
 };
@@ -61,6 +68,9 @@ struct AutoIsoReport {
   std::vector<std::size_t> count;     // voxels per bin
   std::size_t voxels = 0;             // voxels that entered
   double local_iso = 0;               // the Local rule's global value (median of the edges' isovalues)
+  double clipped_share = 0;           // Local: share of the scanned samples at the largest one
+  double clip_level = 0;              // Local: crests from here up count as clipped (+inf: the data do not clip)
+  std::size_t clipped_edges = 0;      // Local: edges whose crest was clipped
   HostVector<float> field;            // Local, want_field: the isovalue per voxel, file units
 };
 

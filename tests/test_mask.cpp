@@ -1152,6 +1152,60 @@ TEST(IsoField, FloatDataNearTheTopOfItsRangeGivesAFiniteFieldThatFollowsTheDrift
   for (float x : lv.data) ASSERT_TRUE(std::isfinite(x));
 }
 
+// Fluid (40) over tissue (200) with a bright echo 6 voxels thick on the
+// boundary, its level `echo` before the display's ceiling of 255 cuts it.
+Volume echo_over_tissue(double echo, std::uint64_t seed) {
+  Volume v({32, 32, 40}, {1, 1, 1}, ScalarType::Float32);
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> noise(0.0, 4.0);
+  for (std::size_t z = 0; z < 40; ++z)
+    for (std::size_t y = 0; y < 32; ++y)
+      for (std::size_t x = 0; x < 32; ++x) {
+        const double level = z < 14 ? 40.0 : z < 20 ? echo : 200.0;
+        v.at(x, y, z) = float(std::clamp(level + noise(rng), 0.0, 255.0));
+      }
+  return v;
+}
+
+TEST(IsoAuto, ClippedEchoesTakeTheClipFraction) {
+  // docs/real-data.md, "Clipped echoes". The echo's true level (400) is
+  // clipped at 255: 15 % of the samples sit at the maximum, and its edges'
+  // crests reach it, so they take clip_fraction of their contrast instead of
+  // local_fraction: the isovalue moves toward the crest by 0.15 of the
+  // fluid-to-crest contrast. The same echo at 235 (no sample clipped) keeps
+  // the old rule, bit for bit.
+  AutoIsoParams ap, off;
+  off.clip_fraction = off.local_fraction;
+  AutoIsoReport rep, rep_off;
+  const Volume clipped = echo_over_tissue(400, test::seed() + 41);
+  const double iso = auto_iso(clipped, nullptr, ap, &rep), iso_off = auto_iso(clipped, nullptr, off, &rep_off);
+  std::cout << "[ iso      ] clipped echo: " << 100 * rep.clipped_share << " % of the samples at the maximum, "
+            << rep.clipped_edges << " of " << rep.crests << " edges clipped; isovalue " << iso << " (without the rule "
+            << iso_off << ")\n";
+  EXPECT_GT(rep.clipped_share, 0.1);
+  EXPECT_LT(rep.clip_level, 255.0);
+  EXPECT_GT(double(rep.clipped_edges), 0.5 * double(rep.crests)) << "most strong edges are the echo's flanks";
+  EXPECT_EQ(rep_off.clipped_edges, rep.clipped_edges) << "which edges clip does not depend on the fraction";
+  // The strong edges are the echo's two flanks, both with their crest at
+  // 255: the fluid side (trough ~40) gives ~233 against ~201, the tissue
+  // side (trough ~200) ~249 against ~241; the median is the lower flank's.
+  EXPECT_NEAR(iso, 40 + 0.9 * (255 - 40), 6);
+  EXPECT_NEAR(iso_off, 40 + 0.75 * (255 - 40), 6);
+
+  AutoIsoReport rep_low, rep_low_off;
+  const Volume unclipped = echo_over_tissue(235, test::seed() + 43);
+  const double low = auto_iso(unclipped, nullptr, ap, &rep_low), low_off = auto_iso(unclipped, nullptr, off, &rep_low_off);
+  EXPECT_LT(rep_low.clipped_share, 0.01);
+  EXPECT_EQ(rep_low.clipped_edges, 0u);
+  EXPECT_EQ(low, low_off) << "data that do not clip keep the old isovalue";
+  // A ceiling reached by a few samples only (0.5 %) is no clipping either.
+  Volume few = unclipped;
+  for (std::size_t i = 0; i < few.voxels(); i += 200) few.data[i] = 255.0f;
+  AutoIsoReport rep_few;
+  auto_iso(few, nullptr, ap, &rep_few);
+  EXPECT_EQ(rep_few.clipped_edges, 0u);
+}
+
 TEST(IsoAuto, ConstantOrEmptyInputsFailCleanly) {
   Volume c({10, 10, 10}, {1, 1, 1}, ScalarType::UInt8);
   for (float& f : c.data) f = 50;

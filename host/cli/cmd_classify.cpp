@@ -45,6 +45,7 @@ struct ClassifyOptions {
   std::string shadow_walls = "remove";  // host/shadow_walls.hpp: weighted down by default
   double thickness = 1.0;
   double iso_fraction = AutoIsoParams().local_fraction, iso_field_sigma = AutoIsoParams().field_sigma_mm;
+  double iso_clip_fraction = AutoIsoParams().clip_fraction;
   std::optional<double> sigma;  // unset: 1 mm for variational, 0 (raw) for levoy
   VariationalParams vp;
   SolverParams sp;
@@ -655,6 +656,7 @@ int run_classify(const ClassifyOptions& given_options) {
     else ap.rule = AutoIsoRule::Edge;
     ap.want_field = ap.rule == AutoIsoRule::Local && !o.no_iso_field;
     ap.local_fraction = o.iso_fraction;
+    ap.clip_fraction = o.iso_clip_fraction;
     ap.field_sigma_mm = o.iso_field_sigma;
     ap.sigma_mm = o.auto_iso_sigma;
     // The local isovalue field levelled out as it is formed: the classifier
@@ -666,6 +668,15 @@ int run_classify(const ClassifyOptions& given_options) {
                                                                : " (auto: local rule, the median of a field)")
                : ap.rule == AutoIsoRule::EchoRidge ? " (auto: echo ridge)"
                                                    : " (auto: edge)";
+    if (ap.rule == AutoIsoRule::Local && rep.clipped_edges) {
+      // The rule for clipped echoes (host/auto_iso.hpp) was used: say so.
+      std::ostringstream t;
+      t << std::fixed << std::setprecision(1) << "; clipped echoes: " << 100 * rep.clipped_share
+        << " % of the samples at the maximum, " << 100.0 * double(rep.clipped_edges) / double(rep.crests)
+        << " % of the edges placed at " << std::setprecision(2) << ap.clip_fraction << " of their contrast)";
+      iso_text.pop_back();  // the closing parenthesis
+      iso_text += t.str();
+    }
   }
   // Levoy's kernel takes the isovalue as a float.
   if (!variational && !(std::fabs(iso) <= 3.0e38)) throw InputError("--iso " + format_iso(iso) + " does not fit a float");
@@ -740,6 +751,12 @@ void add_classify_command(CLI::App& app, Action& action) {
       ->type_name("FILE");
   sub->add_option("--iso-fraction", o->iso_fraction,
                   "The local rule: where between a boundary's dark trough (0) and bright crest (1) its isovalue lies")
+      ->capture_default_str()
+      ->check(real_range(0, 1));
+  sub->add_option("--iso-clip-fraction", o->iso_clip_fraction,
+                  "The local rule: the same for a boundary whose echo is clipped (its crest at the data's maximum, "
+                  "where at least 1 % of the samples lie): its true crest is higher (docs/real-data.md, \"Clipped "
+                  "echoes\"); equal to --iso-fraction turns the rule off")
       ->capture_default_str()
       ->check(real_range(0, 1));
   sub->add_option("--iso-field-sigma", o->iso_field_sigma,
