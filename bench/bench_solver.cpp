@@ -7,7 +7,7 @@
 // (the difference of two solves one iteration apart). Every kernel result is
 // checked against the host reference (bench.hpp) before it is timed.
 //
-//   softshell_bench_solver [--size N] [--reps R] [--device D] [--slab P] [--sweeps S] [--compact 0|1] [--ab ROUNDS] [--trace]
+//   softshell_bench_solver [--size N] [--reps R] [--device D] [--slab P] [--sweeps S] [--compact 0|1] [--ab ROUNDS] [--barrier B] [--sharpen N] [--trace]
 //
 // Byte model: docs/benchmarks.md ("Byte model"). Times are the minimum of R.
 #include <algorithm>
@@ -34,7 +34,7 @@ using namespace softshell;
 namespace {
 
 int usage() {
-  std::cerr << "usage: softshell_bench_solver [--size N] [--reps R] [--device I|NAME] [--slab P] [--sweeps S] [--compact 0|1] [--ab ROUNDS] [--trace]\n";
+  std::cerr << "usage: softshell_bench_solver [--size N] [--reps R] [--device I|NAME] [--slab P] [--sweeps S] [--compact 0|1] [--ab ROUNDS] [--barrier B] [--sharpen N] [--trace]\n";
   return 2;
 }
 
@@ -131,6 +131,8 @@ int main(int argc, char** argv) {
   std::string device;
   bool trace = false;
   int slab = 0, sweeps = 0, compact = 1, ab = 0;
+  double barrier = VariationalParams{}.sharpen_barrier;  // --barrier: the sharpening barrier of every classification
+  int sharpen = VariationalParams{}.sharpen_iterations;  // --sharpen: its steps
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--help" || a == "-h") return usage(), 0;
@@ -143,6 +145,8 @@ int main(int argc, char** argv) {
     else if (a == "--sweeps") sweeps = std::atoi(argv[++i]);
     else if (a == "--compact") compact = std::atoi(argv[++i]);
     else if (a == "--ab") ab = std::atoi(argv[++i]);
+    else if (a == "--barrier") barrier = std::atof(argv[++i]);
+    else if (a == "--sharpen") sharpen = std::atoi(argv[++i]);
     else {
       std::cerr << "softshell_bench_solver: unknown option " << a << "\n";
       return usage();
@@ -165,6 +169,8 @@ int main(int argc, char** argv) {
     const Volume vn = normalised(ph.volume);
     VariationalParams vp;
     vp.v_iso = phantom_iso(ph);
+    vp.sharpen_barrier = barrier;
+    vp.sharpen_iterations = sharpen;
     DeviceSystem sys(rt, vn, vp);
     if (slab > 0) sys.set_gs_slab(slab);
     rt.queue().finish();
@@ -393,8 +399,7 @@ int main(int argc, char** argv) {
     // --trace the stages of the last re-solve go to stderr as JSON lines.
     {
       const Volume& v = ph.volume;
-      VariationalParams p0;
-      p0.v_iso = vp.v_iso;
+      VariationalParams p0 = vp;
       VariationalParams p1 = p0;
       p1.v_iso = 1.05 * p0.v_iso;
       VariationalClassifier c(rt, v, p0, sp);
@@ -430,8 +435,7 @@ int main(int argc, char** argv) {
       // the noise); min and median per setting. On a shared machine whose
       // bandwidth drifts from minute to minute this is the fair A/B.
       const Volume& v = ph.volume;
-      VariationalParams p0;
-      p0.v_iso = vp.v_iso;
+      VariationalParams p0 = vp;
       VariationalParams p1 = p0;
       p1.v_iso = 1.05 * p0.v_iso;
       SolverParams spc[2] = {sp, sp};

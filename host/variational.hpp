@@ -67,7 +67,7 @@ struct VariationalParams {
   // sharpen_iterations fixed-point steps, each a pointwise update and a warm
   // re-solve. 0 iterations: the linear functional.
   int sharpen_iterations = 2;
-  double sharpen_lambda = 2.0, sharpen_barrier = 0.5;
+  double sharpen_lambda = 2.0, sharpen_barrier = 0.3;  // barrier 0.5 until 2026-11-27 (docs/parameters.md, "The sharpening barrier")
   // The resolved reference gradient (per mm of normalised intensity): 0
   // until DeviceSystem takes it from the data (edge_share > 0), or given.
   double g_ref = 0;

@@ -588,6 +588,11 @@ TEST(SolverUpdate, ReSolvesBackAndForthStartTheSharpeningStepsFromTheLastSolvesC
   const FaceCase& f = face64();
   VariationalParams p0;
   p0.v_iso = f.iso;
+  // The sharpening barrier of 0.5 (the default until 2026-11-27): there a
+  // cold classification of this face takes 4 cycles on two of the four
+  // re-solves and the warm start's saving shows in the count; at today's
+  // 0.3 both take 3 on every re-solve (the per-step bound below still holds).
+  p0.sharpen_barrier = 0.5;
   VariationalParams p1 = p0;
   p1.v_iso *= 1.05;
   SolverParams converged;
