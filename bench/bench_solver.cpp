@@ -397,31 +397,52 @@ int main(int argc, char** argv) {
     // one classifier solved at v_iso, then v_iso x 1.05 re-targeted and
     // re-solved warm; beside a cold classification at v_iso x 1.05. With
     // --trace the stages of the last re-solve go to stderr as JSON lines.
-    {
-      const Volume& v = ph.volume;
-      VariationalParams p0 = vp;
-      VariationalParams p1 = p0;
-      p1.v_iso = 1.05 * p0.v_iso;
-      VariationalClassifier c(rt, v, p0, sp);
-      c.keep_resolve_start(true);
+    const Volume& v = ph.volume;
+    VariationalParams p0 = vp;
+    VariationalParams p1 = p0;
+    p1.v_iso = 1.05 * p0.v_iso;
+    // A classifier solved at p0 that keeps its stages for re-solves.
+    auto resolving = [&](const SolverParams& s) {
+      auto c = std::make_unique<VariationalClassifier>(rt, v, p0, s);
+      c->keep_resolve_start(true);
       SolveReport r;
-      c.solve(&r);
+      c->solve(&r);
+      return c;
+    };
+    // One round: a cold classification at p1 with `s`, then `c` re-targeted
+    // to p1 and re-solved warm (timed whole and its update alone), and back
+    // to p0 for the next round.
+    struct Round {
+      double cold = 0, update = 0, warm = 0;
+      int cold_cycles = 0, warm_cycles = 0;
+    };
+    auto reclassify = [&](VariationalClassifier& c, const SolverParams& s, bool json) {
+      Round out;
+      SolveReport r;
+      ClassifyTiming t;
+      classify_variational(rt, v, p1, s, &r, nullptr, nullptr, &t);
+      out.cold = t.setup + t.solve, out.cold_cycles = r.cycles;
+      if (json) progress::set_mode(progress::Mode::Json);
+      const auto t0 = std::chrono::steady_clock::now();
+      c.update(p1);
+      out.update = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      c.solve(&r, nullptr, true);
+      out.warm = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      progress::set_mode(progress::Mode::Off);
+      out.warm_cycles = r.cycles;
+      c.update(p0);
+      c.solve(&r, nullptr, true);
+      return out;
+    };
+    {
+      const auto c = resolving(sp);
       double cold = 1e30, warm = 1e30, upd = 1e30;
       int cold_cycles = 0, warm_cycles = 0;
-      for (int k = 0; k < std::max(3, reps / 2); ++k) {
-        ClassifyTiming t;
-        classify_variational(rt, v, p1, sp, &r, nullptr, nullptr, &t);
-        cold = std::min(cold, t.setup + t.solve), cold_cycles = r.cycles;
-        if (trace && k + 1 == std::max(3, reps / 2)) progress::set_mode(progress::Mode::Json);
-        const auto t0 = std::chrono::steady_clock::now();
-        c.update(p1);
-        const double tu = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        c.solve(&r, nullptr, true);
-        const double tw = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        progress::set_mode(progress::Mode::Off);
-        upd = std::min(upd, tu), warm = std::min(warm, tw), warm_cycles = r.cycles;
-        c.update(p0);
-        c.solve(&r, nullptr, true);
+      const int rounds = std::max(3, reps / 2);
+      for (int k = 0; k < rounds; ++k) {
+        const Round t = reclassify(*c, sp, trace && k + 1 == rounds);
+        cold = std::min(cold, t.cold), cold_cycles = t.cold_cycles;
+        upd = std::min(upd, t.update), warm = std::min(warm, t.warm), warm_cycles = t.warm_cycles;
       }
       std::printf("re-classification: %.1f ms (update %.1f ms, %d cycles) vs cold %.1f ms (%d cycles): %.2f of cold\n",
                   warm * 1e3, upd * 1e3, warm_cycles, cold * 1e3, cold_cycles, warm / cold);
@@ -434,32 +455,15 @@ int main(int argc, char** argv) {
       // compact stencil: the two cold columns are the same code, a measure of
       // the noise); min and median per setting. On a shared machine whose
       // bandwidth drifts from minute to minute this is the fair A/B.
-      const Volume& v = ph.volume;
-      VariationalParams p0 = vp;
-      VariationalParams p1 = p0;
-      p1.v_iso = 1.05 * p0.v_iso;
       SolverParams spc[2] = {sp, sp};
       spc[0].compact_smoother = false, spc[1].compact_smoother = true;
-      std::vector<std::unique_ptr<VariationalClassifier>> cls;
-      for (int k = 0; k < 2; ++k) {
-        cls.push_back(std::make_unique<VariationalClassifier>(rt, v, p0, spc[k]));
-        cls.back()->keep_resolve_start(true);
-        SolveReport r;
-        cls.back()->solve(&r);
-      }
+      std::unique_ptr<VariationalClassifier> cls[2] = {resolving(spc[0]), resolving(spc[1])};
       std::vector<double> tw[2], tc[2];
       for (int round = 0; round < ab; ++round)
         for (int k = 0; k < 2; ++k) {
-          SolveReport r;
-          ClassifyTiming t;
-          classify_variational(rt, v, p1, spc[k], &r, nullptr, nullptr, &t);
-          tc[k].push_back(t.setup + t.solve);
-          const auto t0 = std::chrono::steady_clock::now();
-          cls[std::size_t(k)]->update(p1);
-          cls[std::size_t(k)]->solve(&r, nullptr, true);
-          tw[k].push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-          cls[std::size_t(k)]->update(p0);
-          cls[std::size_t(k)]->solve(&r, nullptr, true);
+          const Round t = reclassify(*cls[k], spc[k], false);
+          tc[k].push_back(t.cold);
+          tw[k].push_back(t.warm);
         }
       auto med = [](std::vector<double> x) {
         std::sort(x.begin(), x.end());

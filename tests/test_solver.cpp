@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "bench.hpp"
 #include "oracle.hpp"
 #include "test_support.hpp"
 #include "variational.hpp"
@@ -755,13 +756,7 @@ TEST(SolverCompact, ThePreconditionerOnTheCompactStencilReachesTheFloat32Systems
   const FaceCase& f = face64();
   VariationalParams p;
   p.v_iso = f.iso;
-  const Volume vn = f.ph.volume;
-  DeviceSystem built(runtime(), [&] {
-    Volume v = vn;
-    const IntensityMap map = v.intensity_map();
-    for (float& x : v.data) x = float(map.to_unit(x));
-    return v;
-  }(), p);
+  DeviceSystem built(runtime(), normalised(f.ph.volume), p);
   const Densities d = built.download_densities();
   const bool slabs = built.gs_order() == GsOrder::Slabs;
   for (const double tol : {1e-4, 1e-6}) {

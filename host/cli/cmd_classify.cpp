@@ -664,19 +664,19 @@ int run_classify(const ClassifyOptions& given_options) {
     // (host/auto_iso.hpp).
     AutoIsoReport rep;
     iso = auto_iso(in, mask.scanned.empty() ? nullptr : &mask.scanned, ap, &rep, &in);
-    iso_text = ap.rule == AutoIsoRule::Local ? (!ap.want_field ? " (auto: local rule, one value)"
-                                                               : " (auto: local rule, the median of a field)")
-               : ap.rule == AutoIsoRule::EchoRidge ? " (auto: echo ridge)"
-                                                   : " (auto: edge)";
+    iso_text = ap.rule == AutoIsoRule::Local ? (!ap.want_field ? " (auto: local rule, one value"
+                                                               : " (auto: local rule, the median of a field")
+               : ap.rule == AutoIsoRule::EchoRidge ? " (auto: echo ridge"
+                                                   : " (auto: edge";
     if (ap.rule == AutoIsoRule::Local && rep.clipped_edges) {
       // The rule for clipped echoes (host/auto_iso.hpp) was used: say so.
       std::ostringstream t;
       t << std::fixed << std::setprecision(1) << "; clipped echoes: " << 100 * rep.clipped_share
         << " % of the samples at the maximum, " << 100.0 * double(rep.clipped_edges) / double(rep.crests)
-        << " % of the edges placed at " << std::setprecision(2) << ap.clip_fraction << " of their contrast)";
-      iso_text.pop_back();  // the closing parenthesis
+        << " % of the edges placed at " << std::setprecision(2) << ap.clip_fraction << " of their contrast";
       iso_text += t.str();
     }
+    iso_text += ")";
   }
   // Levoy's kernel takes the isovalue as a float.
   if (!variational && !(std::fabs(iso) <= 3.0e38)) throw InputError("--iso " + format_iso(iso) + " does not fit a float");
