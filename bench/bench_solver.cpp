@@ -7,7 +7,7 @@
 // (the difference of two solves one iteration apart). Every kernel result is
 // checked against the host reference (bench.hpp) before it is timed.
 //
-//   softshell_bench_solver [--size N] [--reps R] [--device D] [--slab P] [--sweeps S] [--compact 0|1] [--ab ROUNDS] [--barrier B] [--sharpen N] [--trace]
+//   softshell_bench_solver [--size N] [--reps R] [--device D] [--slab P] [--sweeps S] [--compact 0|1] [--ab ROUNDS] [--resolve-tol T] [--ab-resolve ROUNDS] [--barrier B] [--sharpen N] [--trace]
 //
 // Byte model: docs/benchmarks.md ("Byte model"). Times are the minimum of R.
 #include <algorithm>
@@ -34,7 +34,7 @@ using namespace softshell;
 namespace {
 
 int usage() {
-  std::cerr << "usage: softshell_bench_solver [--size N] [--reps R] [--device I|NAME] [--slab P] [--sweeps S] [--compact 0|1] [--ab ROUNDS] [--barrier B] [--sharpen N] [--trace]\n";
+  std::cerr << "usage: softshell_bench_solver [--size N] [--reps R] [--device I|NAME] [--slab P] [--sweeps S] [--compact 0|1] [--ab ROUNDS] [--resolve-tol T] [--ab-resolve ROUNDS] [--barrier B] [--sharpen N] [--trace]\n";
   return 2;
 }
 
@@ -130,7 +130,8 @@ int main(int argc, char** argv) {
   int size = 128, reps = 10;
   std::string device;
   bool trace = false;
-  int slab = 0, sweeps = 0, compact = 1, ab = 0;
+  int slab = 0, sweeps = 0, compact = 1, ab = 0, ab_resolve = 0;
+  double resolve_tol = SolverParams{}.resolve_tol;  // --resolve-tol: the warm re-solves' last step
   double barrier = VariationalParams{}.sharpen_barrier;  // --barrier: the sharpening barrier of every classification
   int sharpen = VariationalParams{}.sharpen_iterations;  // --sharpen: its steps
   for (int i = 1; i < argc; ++i) {
@@ -145,6 +146,8 @@ int main(int argc, char** argv) {
     else if (a == "--sweeps") sweeps = std::atoi(argv[++i]);
     else if (a == "--compact") compact = std::atoi(argv[++i]);
     else if (a == "--ab") ab = std::atoi(argv[++i]);
+    else if (a == "--resolve-tol") resolve_tol = std::atof(argv[++i]);
+    else if (a == "--ab-resolve") ab_resolve = std::atoi(argv[++i]);
     else if (a == "--barrier") barrier = std::atof(argv[++i]);
     else if (a == "--sharpen") sharpen = std::atoi(argv[++i]);
     else {
@@ -344,6 +347,7 @@ int main(int argc, char** argv) {
     SolverParams sp;
     if (sweeps > 0) sp.pre_sweeps = sp.post_sweeps = sweeps;
     sp.compact_smoother = compact != 0;
+    sp.resolve_tol = resolve_tol;
     MultigridSolver mg(sys, sp);
     SolveReport rep;
     mg.solve(&rep);
@@ -473,6 +477,69 @@ int main(int argc, char** argv) {
         std::printf("A/B %-8s re-classification min %.1f median %.1f ms, cold min %.1f median %.1f ms (%d rounds)\n",
                     k ? "compact" : "float32", *std::min_element(tw[k].begin(), tw[k].end()) * 1e3, med(tw[k]) * 1e3,
                     *std::min_element(tc[k].begin(), tc[k].end()) * 1e3, med(tc[k]) * 1e3, ab);
+    }
+    if (ab_resolve > 0) {
+      // --ab-resolve ROUNDS: re-solves to the solver's tol against re-solves
+      // stopped at --resolve-tol (or 1e-3) and then polished, interleaved;
+      // each result's distance from the reference at v_iso x 1.05
+      // (sharpening from converged solves, as bench.cpp's bench_warm) beside
+      // a cold classification's.
+      SolverParams spr[2] = {sp, sp};
+      spr[0].resolve_tol = 0, spr[1].resolve_tol = resolve_tol > 0 ? resolve_tol : 1e-3;
+      SolverParams sp_ref = sp;
+      sp_ref.sharpen_tol = 0, sp_ref.resolve_tol = 0;
+      SolveReport r;
+      const Volume ref = classify_variational(rt, v, p1, sp_ref, &r);
+      const Volume cold = classify_variational(rt, v, p1, sp, &r);
+      auto distance = [&](const Volume& u) {
+        double mean = 0;
+        std::size_t beyond = 0;
+        for (std::size_t i = 0; i < u.data.size(); ++i) {
+          const double e = std::abs(double(u.data[i]) - double(ref.data[i]));
+          mean += e, beyond += e > 5e-3;
+        }
+        return std::make_pair(mean / double(u.data.size()), double(beyond) / double(u.data.size()));
+      };
+      std::unique_ptr<VariationalClassifier> cls[2] = {resolving(spr[0]), resolving(spr[1])};
+      std::vector<double> tw[2], tp, mean[2], share[2], pmean, pshare;
+      int cycles[2] = {0, 0};
+      for (int round = 0; round < ab_resolve; ++round)
+        for (int k = 0; k < 2; ++k) {
+          VariationalClassifier& c = *cls[k];
+          const auto t0 = std::chrono::steady_clock::now();
+          c.update(p1);
+          const Volume u = c.solve(&r, nullptr, true);
+          tw[k].push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+          cycles[k] = r.cycles;
+          const auto d = distance(u);
+          mean[k].push_back(d.first), share[k].push_back(d.second);
+          if (k == 1) {
+            const auto t1 = std::chrono::steady_clock::now();
+            const Volume up = c.polish(&r);
+            tp.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count());
+            const auto dp = distance(up.data.empty() ? u : up);
+            pmean.push_back(dp.first), pshare.push_back(dp.second);
+          }
+          c.update(p0);
+          c.solve(&r, nullptr, true);
+          c.polish(&r);
+        }
+      auto med = [](std::vector<double> x) {
+        std::sort(x.begin(), x.end());
+        return x[x.size() / 2];
+      };
+      auto worst = [](const std::vector<double>& x) { return *std::max_element(x.begin(), x.end()); };
+      const auto dc = distance(cold);
+      std::printf("cold classification: distance from the reference mean %.2e, %.2f %% beyond 5e-3\n", dc.first,
+                  100 * dc.second);
+      char loose[32];
+      std::snprintf(loose, sizeof loose, "%.0e", spr[1].resolve_tol);
+      for (int k = 0; k < 2; ++k)
+        std::printf("A/B re-solve to %-7s min %.1f median %.1f ms, %d cycles; distance mean %.2e (worst), %.2f %% beyond 5e-3 (worst) (%d rounds)\n",
+                    k ? loose : "tol", *std::min_element(tw[k].begin(), tw[k].end()) * 1e3,
+                    med(tw[k]) * 1e3, cycles[k], worst(mean[k]), 100 * worst(share[k]), ab_resolve);
+      std::printf("    then polished: min %.1f median %.1f ms more; distance mean %.2e, %.2f %% beyond 5e-3 (worst)\n",
+                  *std::min_element(tp.begin(), tp.end()) * 1e3, med(tp) * 1e3, worst(pmean), 100 * worst(pshare));
     }
     return 0;
   } catch (const std::exception& e) {

@@ -156,7 +156,9 @@ struct DeviceBench {
   // Warm start: a cold classification at v_iso' = 1.05 v_iso (setup +
   // solve) against a re-solve of a VariationalClassifier set up at v_iso:
   // update() to v_iso' + a solve from the last linear solution
-  // (keep_resolve_start; mins over repeats).
+  // (keep_resolve_start; mins over repeats), its last step stopped at
+  // SolverParams::resolve_tol as the viewer shows it; warm_polish: the
+  // viewer's polish() after it, to the solver's tol (min over repeats).
   // warm_start_fraction = warm_total / cold_total, what a user waits for;
   // warm_solve_fraction = warm solve / cold solve (FMG start, same hierarchy).
   double warm_cold_solve = 0, warm_warm_solve = 0, warm_start_fraction = 0, warm_solve_fraction = 0;
@@ -167,6 +169,8 @@ struct DeviceBench {
   // largest |du|, share of voxels beyond 5e-3.
   double warm_ref_cold_mean = 0, warm_ref_cold_max = 0, warm_ref_cold_share = 0;
   double warm_ref_warm_mean = 0, warm_ref_warm_max = 0, warm_ref_warm_share = 0;
+  double warm_polish = 0, warm_ref_polish_mean = 0, warm_ref_polish_share = 0, warm_resolve_tol = 0;
+  double warm_loose_vs_polished_max = 0;  // largest |du| between the re-solve shown and its polish (worst repeat)
 
   std::vector<Table1Row> table1;
   std::vector<ScalingRow> scaling;

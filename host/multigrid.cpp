@@ -584,7 +584,7 @@ void VariationalClassifier::update(const VariationalParams& p) {
   sys_->update_point(p);
   mg_->update_point();
   rt_.queue().finish();
-  sharpened_ = false;
+  sharpened_ = polishable_ = false;
   params_ = p;
   update_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -628,6 +628,9 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
   }
   const bool from_last = warm && !linear_in && keep && kept_linear_;
   const bool extrapolate = from_last && kept_steps_;
+  // A warm re-solve's last step stops at resolve_tol (polish() finishes it).
+  const double last_tol = from_last && mg_->params().resolve_tol > mg_->params().tol ? mg_->params().resolve_tol : 0.0;
+  polishable_ = false;
   // Warm re-solves relax on the compact stencil (keep_resolve_start).
   mg_->allow_compact_smoother(from_last);
   kept_linear_ = kept_steps_ = false;
@@ -687,27 +690,49 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
         if (s == 0) kept_linear_ = true;
       }
       // Only the last step's solution comes back to the host.
-      u = mg_->solve(&step_report, nullptr, true, s + 1 < steps ? loose : 0.0, s + 1 == steps);
+      u = mg_->solve(&step_report, nullptr, true, s + 1 < steps ? loose : last_tol, s + 1 == steps);
       if (keep_linear && s + 1 == steps && step_report.converged) {
         rt_.queue().enqueueCopyBuffer(mg_->solution(), kept_[std::size_t(steps)], 0, 0, bytes);
         kept_steps_ = true;
       }
       report->cycles += step_report.cycles;
       report->seconds += step_report.seconds;
-      report->converged = step_report.converged;  // the last step's, to the solver's tol
+      report->converged = step_report.converged;  // the last step's, to the solver's tol (or resolve_tol)
       report->residuals.push_back(step_report.residuals.back());
     }
+    polishable_ = last_tol > 0 && step_report.converged && step_report.residuals.back() > mg_->params().tol;
   }
   if (steps > 0 && !sharpened_ && linear_ok) {
     // No sharpening after all (nothing drawn): finish the loose linear
     // solve to the solver's tol.
-    SolveReport finish;
-    u = mg_->solve(&finish, nullptr, true);
-    report->cycles += finish.cycles;
-    report->seconds += finish.seconds;
-    report->converged = finish.converged;
-    report->residuals.push_back(finish.residuals.back());
+    SolveReport tail;
+    u = mg_->solve(&tail, nullptr, true);
+    report->cycles += tail.cycles;
+    report->seconds += tail.seconds;
+    report->converged = tail.converged;
+    report->residuals.push_back(tail.residuals.back());
   }
+  return finish(std::move(u));
+}
+
+Volume VariationalClassifier::polish(SolveReport* report) {
+  if (!polishable_) return Volume{};
+  polishable_ = false;
+  const progress::Stage stage("polish");
+  // The system still holds the last step's sharpening term and the solver
+  // its solution: the same solve, carried on to the solver's tol.
+  SolveReport local;
+  if (!report) report = &local;
+  std::vector<float> u = mg_->solve(report, nullptr, true, 0.0, true);
+  const int steps = params_.sharpen_iterations;
+  if (keep_start_ && report->converged && kept_.size() == std::size_t(steps) + 1 && kept_steps_) {
+    const std::size_t bytes = geometry_.voxels() * sizeof(float);
+    rt_.queue().enqueueCopyBuffer(mg_->solution(), kept_[std::size_t(steps)], 0, 0, bytes);
+  }
+  return finish(std::move(u));
+}
+
+Volume VariationalClassifier::finish(std::vector<float> u) {
   Volume out = geometry_.with_data(std::move(u), ScalarType::Float32);
   gain_ = 1.0;
   if (params_.max_gain > 0) {

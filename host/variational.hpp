@@ -289,6 +289,14 @@ struct SolverParams {
   // only give the next linearisation point; 0 takes tol (the reference the
   // bench measures re-solves against: sharpening from converged solves).
   double sharpen_tol = 5e-2;
+  // A warm re-solve from kept stages (VariationalClassifier::solve with
+  // `warm` after keep_resolve_start: the viewer's sliders) stops its last
+  // step at this relative residual (or tol, if looser): one PCG iteration
+  // fewer, as close to the converged reference as a cold classification
+  // (docs/numerics.md, "Re-solving to the display");
+  // VariationalClassifier::polish() then finishes it to tol, as the viewer
+  // does once no slider moves. 0 takes tol.
+  double resolve_tol = 1e-3;
   // The conjugate gradients' preconditioner relaxes on a compact copy of the
   // fine level's stencil (bfloat16 couplings; DeviceSystem::build_compact)
   // where the slab Gauss-Seidel runs (CPUs) and the copy fits: fewer bytes
@@ -402,6 +410,13 @@ class VariationalClassifier {
   // `sequence`: a 3D+t warm start (SequenceStart).
   Volume solve(SolveReport* report = nullptr, const Volume* init = nullptr, bool warm = false,
                const SequenceStart* sequence = nullptr);
+  // Finishes the last solve to SolverParams::tol when it stopped at
+  // resolve_tol (a warm re-solve), from where it stopped, with the same
+  // system; returns its u as solve() does, or an empty volume when there is
+  // nothing to finish (no loose re-solve since the last update or solve).
+  Volume polish(SolveReport* report = nullptr);
+  // Whether the last solve stopped at resolve_tol and polish() would finish it.
+  bool polishable() const { return polishable_; }
   // The factor the last solve scaled u by (u_ind from the data, max_gain).
   double gain() const { return gain_; }
   double setup_seconds() const { return setup_seconds_; }    // the constructor, hierarchy included
@@ -435,7 +450,10 @@ class VariationalClassifier {
   std::unique_ptr<DeviceSystem> sys_;
   std::unique_ptr<MultigridSolver> mg_;
   double setup_seconds_ = 0, update_seconds_ = 0, gain_ = 1.0;
+  // The solution `u` as solve() returns it: scaled by the gain, clamped.
+  Volume finish(std::vector<float> u);
   bool sharpened_ = false;  // the system holds the sharpening term of the last solve
+  bool polishable_ = false;  // the last solve stopped at resolve_tol (polish())
   // The last solve's stages (keep_resolve_start): kept_[0] its linear
   // solution (valid: kept_linear_), kept_[s] its sharpening step s's
   // (kept_steps_: all of them, from the same solve as kept_[0]).

@@ -646,6 +646,87 @@ TEST(SolverUpdate, ReSolvesBackAndForthStartTheSharpeningStepsFromTheLastSolvesC
   EXPECT_EQ(test::max_relative_deviation(uw.data, uc.data), 0.0);
 }
 
+TEST(SolverUpdate, AReSolveStopsAtTheDisplayToleranceAndItsPolishFinishesIt) {
+  // The viewer's re-solve stops its last step at SolverParams::resolve_tol
+  // (1e-3): one PCG iteration fewer than to the solver's tol, as close to
+  // the converged reference as the cold classification, and within a grey
+  // level of its polish, which carries the same solve on to tol.
+  PhantomParams pp;
+  pp.shape = PhantomShape::Face;
+  pp.size = 96;  // at 64^3 one iteration of the last step reaches tol: nothing to polish
+  pp.seed = 1;
+  const FaceCase f{make_phantom(test::runtime(), pp), 0};
+  const double iso = f.ph.volume.intensity_map().to_unit(160.0);
+  ASSERT_GT(SolverParams{}.resolve_tol, SolverParams{}.tol);
+  VariationalParams p0;
+  p0.v_iso = iso;
+  VariationalParams p1 = p0;
+  p1.v_iso *= 1.05;
+  SolverParams exact;
+  exact.resolve_tol = 0;
+  SolverParams converged = exact;
+  converged.sharpen_tol = 0;
+  SolveReport r;
+  const Volume ref = classify_variational(runtime(), f.ph.volume, p1, converged, &r);
+  ASSERT_TRUE(r.converged);
+  const Volume uc = classify_variational(runtime(), f.ph.volume, p1, SolverParams{}, &r);
+  const test::MeanDeviation cold = test::mean_deviation(uc.data, ref.data, 5e-3);
+  struct Run {
+    Volume u;
+    SolveReport report;
+  };
+  Run loose, full;
+  for (const bool display : {true, false}) {
+    VariationalClassifier c(runtime(), f.ph.volume, p0, display ? SolverParams{} : exact);
+    c.keep_resolve_start(true);
+    c.solve(&r);
+    ASSERT_TRUE(r.converged);
+    EXPECT_FALSE(c.polishable()) << "a cold solve goes to tol";
+    c.update(p1);
+    Run& run = display ? loose : full;
+    run.u = c.solve(&run.report, nullptr, true);
+    ASSERT_TRUE(run.report.converged);
+    EXPECT_EQ(c.polishable(), display);
+    if (!display) {
+      EXPECT_TRUE(c.polish(&r).data.empty()) << "nothing to finish";
+      continue;
+    }
+    const double shown = run.report.residuals.back();
+    EXPECT_LE(shown, SolverParams{}.resolve_tol);
+    EXPECT_GT(shown, SolverParams{}.tol);
+    SolveReport pr;
+    const Volume up = c.polish(&pr);
+    ASSERT_EQ(up.data.size(), run.u.data.size());
+    ASSERT_TRUE(pr.converged);
+    EXPECT_LE(pr.residuals.back(), SolverParams{}.tol);
+    EXPECT_FALSE(c.polishable());
+    EXPECT_TRUE(c.polish(&r).data.empty()) << "polished once";
+    // What the polish changes on an 8-bit display: a grey level (1/255) on
+    // few voxels.
+    double largest = 0;
+    for (std::size_t i = 0; i < up.data.size(); ++i)
+      largest = std::max(largest, double(std::abs(up.data[i] - run.u.data[i])));
+    const test::MeanDeviation change = test::mean_deviation(up.data, run.u.data, 1.0 / 255);
+    const test::MeanDeviation polished = test::mean_deviation(up.data, ref.data, 5e-3);
+    std::cout << "[ display re-solve ] residual " << shown << " -> " << pr.residuals.back() << " in " << pr.cycles
+              << " cycles; change: largest " << largest << ", mean " << change.mean << ", " << 100 * change.share
+              << " % of voxels beyond 1/255; from the reference: polished " << polished.mean << ", cold " << cold.mean
+              << "\n";
+    EXPECT_LT(change.share, 1e-3);
+    EXPECT_LT(largest, 0.02);
+    EXPECT_LE(polished.mean, 2 * cold.mean + 1e-6);
+    // An update drops what there was to polish.
+    c.update(p1);
+    EXPECT_FALSE(c.polishable());
+  }
+  EXPECT_LT(loose.report.cycles, full.report.cycles);
+  for (const Run* run : {&loose, &full}) {
+    const test::MeanDeviation w = test::mean_deviation(run->u.data, ref.data, 5e-3);
+    EXPECT_LE(w.mean, 2 * cold.mean + 1e-6);
+    EXPECT_LE(w.share, 2 * cold.share + 1e-3);
+  }
+}
+
 TEST(SolverFace, BitIdenticalBetweenRuns) {
   const FaceCase& f = face64();
   VariationalParams p = earlier_defaults();

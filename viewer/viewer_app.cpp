@@ -145,7 +145,8 @@ class ViewerApp {
       if (frame > 0 && !(last && !o_.screenshot.empty())) loop_s += since(t0), ++timed;
       if (last) break;
     }
-    if (solving_.valid()) solving_.wait(), update_solve();
+    // The last re-solve and its polish (update_solve starts it) before u is saved.
+    while (solving_.valid()) solving_.wait(), update_solve();
     if (!o_.save_u.empty()) save_u(o_.save_u);
     if (!o_.save_mesh.empty()) save_mesh(o_.save_mesh);
     if (!o_.save_params.empty()) save_params(o_.save_params);
@@ -252,20 +253,47 @@ class ViewerApp {
   void update_solve() {
     try {
       auto [u, report] = solving_.get();
-      input_.u = std::move(u);
-      solve_report_ = report;
-      input_.params = solve_params_;
-      solve_seconds_ = since(solve_start_);
-      upload_u();
-      regenerate();
-      mesh_dirty_ = caster_dirty_ = slices_dirty_ = true;
-      ++u_version_;  // the mesh, the ray caster and the slices follow the new u
+      const bool polish = polishing_;
+      polishing_ = false;
+      if (polish) {
+        polish_seconds_ = since(solve_start_);
+        polish_report_ = report;
+      } else {
+        solve_report_ = report;
+        solve_seconds_ = since(solve_start_);
+        polish_seconds_ = 0;
+      }
+      if (!u.data.empty()) {  // a polish with nothing to finish returns none
+        input_.u = std::move(u);
+        input_.params = solve_params_;
+        upload_u();
+        regenerate();
+        mesh_dirty_ = caster_dirty_ = slices_dirty_ = true;
+        ++u_version_;  // the mesh, the ray caster and the slices follow the new u
+      }
     } catch (const std::exception& e) {  // bad parameters (e.g. too wide a lowpass), device out of memory
       status_ = std::string("re-solve failed: ") + e.what();
     }
-    // A change made while solving: solve again.
-    if (resolve_pending_ && edit_ && !same_params(*edit_, input_.params)) start_solve(*edit_);
+    // A change made while solving: solve again; else finish the re-solve
+    // that stopped at the display's tolerance (SolverParams::resolve_tol).
+    const bool again = resolve_pending_ && edit_ && !same_params(*edit_, input_.params);
     resolve_pending_ = false;
+    if (again) start_solve(*edit_);
+    else start_polish();
+  }
+
+  // The last re-solve carried on to the solver's tolerance in the
+  // background (VariationalClassifier::polish: one PCG iteration, about a
+  // third of a re-solve); a slider moved meanwhile waits for it.
+  void start_polish() {
+    if (solving_.valid() || !input_.classifier || !input_.classifier->polishable()) return;
+    polishing_ = true;
+    solve_start_ = Clock::now();
+    solving_ = std::async(std::launch::async, [this] {
+      SolveReport report;
+      Volume u = input_.classifier->polish(&report);
+      return std::make_pair(std::move(u), report);
+    });
   }
 
   // 3D+t: show frame k of the opacity sequence (new splats, mesh, ray
@@ -804,15 +832,19 @@ class ViewerApp {
     ImGui::TextDisabled("releasing a slider re-solves (warm start)");
     if (release) start_solve(p);
     if (solving_.valid()) {
-      ImGui::Text("solving ... %.1f s", since(solve_start_));
+      if (polishing_) ImGui::Text("polishing the last re-solve ... %.1f s", since(solve_start_));
+      else ImGui::Text("solving ... %.1f s", since(solve_start_));
       ImGui::ProgressBar(-1.0f * float(ImGui::GetTime()), ImVec2(-1, 0), "multigrid PCG");
     } else if (ImGui::Button("re-solve now")) {
       start_solve(p);
     }
     if (solve_seconds_ > 0)
-      ImGui::Text("last solve: %.1f s, %d iterations, residual %.1e%s", solve_seconds_, solve_report_.cycles,
+      ImGui::Text("last solve: %.2f s, %d iterations, residual %.1e%s", solve_seconds_, solve_report_.cycles,
                   solve_report_.residuals.empty() ? 0.0 : solve_report_.residuals.back(),
                   solve_report_.converged ? "" : " (not converged)");
+    if (polish_seconds_ > 0 && !polish_report_.residuals.empty())
+      ImGui::Text("then polished: %.2f s, %d iterations, residual %.1e%s", polish_seconds_, polish_report_.cycles,
+                  polish_report_.residuals.back(), polish_report_.converged ? "" : " (not converged)");
   }
 
   // The histogram (log counts) with the isovalue (or, for an opacity volume,
@@ -1187,7 +1219,9 @@ class ViewerApp {
   std::string ray_error_;
   OrbitCamera camera_;
   DrawStats stats_;
-  double frame_ms_ = 0, generate_ms_ = 0, solve_seconds_ = 0;
+  double frame_ms_ = 0, generate_ms_ = 0, solve_seconds_ = 0, polish_seconds_ = 0;
+  bool polishing_ = false;  // solving_ is a polish (start_polish)
+  SolveReport polish_report_;
   bool screenshot_request_ = false;
   int screenshots_ = 0;
   bool keys_down_[GLFW_KEY_LAST + 1] = {};
