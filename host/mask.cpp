@@ -461,7 +461,13 @@ int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int 
     for (std::size_t z = 0; z < d[2]; ++z) sum += psum[3 * z + std::size_t(a)], count += pcount[3 * z + std::size_t(a)];
     energy[a] = count ? sum / double(count) : 0;
   }
-  return int(std::max_element(energy, energy + 3) - energy);
+  const int best = int(std::max_element(energy, energy + 3) - energy);
+  // A PSF finer than the voxels along two axes leaves their grain alike
+  // (white speckle at the voxel scale): when z ties with the winner, the
+  // data does not tell, and the beam is the classifier's default, +z
+  // (docs/real-data.md, "The beam axis").
+  if (best != 2 && !(energy[best] >= kBeamAxisMargin * energy[2])) return 2;
+  return best;
 }
 
 namespace {
