@@ -902,7 +902,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   std::vector<float> ltop(lines, -std::numeric_limits<float>::infinity());
   std::vector<long> ltop_at(lines, -1), lbottom(lines, 0), run(lines, -1);
   // A faint band (faint_ratio, speckle_sds) must lie under faint_lines of the
-  // lines with a skin line: a layer across the probe. A few lines brighter at
+  // lines under the probe: a layer across the probe. A few lines brighter at
   // their top than the deep median (tissue on a gain that drifts with depth,
   // an object near the skin) are no near field unless min_ratio brighter.
   bool faint = false;
@@ -922,12 +922,28 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   });
   if (params.faint_ratio < params.min_ratio) {
     faint = true;  // count the lines that pass with the faint rule in force, then keep it only if enough do
-    std::size_t faint_lines = 0, with_skin_lines = 0;
-    for (std::size_t l = 0; l < lines; ++l) {
-      with_skin_lines += skin[l] >= 0;
-      faint_lines += candidate(l);
-    }
-    faint = double(faint_lines) >= params.faint_lines * double(with_skin_lines);
+    // Of the lines under the probe: where the skin line runs across the
+    // beam (it deepens by less than 1 mm per mm across it), not down the
+    // side of a sector, whose lines enter the scan below the band (a volume
+    // probe's fan cut by the top face: two thirds of the lines).
+    const double h_u = v.spacing[u_ax], h_w = v.spacing[w_ax];
+    const auto under_probe = [&](std::size_t l) {
+      const std::size_t a = l % d[u_ax], b = l / d[u_ax];
+      const auto slope = [&](std::size_t l0, std::size_t l1, double h) {
+        if (skin[l0] < 0 || skin[l1] < 0) return 0.0;
+        return std::fabs(double(skin[l1] - skin[l0])) * hz / h;
+      };
+      double s = 0;
+      if (a > 0) s = std::max(s, slope(l - 1, l, h_u));
+      if (a + 1 < d[u_ax]) s = std::max(s, slope(l, l + 1, h_u));
+      if (b > 0) s = std::max(s, slope(l - d[u_ax], l, h_w));
+      if (b + 1 < d[w_ax]) s = std::max(s, slope(l, l + d[u_ax], h_w));
+      return s <= 1.0;
+    };
+    std::size_t faint_lines = 0, probe_lines = 0;
+    for (std::size_t l = 0; l < lines; ++l)
+      if (skin[l] >= 0 && under_probe(l)) ++probe_lines, faint_lines += candidate(l);
+    faint = probe_lines > 0 && double(faint_lines) >= params.faint_lines * double(probe_lines);
   }
   // A layered band (skin, a dark fat layer up to a few mm thick, then bright
   // muscle or fascia): Pc(k), the median over the candidate lines of their

@@ -154,7 +154,9 @@ struct NearFieldParams {
   double min_ratio = 0.3;  // the top brighter than below it by this share of the top
   // ... or by this smaller share when that is also speckle_sds of the
   // speckle's spread below the top (NearFieldReport::speckle_sd), on at
-  // least faint_lines of the lines with a skin line.
+  // least faint_lines of the lines under the probe (their skin line
+  // deepening by at most 1 mm per mm across the beam: not the lines that
+  // enter a sector down its side).
   double faint_ratio = 0.1, speckle_sds = 2.5, faint_lines = 0.25;
   double sigma_mm = 1.0;   // lowpass across the beam of the profile's samples
   int axis = -1;           // beam axis (0 x, 1 y, 2 z); -1: beam_axis_of the data

@@ -383,6 +383,39 @@ TEST(NearField, ASaturatedBandOverBrightTissueIsFoundAcrossTheProbeOnly) {
   EXPECT_FALSE(r.found);
 }
 
+TEST(NearField, ASaturatedBandUnderAFanCutByTheTopFaceIsFoundOnTheLinesUnderTheProbe) {
+  // The saturated band of the test above under the probe of a volume fan
+  // that the volume's top face cuts: only the lines within 5 mm of the
+  // middle (a square) start at the probe; the others enter the sector down
+  // its sides (3 mm deeper per mm out), most of them below the band. Under a
+  // fifth of the scanned lines the top is the band -- under the faint rule's
+  // quarter -- but under every line of the probe it is: the share is of the
+  // lines whose skin line runs across the beam, and the band is found there,
+  // to its bottom, and not on the side lines.
+  const double h = 0.5, c = 16.0;
+  const auto entry_mm = [&](double x, double y) {
+    return 3.0 * std::max(0.0, std::max(std::fabs(x - c), std::fabs(y - c)) - 5.0);
+  };
+  const Volume v = speckled({64, 64, 60}, h, [&](double, double, double z) { return z < 5.0 ? 250.0 : 180.0; },
+                            test::seed() + 33, 0.8, 1.2);
+  std::vector<std::uint8_t> scanned(v.voxels());  // outside the sector: unscanned
+  std::size_t lines = 0, banded = 0;
+  for (std::size_t y = 0; y < 64; ++y)
+    for (std::size_t x = 0; x < 64; ++x) {
+      const double e = entry_mm(double(x) * h, double(y) * h);
+      if (e < 30.0) ++lines, banded += e < 5.0;
+      for (std::size_t z = 0; z < 60; ++z) scanned[v.index(x, y, z)] = double(z) * h >= e;
+    }
+  ASSERT_LT(double(banded), NearFieldParams{}.faint_lines * double(lines));
+  NearFieldReport r;
+  const auto band = near_field_band(v, &scanned, NearFieldParams{}, &r);
+  ASSERT_TRUE(r.found);
+  EXPECT_TRUE(r.faint);
+  EXPECT_EQ(band[v.index(32, 32, 4)], 1);   // under the probe
+  EXPECT_EQ(band[v.index(32, 32, 20)], 0);  // under the band
+  EXPECT_EQ(band[v.index(50, 32, 40)], 0);  // a side line's first samples: tissue
+}
+
 TEST(NearField, ALayeredBandWithAThickFatLayerIsFoundToItsMuscle) {
   // Skin (220, 1.5 mm), a dark fat layer 4.5 mm thick (longer than stay_mm:
   // each line stays below halfway through it), bright muscle (210, 3 mm),
