@@ -469,14 +469,11 @@ int main(int argc, char** argv) {
           tc[k].push_back(t.cold);
           tw[k].push_back(t.warm);
         }
-      auto med = [](std::vector<double> x) {
-        std::sort(x.begin(), x.end());
-        return x[x.size() / 2];
-      };
-      for (int k = 0; k < 2; ++k)
+      for (int k = 0; k < 2; ++k) {
+        const Timing w = summarise(tw[k]), c = summarise(tc[k]);
         std::printf("A/B %-8s re-classification min %.1f median %.1f ms, cold min %.1f median %.1f ms (%d rounds)\n",
-                    k ? "compact" : "float32", *std::min_element(tw[k].begin(), tw[k].end()) * 1e3, med(tw[k]) * 1e3,
-                    *std::min_element(tc[k].begin(), tc[k].end()) * 1e3, med(tc[k]) * 1e3, ab);
+                    k ? "compact" : "float32", w.min * 1e3, w.median * 1e3, c.min * 1e3, c.median * 1e3, ab);
+      }
     }
     if (ab_resolve > 0) {
       // --ab-resolve ROUNDS: re-solves to the solver's tol against re-solves
@@ -487,19 +484,10 @@ int main(int argc, char** argv) {
       SolverParams spr[2] = {sp, sp};
       spr[0].resolve_tol = 0, spr[1].resolve_tol = resolve_tol > 0 ? resolve_tol : 1e-3;
       SolverParams sp_ref = sp;
-      sp_ref.sharpen_tol = 0, sp_ref.resolve_tol = 0;
+      sp_ref.sharpen_tol = 0;
       SolveReport r;
       const Volume ref = classify_variational(rt, v, p1, sp_ref, &r);
       const Volume cold = classify_variational(rt, v, p1, sp, &r);
-      auto distance = [&](const Volume& u) {
-        double mean = 0;
-        std::size_t beyond = 0;
-        for (std::size_t i = 0; i < u.data.size(); ++i) {
-          const double e = std::abs(double(u.data[i]) - double(ref.data[i]));
-          mean += e, beyond += e > 5e-3;
-        }
-        return std::make_pair(mean / double(u.data.size()), double(beyond) / double(u.data.size()));
-      };
       std::unique_ptr<VariationalClassifier> cls[2] = {resolving(spr[0]), resolving(spr[1])};
       std::vector<double> tw[2], tp, mean[2], share[2], pmean, pshare;
       int cycles[2] = {0, 0};
@@ -511,35 +499,34 @@ int main(int argc, char** argv) {
           const Volume u = c.solve(&r, nullptr, true);
           tw[k].push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
           cycles[k] = r.cycles;
-          const auto d = distance(u);
-          mean[k].push_back(d.first), share[k].push_back(d.second);
+          const Deviation d = deviation(u, ref);
+          mean[k].push_back(d.mean), share[k].push_back(d.share);
           if (k == 1) {
             const auto t1 = std::chrono::steady_clock::now();
             const Volume up = c.polish(&r);
             tp.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count());
-            const auto dp = distance(up.data.empty() ? u : up);
-            pmean.push_back(dp.first), pshare.push_back(dp.second);
+            const Deviation dp = deviation(up.data.empty() ? u : up, ref);
+            pmean.push_back(dp.mean), pshare.push_back(dp.share);
           }
           c.update(p0);
           c.solve(&r, nullptr, true);
           c.polish(&r);
         }
-      auto med = [](std::vector<double> x) {
-        std::sort(x.begin(), x.end());
-        return x[x.size() / 2];
-      };
       auto worst = [](const std::vector<double>& x) { return *std::max_element(x.begin(), x.end()); };
-      const auto dc = distance(cold);
-      std::printf("cold classification: distance from the reference mean %.2e, %.2f %% beyond 5e-3\n", dc.first,
-                  100 * dc.second);
+      const Deviation dc = deviation(cold, ref);
+      std::printf("cold classification: distance from the reference mean %.2e, %.2f %% beyond 5e-3\n", dc.mean,
+                  100 * dc.share);
       char loose[32];
       std::snprintf(loose, sizeof loose, "%.0e", spr[1].resolve_tol);
-      for (int k = 0; k < 2; ++k)
+      for (int k = 0; k < 2; ++k) {
+        const Timing w = summarise(tw[k]);
         std::printf("A/B re-solve to %-7s min %.1f median %.1f ms, %d cycles; distance mean %.2e (worst), %.2f %% beyond 5e-3 (worst) (%d rounds)\n",
-                    k ? loose : "tol", *std::min_element(tw[k].begin(), tw[k].end()) * 1e3,
-                    med(tw[k]) * 1e3, cycles[k], worst(mean[k]), 100 * worst(share[k]), ab_resolve);
+                    k ? loose : "tol", w.min * 1e3, w.median * 1e3, cycles[k], worst(mean[k]), 100 * worst(share[k]),
+                    ab_resolve);
+      }
+      const Timing pt = summarise(tp);
       std::printf("    then polished: min %.1f median %.1f ms more; distance mean %.2e, %.2f %% beyond 5e-3 (worst)\n",
-                  *std::min_element(tp.begin(), tp.end()) * 1e3, med(tp) * 1e3, worst(pmean), 100 * worst(pshare));
+                  pt.min * 1e3, pt.median * 1e3, worst(pmean), 100 * worst(pshare));
     }
     return 0;
   } catch (const std::exception& e) {

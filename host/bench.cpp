@@ -226,6 +226,18 @@ Volume normalised(const Volume& v) {
   return vn;
 }
 
+Deviation deviation(const Volume& a, const Volume& b) {
+  Deviation d;
+  std::size_t beyond = 0;
+  for (std::size_t i = 0; i < a.data.size(); ++i) {
+    const double e = std::abs(double(a.data[i]) - double(b.data[i]));
+    d.max = std::max(d.max, e), d.mean += e, beyond += e > 5e-3;
+  }
+  const double n = double(std::max<std::size_t>(1, a.data.size()));
+  d.mean /= n, d.share = double(beyond) / n;
+  return d;
+}
+
 double phantom_iso(const Phantom& ph) {
   return ph.volume.intensity_map().to_unit(ph.fluid_median + 0.5 * (ph.tissue_median - ph.fluid_median));
 }
@@ -674,23 +686,6 @@ double bench_peers(Runtime& rt, DeviceBench& db, const Phantom& ph, double beta,
 }
 
 // ---- warm start
-
-// Largest and mean |a - b| and the share of voxels differing by more than
-// 5e-3 (1.3 grey levels of an 8-bit display).
-struct Deviation {
-  double max = 0, mean = 0, share = 0;
-};
-Deviation deviation(const Volume& a, const Volume& b) {
-  Deviation d;
-  std::size_t beyond = 0;
-  for (std::size_t i = 0; i < a.data.size(); ++i) {
-    const double e = std::abs(double(a.data[i]) - double(b.data[i]));
-    d.max = std::max(d.max, e), d.mean += e, beyond += e > 5e-3;
-  }
-  const double n = double(std::max<std::size_t>(1, a.data.size()));
-  d.mean /= n, d.share = double(beyond) / n;
-  return d;
-}
 
 void bench_warm(Runtime& rt, DeviceBench& db, int size, int reps) {
   const Phantom ph = phantom_of(rt, PhantomShape::Face, {size, size, size}, nullptr, nullptr);

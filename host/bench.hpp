@@ -228,6 +228,13 @@ HostStencil host_stencil(const DeviceSystem& sys);
 HostStencil compact_host_stencil(const DeviceSystem& sys);
 // The volume in normalised units (IntensityMap::to_unit), as DeviceSystem takes it.
 Volume normalised(const Volume& v);
+// Largest and mean |a - b| over the voxels of two volumes of the same dims,
+// and the share of voxels differing by more than 5e-3 (1.3 grey levels of
+// an 8-bit display): a re-solve's distance from a reference.
+struct Deviation {
+  double max = 0, mean = 0, share = 0;
+};
+Deviation deviation(const Volume& a, const Volume& b);
 // v_iso half-way between a phantom's fluid and tissue medians, normalised.
 double phantom_iso(const Phantom& ph);
 

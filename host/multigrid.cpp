@@ -691,10 +691,7 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
       }
       // Only the last step's solution comes back to the host.
       u = mg_->solve(&step_report, nullptr, true, s + 1 < steps ? loose : last_tol, s + 1 == steps);
-      if (keep_linear && s + 1 == steps && step_report.converged) {
-        rt_.queue().enqueueCopyBuffer(mg_->solution(), kept_[std::size_t(steps)], 0, 0, bytes);
-        kept_steps_ = true;
-      }
+      if (keep_linear && s + 1 == steps && step_report.converged) keep_last_step();
       report->cycles += step_report.cycles;
       report->seconds += step_report.seconds;
       report->converged = step_report.converged;  // the last step's, to the solver's tol (or resolve_tol)
@@ -724,12 +721,15 @@ Volume VariationalClassifier::polish(SolveReport* report) {
   SolveReport local;
   if (!report) report = &local;
   std::vector<float> u = mg_->solve(report, nullptr, true, 0.0, true);
-  const int steps = params_.sharpen_iterations;
-  if (keep_start_ && report->converged && kept_.size() == std::size_t(steps) + 1 && kept_steps_) {
-    const std::size_t bytes = geometry_.voxels() * sizeof(float);
-    rt_.queue().enqueueCopyBuffer(mg_->solution(), kept_[std::size_t(steps)], 0, 0, bytes);
-  }
+  // The stages kept by the solve polished (an update in between leaves
+  // nothing to polish): its last step now the polished one.
+  if (report->converged && kept_steps_) keep_last_step();
   return finish(std::move(u));
+}
+
+void VariationalClassifier::keep_last_step() {
+  rt_.queue().enqueueCopyBuffer(mg_->solution(), kept_.back(), 0, 0, geometry_.voxels() * sizeof(float));
+  kept_steps_ = true;
 }
 
 Volume VariationalClassifier::finish(std::vector<float> u) {

@@ -452,6 +452,9 @@ class VariationalClassifier {
   double setup_seconds_ = 0, update_seconds_ = 0, gain_ = 1.0;
   // The solution `u` as solve() returns it: scaled by the gain, clamped.
   Volume finish(std::vector<float> u);
+  // The solver's solution (the last sharpening step's) kept as kept_.back(),
+  // the next re-solve's start (keep_resolve_start).
+  void keep_last_step();
   bool sharpened_ = false;  // the system holds the sharpening term of the last solve
   bool polishable_ = false;  // the last solve stopped at resolve_tol (polish())
   // The last solve's stages (keep_resolve_start): kept_[0] its linear
