@@ -923,7 +923,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   if (params.faint_ratio < params.min_ratio) {
     faint = true;  // count the lines that pass with the faint rule in force, then keep it only if enough do
     // Of the lines under the probe: where the skin line runs across the
-    // beam (it deepens by less than 1 mm per mm across it), not down the
+    // beam (it deepens by at most 1 mm per mm across it), not down the
     // side of a sector, whose lines enter the scan below the band (a volume
     // probe's fan cut by the top face: two thirds of the lines).
     const double h_u = v.spacing[u_ax], h_w = v.spacing[w_ax];

@@ -68,11 +68,12 @@ struct MaskReport {
 // recursion), O(voxels) time and a few bytes per voxel.
 std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params = {}, MaskReport* report = nullptr);
 
+// beam_axis_of: an axis other than z wins only by this factor over z.
+constexpr double kBeamAxisMargin = 1.1;
 // The beam axis of a scan, from the data: speckle is finest along the beam,
 // so the mean squared difference between neighbours (per mm, scanned
 // nonzero samples) is largest along it. Another axis than z wins only by
 // kBeamAxisMargin over z; less is a tie, and ties go to z (the default beam).
-constexpr double kBeamAxisMargin = 1.1;
 // `threads` (0: every core) does not change the result.
 // `plane_step` > 1 sums every plane_step-th z-plane only (a cheaper estimate).
 int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int threads = 0, std::size_t plane_step = 1);
