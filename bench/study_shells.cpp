@@ -130,6 +130,9 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   MaskReport mr;
   std::vector<std::uint8_t> mask = scanned_mask(in, MaskParams{}, &mr);
   if (mr.unscanned == 0) mask.clear();
+  std::fprintf(stderr, "  mask: %zu unscanned (zero fill %zu)%s%s, %.3f of the fill between echoes\n", mr.unscanned,
+               mr.zero_fill, mr.rejected ? ", rejected as dark fluid" : "", mr.outside ? ", the part outside the data" : "",
+               mr.enclosed_share);
   AutoIsoParams ap;
   VariationalParams p;
   NearFieldParams np;

@@ -43,6 +43,16 @@ namespace softshell {
 //     min_faces (off by default) also asks for scanned voxels on 2 % of that
 //     many faces: the PLUS reconstructions reach only 0-2 faces so, with
 //     their dim edge rim, so it cannot tell them apart.
+//  2c. unless what lies outside the data: when 2b finds dark fluid, the
+//     fill's voxels with no nonzero sample on one side or the other along
+//     each of 49 lines through them (directions with components in
+//     [-2, 2]) lie outside the data's hull -- beyond a scan's convex sector
+//     -- and are unscanned if there are min_fraction of them; the rest is
+//     fluid or shadow and scanned. Before the first sample of a beam line
+//     the fill counts as outside only when the scan meets the face at the
+//     probe (kProbeShare of its lines start there): else it is fluid in
+//     front of the object. Steps 3 and 4 then take nothing more: such a
+//     fill can border an object in fluid.
 struct MaskParams {
   double min_fraction = 0.001;
   int beam_axis = 2;          // the beam's axis (x 0, y 1, z 2)
@@ -62,6 +72,8 @@ struct MaskReport {
   double enclosed_share = 0;          // of the zero fill, between nonzero samples along the beam (step 2b)
   int faces_with_data = 0;            // faces of the volume with scanned voxels (step 2b)
   bool rejected = false;              // step 2b found dark fluid, not an unscanned region
+  bool outside = false;               // step 2c kept the part of such a fill outside the data's hull
+  double outside_share = 0;           // step 2c: that part's share of the zero fill
 };
 
 // The mask derived from the zero fill; deterministic, iterative (no

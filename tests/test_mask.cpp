@@ -164,6 +164,82 @@ TEST(Mask, AFansArcMeetingTheFaceLeavesNoScannedZerosThere) {
   for (std::size_t x = 0; x < 64; ++x) EXPECT_EQ(m[v.index(x, 12, 63)], 0) << "x " << x;
 }
 
+// The fan of the test above with two acoustic shadows clipped to exact 0:
+// columns 6 voxels wide across the whole volume in y, from z = 24 to 50,
+// tissue again below them down to the arc.
+bool in_fan(std::size_t x, std::size_t z) {
+  const double dx = double(x) - 32.0, dz = double(z) + 40.0;
+  return std::hypot(dx, dz) < 103.0 && std::fabs(dx) < 0.45 * dz;
+}
+bool in_shadow(std::size_t x, std::size_t z) { return ((x >= 20 && x < 26) || (x >= 38 && x < 44)) && z >= 24 && z < 50; }
+Volume fan_with_shadows() {
+  Volume v = test::speckled({64, 24, 64}, 0.5, [](double, double, double) { return 60.0; }, test::seed() + 43);
+  for (std::size_t z = 0; z < 64; ++z)
+    for (std::size_t y = 0; y < 24; ++y)
+      for (std::size_t x = 0; x < 64; ++x)
+        if (!in_fan(x, z) || in_shadow(x, z)) v.at(x, y, z) = 0.0f;
+  return v;
+}
+
+TEST(Mask, AFansShadowsClippedToZeroStayScannedAndItsWedgesUnscanned) {
+  // 40 % of the zero fill of fan_with_shadows() lies between echoes along
+  // the beam, and step 2b alone took the whole fill for dark fluid, leaving
+  // the fan's edge to be drawn (randomised spine 601). Step 2c keeps what
+  // lies outside the data (the side wedges, beyond every nonzero sample
+  // along each line through them) and gives the shadows back to the scan.
+  const Volume v = fan_with_shadows();
+  ASSERT_EQ(beam_axis_of(v, nullptr), 2);
+  MaskReport r;
+  const auto m = scanned_mask(v, MaskParams{}, &r);
+  EXPECT_GT(r.enclosed_share, 0.3);  // step 2b's test fails ...
+  EXPECT_FALSE(r.rejected);          // ... and 2c keeps the wedges
+  EXPECT_TRUE(r.outside);
+  std::size_t wedge = 0, wedge_unscanned = 0, shadow = 0, shadow_scanned = 0, data_unscanned = 0;
+  for (std::size_t z = 0; z < 64; ++z)
+    for (std::size_t y = 0; y < 24; ++y)
+      for (std::size_t x = 0; x < 64; ++x) {
+        const bool off = m[v.index(x, y, z)] == 0;
+        if (!in_fan(x, z)) ++wedge, wedge_unscanned += off;
+        else if (in_shadow(x, z)) ++shadow, shadow_scanned += !off;
+        else data_unscanned += off;
+      }
+  EXPECT_GE(double(wedge_unscanned), 0.95 * double(wedge));
+  EXPECT_EQ(shadow_scanned, shadow);
+  // No rim after 2c: its fill can border an object in fluid, and the data
+  // next to it stay scanned.
+  EXPECT_EQ(data_unscanned, 0u);
+  // The same mask for any thread count (2c's directions split over them).
+  for (int threads : {1, 3}) {
+    MaskParams p;
+    p.threads = threads;
+    EXPECT_EQ(scanned_mask(v, p), m) << threads << " threads";
+  }
+  // Without the tissue under the shadows they reach the arc, lie between no
+  // echoes and are unswept for 2b itself (as before 2c).
+  Volume open = v;
+  for (std::size_t z = 50; z < 64; ++z)
+    for (std::size_t y = 0; y < 24; ++y)
+      for (std::size_t x = 0; x < 64; ++x)
+        if ((x >= 20 && x < 26) || (x >= 38 && x < 44)) open.at(x, y, z) = 0.0f;
+  scanned_mask(open, MaskParams{}, &r);
+  EXPECT_FALSE(r.rejected);
+  EXPECT_FALSE(r.outside);
+  EXPECT_LT(r.enclosed_share, 0.05);
+  // Fluid at 0 under the probe (no skin: no line's data starts at the top
+  // face) lies in front of the object on its beam lines, is in no wedge and
+  // stays scanned, as before 2c.
+  Volume fluid = v;
+  for (std::size_t z = 0; z < 12; ++z)
+    for (std::size_t y = 0; y < 24; ++y)
+      for (std::size_t x = 0; x < 64; ++x) fluid.at(x, y, z) = 0.0f;
+  const auto mf = scanned_mask(fluid, MaskParams{}, &r);
+  std::size_t front = 0, front_scanned = 0;
+  for (std::size_t z = 0; z < 12; ++z)
+    for (std::size_t y = 0; y < 24; ++y)
+      for (std::size_t x = 20; x < 44; ++x) ++front, front_scanned += mf[fluid.index(x, y, z)] != 0;
+  EXPECT_EQ(front_scanned, front);
+}
+
 // ---- the near field ------------------------------------------------------------------------------------------
 
 // Speckle-like samples of a given mean, with a grain along the beam axis
@@ -1624,6 +1700,26 @@ TEST_F(CliMask, AutoMaskFixesUnscannedVoxelsAndIsReported) {
       for (std::size_t y = 2; y < 10; ++y) edge0 = std::max(edge0, double(u0.at(14 - y, y, z)));
     EXPECT_GT(edge0, 0.2);
   }
+}
+
+TEST_F(CliMask, AFanWithZeroShadowsHasItsWedgesMaskedAndSaysSo) {
+  // classify on fan_with_shadows(): the mask of step 2c (the wedges, not the
+  // shadows), named as such; u is 0 on the unscanned voxels.
+  const Volume v = fan_with_shadows();
+  write_volume(file("fan.nrrd"), v);
+  MaskReport rep;
+  const auto mask = scanned_mask(v, MaskParams{}, &rep);
+  ASSERT_TRUE(rep.outside);
+  const test::RunResult r = run({"classify", file("fan.nrrd"), "--iso", "auto", "-o", file("u.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("mask     auto: " + std::to_string(count_unscanned(mask)) +
+                       " voxels unscanned"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("the part of the zero fill outside the data"), std::string::npos) << r.out;
+  const Volume u = read_volume(file("u.nrrd"));
+  for (std::size_t i = 0; i < u.voxels(); ++i)
+    if (!mask[i]) ASSERT_EQ(u.data[i], 0.0f) << "unscanned voxel " << i;
 }
 
 TEST_F(CliMask, MaskFromFileAndIsoAuto) {

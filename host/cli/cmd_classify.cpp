@@ -123,7 +123,13 @@ DataMask make_mask(const std::string& option, const Volume& in) {
     m.scanned = scanned_mask(in, params, &r);
     m.text = "auto: " + percent(r.unscanned) + " (zero fill " + std::to_string(r.zero_fill) + " + " +
              std::to_string(params.grow) + "-voxel rim)";
-    if (r.rejected) {
+    if (r.outside) {
+      std::ostringstream t;
+      t << "auto: " << percent(r.unscanned) << " (the part of the zero fill outside the data: " << std::fixed
+        << std::setprecision(1) << 100 * r.outside_share << " % of it, no rim; the rest is dark fluid or shadow, "
+        << 100 * r.enclosed_share << " % of the fill lying between echoes along the beam)";
+      m.text = t.str();
+    } else if (r.rejected) {
       std::ostringstream t;
       t << "auto: none; the zero fill is dark fluid, not an unswept region (" << std::fixed << std::setprecision(1)
         << 100 * r.enclosed_share << " % of it between echoes along the beam, " << r.faces_with_data
