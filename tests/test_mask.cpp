@@ -131,6 +131,13 @@ TEST(Mask, OneInAThousandRule) {
   }
 }
 
+// A fan in the x-z plane of a 64 x 24 x 64 volume: apex 40 voxels above it,
+// radius 103, half-angle atan(0.45).
+bool in_fan(std::size_t x, std::size_t z) {
+  const double dx = double(x) - 32.0, dz = double(z) + 40.0;
+  return std::hypot(dx, dz) < 103.0 && std::fabs(dx) < 0.45 * dz;
+}
+
 TEST(Mask, AFansArcMeetingTheFaceLeavesNoScannedZerosThere) {
   // A fan (apex 40 voxels above the volume, radius 103) whose bottom arc
   // just misses the bottom face in the middle: there the zeros under the arc
@@ -146,11 +153,8 @@ TEST(Mask, AFansArcMeetingTheFaceLeavesNoScannedZerosThere) {
   Volume v = speckle;
   for (std::size_t z = 0; z < 64; ++z)
     for (std::size_t y = 0; y < 24; ++y)
-      for (std::size_t x = 0; x < 64; ++x) {
-        const double dx = double(x) - 32.0, dz = double(z) + 40.0;
-        const bool in_fan = std::hypot(dx, dz) < 103.0 && std::fabs(dx) < 0.45 * dz;
-        if (!in_fan) v.at(x, y, z) = 0.0f;
-      }
+      for (std::size_t x = 0; x < 64; ++x)
+        if (!in_fan(x, z)) v.at(x, y, z) = 0.0f;
   ASSERT_EQ(beam_axis_of(v, nullptr), 2);
   ASSERT_EQ(v.at(32, 12, 63), 0.0f);
   ASSERT_GT(v.at(32, 12, 62), 0.0f);
@@ -167,10 +171,6 @@ TEST(Mask, AFansArcMeetingTheFaceLeavesNoScannedZerosThere) {
 // The fan of the test above with two acoustic shadows clipped to exact 0:
 // columns 6 voxels wide across the whole volume in y, from z = 24 to 50,
 // tissue again below them down to the arc.
-bool in_fan(std::size_t x, std::size_t z) {
-  const double dx = double(x) - 32.0, dz = double(z) + 40.0;
-  return std::hypot(dx, dz) < 103.0 && std::fabs(dx) < 0.45 * dz;
-}
 bool in_shadow(std::size_t x, std::size_t z) { return ((x >= 20 && x < 26) || (x >= 38 && x < 44)) && z >= 24 && z < 50; }
 Volume fan_with_shadows() {
   Volume v = test::speckled({64, 24, 64}, 0.5, [](double, double, double) { return 60.0; }, test::seed() + 43);
