@@ -114,6 +114,7 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "near_stay") nf.stay_mm = x;
   else if (k == "iso_fraction") ap.local_fraction = x;
   else if (k == "iso_field_sigma") ap.field_sigma_mm = x;
+  else if (k == "iso_field_depth_sigma") ap.field_depth_sigma_mm = x;
   else if (k == "iso_clip_fraction") ap.clip_fraction = x;
   else if (k == "iso_clip_share") ap.clip_share = x;
   else if (k == "iso_clip_margin") ap.clip_margin = x;
@@ -145,7 +146,8 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   // A small volume's length scales shrink with it (1 for every phantom of
   // the family: they are 55 mm across or more).
   const double scale = small_volume_scale(in.dims, in.spacing, kSmallVolumeMm);
-  ap.sigma_mm *= scale, ap.field_sigma_mm *= scale;
+  ap.sigma_mm *= scale, ap.field_sigma_mm *= scale, ap.field_depth_sigma_mm *= scale;
+  ap.beam_axis = nf.axis;
   const LevelledVolume lv = auto_iso_levelled(in, mp, mp ? &filled : nullptr, ap);
   scale_length_scales(p, scale);
   p.v_iso = lv.data.intensity_map().to_unit(lv.iso);
@@ -309,7 +311,7 @@ int main(int argc, char** argv) {
     } else {
       std::fprintf(stderr, "usage: softshell_study_shells [--train S,S..] [--test S,S..] [--shapes face,spine] "
                            "[--size N] [--physics NAME] [--tolerance-mm MM] [--variational-only] [--defaults-only] "
-                           "[--set iso_fraction=..,iso_clip_fraction=..,iso_field_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
+                           "[--set iso_fraction=..,iso_clip_fraction=..,iso_field_sigma=..,iso_field_depth_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
                            "... (bench/param_keys.hpp)] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..] "
                            "[--shadow-walls on|off] [--walls beam_cos=..,reach=..,smooth=..,sigma=..,gap=..] [--wall-ref weighted|data]\n");
       return 2;

@@ -363,6 +363,8 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
   const bool want_field = rule == AutoIsoRule::Local && !(b[32] & 4);
   const double local_fraction = param(b[43], 0, 1);
   const double field_sigma = param(b[44], 0.5, 8);
+  const double field_depth_sigma = param(b[28], 0.5, 16);
+  const int beam_axis = b[29] % 3;
   const bool near_field = b[33] & 1;
 
   bool solved = false;
@@ -390,6 +392,8 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
     // What `classify` checks of the local rule's options (CLI11 ranges).
     if (!(local_fraction >= 0 && local_fraction <= 1)) throw InputError("--iso-fraction must be in [0, 1]");
     if (!(field_sigma >= 0.5 && field_sigma <= 1000)) throw InputError("--iso-field-sigma must be in [0.5, 1000]");
+    if (!(field_depth_sigma >= 0.5 && field_depth_sigma <= 1000))
+      throw InputError("--iso-field-depth-sigma must be in [0.5, 1000]");
     if (near_field) {
       const NearFieldReport nf = remove_near_field(v, mask);
       if (nf.found && !mask.empty() && mask.size() != v.voxels()) fail("near-field mask of the wrong size");
@@ -403,6 +407,8 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
       ap.want_field = want_field;
       ap.local_fraction = local_fraction;
       ap.field_sigma_mm = field_sigma;
+      ap.field_depth_sigma_mm = field_depth_sigma;
+      ap.beam_axis = beam_axis;
       AutoIsoReport rep;
       iso = auto_iso(v, m, ap, &rep);
       if (!std::isfinite(iso)) fail("automatic isovalue not finite");
@@ -847,7 +853,8 @@ std::vector<Seed> seeds(const std::string& harness) {
       // field, the near field removed, in turn the paper's functional.
       b[32] = char(k % 3), b[33] = 1;
       b[34] = 80, b[35] = 80, b[36] = 24, b[37] = 14, b[38] = 120, b[39] = 2, b[40] = 120, b[41] = 113, b[42] = 0;
-      b[43] = 179, b[44] = 115, b[45] = char(k == 2);
+      b[43] = 179, b[44] = 80, b[45] = char(k == 2);
+      b[28] = 115, b[29] = 2;  // the field: 3 mm across the beam, 8 mm along z
       const Volume v = seed_volume(ScalarType::Float32, {8, 8, 8}, 5, 200);
       for (float x : v.data) {
         if (k % 3 == 0) b += char(int(x));

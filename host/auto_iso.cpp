@@ -530,7 +530,8 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
       std::array<std::size_t, 3> f{1, 1, 1}, dc{};
       std::array<double, 3> sigma_vox{};
       for (int a = 0; a < 3; ++a) {
-        sigma_vox[a] = std::max(1.0, params.field_sigma_mm / v.spacing[a]);
+        const double mm = a == params.beam_axis ? params.field_depth_sigma_mm : params.field_sigma_mm;
+        sigma_vox[a] = std::max(1.0, mm / v.spacing[a]);
         f[a] = sigma_vox[a] >= 3.0 ? 2 : 1;
         dc[a] = (d[a] + f[a] - 1) / f[a];
       }

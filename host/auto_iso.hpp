@@ -14,11 +14,17 @@
 //    most climb_steps each); the edge's isovalue is D + local_fraction
 //    (B - D), near the bright side, where a log-compressed, blurred boundary
 //    has its surface (docs/parameters.md, "The automatic isovalue"). Their
-//    median is the global v_iso; spread by a normalised Gaussian of
-//    field_sigma_mm (falling back to the median where no edge is near) they
-//    give an isovalue field that follows depth-dependent gain, attenuation
-//    and a mismatched time-gain compensation (the paper's future work: an
-//    isovalue that varies across the volume).
+//    median is the global v_iso; spread by a normalised Gaussian (falling
+//    back to the median where no edge is near) they give an isovalue field
+//    that follows depth-dependent gain, attenuation and a mismatched
+//    time-gain compensation (the paper's future work: an isovalue that
+//    varies across the volume). The Gaussian is long along the beam
+//    (field_depth_sigma_mm, 8 mm) and short across it (field_sigma_mm,
+//    3 mm): gain drifts slowly with depth, while objects of different
+//    brightness lie side by side; a field as short along the beam follows
+//    each bone's echo and its shadow beneath and levels the bone's own
+//    contrast away (docs/parameters.md, "The isovalue field along the
+//    beam").
 //  - Edge (for Levoy's contours): the value at which the boundaries lie,
 //    found the way Kindlmann and Durkin (1998) find boundaries for transfer
 //    functions: across a boundary blurred by the imaging, |grad v| peaks
@@ -46,7 +52,9 @@ struct AutoIsoParams {
   int bins = 64;                // over the range of v~ in the scanned voxels
   double min_bin_share = 0.001; // bins with fewer voxels than this share are ignored
   double local_fraction = 0.75; // Local: where between trough and crest the surface lies
-  double field_sigma_mm = 4.0;  // Local: spread of the edges' isovalues into a field
+  double field_sigma_mm = 3.0;        // Local: spread of the edges' isovalues into a field, across the beam
+  double field_depth_sigma_mm = 8.0;  // ... and along it (the beam axis: beam_axis)
+  int beam_axis = 2;                  // x 0, y 1, z 2 (the classifier's beam_axis_of or the near field's)
   double field_prior = 0.5;     // Local: weight of the global median in the field (edges per Gaussian volume)
   // Local, clipped echoes: an edge whose crest reaches the data's ceiling
   // takes clip_fraction instead of local_fraction. The data clip when at

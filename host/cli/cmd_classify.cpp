@@ -45,6 +45,7 @@ struct ClassifyOptions {
   std::string shadow_walls = "remove";  // host/shadow_walls.hpp: weighted down by default
   double thickness = 1.0;
   double iso_fraction = AutoIsoParams().local_fraction, iso_field_sigma = AutoIsoParams().field_sigma_mm;
+  double iso_field_depth_sigma = AutoIsoParams().field_depth_sigma_mm;
   double iso_clip_fraction = AutoIsoParams().clip_fraction;
   std::optional<double> sigma;  // unset: 1 mm for variational, 0 (raw) for levoy
   VariationalParams vp;
@@ -546,6 +547,7 @@ int run_classify(const ClassifyOptions& given_options) {
     if (!given("--shell")) o.vp.thickness_mm *= scale;
     if (!given("--shell-shift")) o.vp.shell_shift_mm *= scale;
     if (!given("--iso-field-sigma")) o.iso_field_sigma *= scale;
+    if (!given("--iso-field-depth-sigma")) o.iso_field_depth_sigma *= scale;
     // beta and kappa are squared lengths (mm^2; host/variational.hpp).
     if (!given("--beta")) o.vp.beta *= scale * scale;
     if (!given("--kappa")) o.vp.kappa *= scale * scale;
@@ -647,6 +649,13 @@ int run_classify(const ClassifyOptions& given_options) {
   }
   double iso = 0;
   std::string iso_text;
+  const std::vector<std::uint8_t>* sc = mask.scanned.empty() ? nullptr : &mask.scanned;
+  // The beam axis the isovalue field, the bone cue and the shadow walls take:
+  // the near-field step's, else the data's own (one pass, when first asked).
+  const auto beam_axis_now = [&] {
+    if (beam_axis < 0) beam_axis = beam_axis_of(in, sc);
+    return beam_axis;
+  };
   if (given_iso) {
     iso = *given_iso;
   } else {
@@ -664,6 +673,8 @@ int run_classify(const ClassifyOptions& given_options) {
     ap.local_fraction = o.iso_fraction;
     ap.clip_fraction = o.iso_clip_fraction;
     ap.field_sigma_mm = o.iso_field_sigma;
+    ap.field_depth_sigma_mm = o.iso_field_depth_sigma;
+    if (ap.want_field) ap.beam_axis = beam_axis_now();
     ap.sigma_mm = o.auto_iso_sigma;
     // The local isovalue field levelled out as it is formed: the classifier
     // then works at one isovalue on data whose brightness no longer drifts
@@ -689,12 +700,6 @@ int run_classify(const ClassifyOptions& given_options) {
   // The bone cue (host/bone_cue.hpp): on the data the classifier sees.
   std::shared_ptr<const std::vector<float>> cue, walls;
   std::string cue_text = "off";
-  const std::vector<std::uint8_t>* sc = mask.scanned.empty() ? nullptr : &mask.scanned;
-  // The beam axis both take: the near-field step's, else the data's own (one pass, when first asked).
-  const auto beam_axis_now = [&] {
-    if (beam_axis < 0) beam_axis = beam_axis_of(in, sc);
-    return beam_axis;
-  };
   if (variational && cue_mode != BoneCueMode::Off) {
     step.emplace("bone cue");
     BoneCueParams bp;
@@ -766,7 +771,13 @@ void add_classify_command(CLI::App& app, Action& action) {
       ->capture_default_str()
       ->check(real_range(0, 1));
   sub->add_option("--iso-field-sigma", o->iso_field_sigma,
-                  "The local rule: Gaussian spread (mm) of the boundaries' isovalues into the isovalue field")
+                  "The local rule: Gaussian spread (mm) of the boundaries' isovalues into the isovalue field, across "
+                  "the beam (objects of different brightness lie side by side)")
+      ->capture_default_str()
+      ->check(real_range(0.5, 1000, "mm"));
+  sub->add_option("--iso-field-depth-sigma", o->iso_field_depth_sigma,
+                  "The same along the beam (gain drifts slowly with depth; a short one levels a bone's echo against "
+                  "its own shadow: docs/parameters.md)")
       ->capture_default_str()
       ->check(real_range(0.5, 1000, "mm"));
   sub->add_flag("--no-iso-field", o->no_iso_field,
