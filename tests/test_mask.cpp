@@ -1773,7 +1773,9 @@ TEST_F(CliMask, MaskFromFileAndIsoAuto) {
   const test::RunResult r =
       run({"classify", in, "--iso", "auto", "--mask", file("mask.nrrd"), "-o", file("u.nrrd")});
   ASSERT_EQ(r.status, 0) << r.err;
-  EXPECT_NE(r.out.find("(auto: local rule, the median of a field)"), std::string::npos) << r.out;
+  // The field's extent, scaled with this 12 mm volume's other lengths (x0.6).
+  EXPECT_NE(r.out.find("(auto: local rule, the median of a field 4.8 mm along z, 1.8 mm across)"), std::string::npos)
+      << r.out;
   EXPECT_NE(r.out.find(std::to_string(4 * 28 * 24) + " voxels unscanned"), std::string::npos) << r.out;
   const Volume u = read_volume(file("u.nrrd"));
   for (std::size_t i = 0; i < u.voxels(); ++i)

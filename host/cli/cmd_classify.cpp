@@ -685,6 +685,13 @@ int run_classify(const ClassifyOptions& given_options) {
                                                                : " (auto: local rule, the median of a field")
                : ap.rule == AutoIsoRule::EchoRidge ? " (auto: echo ridge"
                                                    : " (auto: edge";
+    if (ap.rule == AutoIsoRule::Local && ap.want_field) {
+      // The field's extent: long along the beam, short across it (host/auto_iso.hpp).
+      std::ostringstream t;
+      t << std::setprecision(3) << " " << ap.field_depth_sigma_mm << " mm along " << "xyz"[ap.beam_axis] << ", "
+        << ap.field_sigma_mm << " mm across";
+      iso_text += t.str();
+    }
     if (ap.rule == AutoIsoRule::Local && rep.clipped_edges) {
       // The rule for clipped echoes (host/auto_iso.hpp) was used: say so.
       std::ostringstream t;
