@@ -146,7 +146,7 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   // A small volume's length scales shrink with it (1 for every phantom of
   // the family: they are 55 mm across or more).
   const double scale = small_volume_scale(in.dims, in.spacing, kSmallVolumeMm);
-  ap.sigma_mm *= scale, ap.field_sigma_mm *= scale, ap.field_depth_sigma_mm *= scale;
+  scale_length_scales(ap, scale);
   ap.beam_axis = nf.axis;
   const LevelledVolume lv = auto_iso_levelled(in, mp, mp ? &filled : nullptr, ap);
   scale_length_scales(p, scale);

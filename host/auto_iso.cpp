@@ -624,6 +624,10 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   return iso;
 }
 
+void scale_length_scales(AutoIsoParams& p, double f) {
+  p.sigma_mm *= f, p.field_sigma_mm *= f, p.field_depth_sigma_mm *= f;
+}
+
 Volume level_isovalue(const Volume& v, const float* field, std::size_t field_size, double iso) {
   if (field_size != v.voxels()) throw std::invalid_argument("level_isovalue: field size differs from the volume");
   Volume out = v;

@@ -94,6 +94,12 @@ inline Volume level_isovalue(const Volume& v, const std::vector<float>& field, d
   return level_isovalue(v, field.data(), field.size(), iso);
 }
 
+// p's length scales times f (a small volume's, host/variational.hpp's
+// small_volume_scale): the lowpass of v~ and the field's spread along and
+// across the beam. The classify CLI does the same to the ones not given on
+// its command line.
+void scale_length_scales(AutoIsoParams& p, double f);
+
 // `classify --iso auto` for the variational classifier in one call: the
 // Local rule's isovalue (file units) taken from `v` (the mask as for
 // auto_iso), and `target` (v itself when null; with a mask, v with its

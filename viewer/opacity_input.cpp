@@ -98,7 +98,7 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   if (iso_text == "auto") {
     // The local rule's field levelled out, as classify does (host/auto_iso.hpp).
     AutoIsoParams ap;
-    ap.sigma_mm *= scale, ap.field_sigma_mm *= scale, ap.field_depth_sigma_mm *= scale;
+    scale_length_scales(ap, scale);
     ap.beam_axis = nf.axis;
     in.iso = auto_iso_level_in_place(v, mask, ap);
     in.data = std::move(v);
