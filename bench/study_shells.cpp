@@ -103,10 +103,22 @@ bool set_wall_param(ShadowWallParams& wp, const std::string& k, double x) {
 // isovalue's constants, for sweeps on training seeds (the defaults otherwise).
 std::vector<std::pair<std::string, double>> g_overrides;
 
-// near_min_ratio, near_faint_ratio, near_speckle_sds and near_stay: the
-// near-field band's constants.
+// mask_grow, mask_max_enclosed, mask_fluid_enclosed and mask_fluid_inside:
+// the scanned-region mask's constants (host/mask.hpp).
+bool set_mask_param(MaskParams& m, const std::string& k, double x) {
+  if (k == "mask_grow") m.grow = int(x);
+  else if (k == "mask_max_enclosed") m.max_enclosed = x;
+  else if (k == "mask_fluid_enclosed") m.fluid_enclosed = x;
+  else if (k == "mask_fluid_inside") m.fluid_inside = x;
+  else return false;
+  return true;
+}
+
+// near_band (0: keep the band), near_min_ratio, near_faint_ratio,
+// near_speckle_sds and near_stay: the near-field band's constants.
 bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIsoParams& ap, NearFieldParams& nf) {
-  if (k == "near_min_ratio") nf.min_ratio = x;
+  if (k == "near_band") nf.band = x != 0;
+  else if (k == "near_min_ratio") nf.min_ratio = x;
   else if (k == "near_faint_ratio") nf.faint_ratio = x;
   else if (k == "near_speckle_sds") nf.speckle_sds = x;
   else if (k == "near_faint_lines") nf.faint_lines = x;
@@ -129,11 +141,16 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
 Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveReport* rep, BoneCueMode mode,
                         BoneCueParams cue, BoneCueReport* cue_report) {
   MaskReport mr;
-  std::vector<std::uint8_t> mask = scanned_mask(in, MaskParams{}, &mr);
+  MaskParams mask_params;
+  for (const auto& [k, x] : g_overrides) set_mask_param(mask_params, k, x);
+  std::vector<std::uint8_t> mask = scanned_mask(in, mask_params, &mr);
   if (mr.unscanned == 0) mask.clear();
-  std::fprintf(stderr, "  mask: %zu unscanned (zero fill %zu)%s%s, %.3f of the fill between echoes\n", mr.unscanned,
+  std::fprintf(stderr,
+               "  mask: %zu unscanned (zero fill %zu)%s%s, %.3f of the fill between echoes, %.3f inside the hull, %.3f "
+               "outside\n",
+               mr.unscanned,
                mr.zero_fill, mr.rejected ? ", rejected as dark fluid" : "", mr.outside ? ", the part outside the data" : "",
-               mr.enclosed_share);
+               mr.enclosed_share, mr.inside_share, mr.outside_share);
   AutoIsoParams ap;
   VariationalParams p;
   NearFieldParams np;
@@ -252,7 +269,9 @@ int main(int argc, char** argv) {
         VariationalParams vp;
         AutoIsoParams ap;
         NearFieldParams np;
-        if (eq == std::string::npos || !apply_override(kv.substr(0, eq), 0.0, vp, ap, np)) {
+        MaskParams mp;
+        if (eq == std::string::npos ||
+            !(apply_override(kv.substr(0, eq), 0.0, vp, ap, np) || set_mask_param(mp, kv.substr(0, eq), 0.0))) {
           std::fprintf(stderr, "softshell_study_shells: unknown --set key %s\n", kv.substr(0, eq).c_str());
           return 2;
         }

@@ -39,11 +39,18 @@ namespace softshell {
 //     the log-compression floor: 11-37 % on low-dynamic-range phantoms,
 //     at most 1.7 % on the five PLUS reconstructions), there is no unscanned
 //     region. (An object floating in a void of exact zeros with nothing
-//     beyond it along the beam still reads as unscanned: a limit of the rule.)
+//     beyond it along the beam has few zeros between echoes: 2b'.)
 //     min_faces (off by default) also asks for scanned voxels on 2 % of that
 //     many faces: the PLUS reconstructions reach only 0-2 faces so, with
 //     their dim edge rim, so it cannot tell them apart.
-//  2c. unless what lies outside the data: when 2b finds dark fluid, the
+//  2b'. also dark fluid when more than fluid_enclosed (1 %) of the fill lies
+//     between echoes along the beam and more than fluid_inside (5 %) of it
+//     inside the data's hull (2c's lines): an object in a void of zeros
+//     with nothing above it. A sweep's gaps between frames lie inside its
+//     hull too, but with no echo above or below them. 2c follows, with the
+//     zeros beyond a line's last sample kept unscanned (a shadow running out
+//     to the sector's end), and then step 4's rim (not step 3).
+//  2c. unless what lies outside the data: when 2b or 2b' finds dark fluid, the
 //     fill's voxels with no nonzero sample on one side or the other along
 //     each of 49 lines through them (directions with components in
 //     [-2, 2]) lie outside the data's hull -- beyond a scan's convex sector
@@ -51,12 +58,16 @@ namespace softshell {
 //     fluid or shadow and scanned. Before the first sample of a beam line
 //     the fill counts as outside only when the scan meets the face at the
 //     probe (kProbeShare of its lines start there): else it is fluid in
-//     front of the object. Steps 3 and 4 then take nothing more: such a
-//     fill can border an object in fluid.
+//     front of the object. Steps 3 and 4 then take nothing more (after 2b,
+//     step 4 does after 2b'): such a fill can border an object in fluid.
 struct MaskParams {
   double min_fraction = 0.001;
   int beam_axis = 2;          // the beam's axis (x 0, y 1, z 2)
   double max_enclosed = 0.05;
+  // 2b': dark fluid also when more than fluid_enclosed of the fill lies
+  // between echoes along the beam and more than fluid_inside of it inside
+  // the data's hull (2c's between_data).
+  double fluid_enclosed = 0.01, fluid_inside = 0.05;
   int min_faces = 0;
   int solid = 2;  // cube half-width of step 1, voxels (0: every zero voxel, the plain rule)
   int grow = 2;
@@ -74,6 +85,8 @@ struct MaskReport {
   bool rejected = false;              // step 2b found dark fluid, not an unscanned region
   bool outside = false;               // step 2c kept the part of such a fill outside the data's hull
   double outside_share = 0;           // step 2c: that part's share of the zero fill
+  double inside_share = 0;            // step 2b': the fill's share inside the data's hull (when measured)
+  bool fluid_inside = false;          // step 2b' (not 2b) found the dark fluid
 };
 
 // The mask derived from the zero fill; deterministic, iterative (no

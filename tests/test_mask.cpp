@@ -899,7 +899,8 @@ TEST(Mask, SpeckleZerosThatPercolateAreNotUnscanned) {
   scanned_mask(v, plain, &r);
   EXPECT_EQ(r.unscanned_regions, 0u) << "scattered zeros lie between nonzero samples along the beam: no unscanned region";
   EXPECT_TRUE(r.rejected);
-  plain.max_enclosed = 1.0;  // without step 2b, the plain rule takes them
+  plain.max_enclosed = 1.0;  // without steps 2b and 2b', the plain rule takes them
+  plain.fluid_inside = 2.0;
   scanned_mask(v, plain, &r);
   EXPECT_GE(r.unscanned_regions, 1u);  // the huge one (and, at 0.1 %, a few clusters of 111 zeros or more)
   EXPECT_GT(r.zero_fill, v.voxels() / 5);
@@ -946,6 +947,88 @@ TEST(Mask, DarkFluidAtTheCompressionFloorIsNotUnscanned) {
   EXPECT_GE(count_unscanned(scanned_mask(across_y, MaskParams{}, &r)), 12u * 36 * 44);
   EXPECT_FALSE(r.rejected);
   EXPECT_LT(r.enclosed_share, 0.01);
+}
+
+// A ball of speckle (a head) over a patch of tissue, in a void of exact
+// zeros with nothing above it (fresh randomised faces 915, 928, 1116).
+bool in_void_ball(std::size_t x, std::size_t y, std::size_t z) {
+  const double dx = double(x) - 23.5, dy = double(y) - 23.5, dz = double(z) - 20.0;
+  return dx * dx + dy * dy + dz * dz <= 8.0 * 8.0;
+}
+Volume ball_in_a_void() {
+  Volume v = speckle_volume({48, 48, 48}, test::seed() + 21);
+  for (std::size_t z = 0; z < 48; ++z)
+    for (std::size_t y = 0; y < 48; ++y)
+      for (std::size_t x = 0; x < 48; ++x)
+        if (!in_void_ball(x, y, z) && (z < 42 || x < 10 || x >= 38 || y < 10 || y >= 38)) v.at(x, y, z) = 0.0f;
+  return v;
+}
+
+TEST(Mask, AnObjectInAVoidOfZerosIsFluidNotAnUnsweptRegion) {
+  // ball_in_a_void(): only the fluid between the ball and the floor lies between echoes along
+  // the beam (a few % of the fill: step 2b alone took the void for unswept,
+  // the ball's outer 2 voxels with it and the fluid over it), but much of
+  // the fill lies inside the data's hull: step 2b' calls it fluid, and 2c
+  // keeps unscanned only what lies outside the data.
+  const Dims3 dims{48, 48, 48};
+  const Volume v = ball_in_a_void();
+  const auto in_ball = in_void_ball;
+  MaskReport r;
+  const auto m = scanned_mask(v, MaskParams{}, &r);
+  EXPECT_GT(r.enclosed_share, 0.01);
+  EXPECT_LT(r.enclosed_share, 0.05);  // 2b alone: unswept
+  EXPECT_GT(r.inside_share, 0.05);
+  EXPECT_TRUE(r.fluid_inside);
+  EXPECT_TRUE(r.outside);
+  EXPECT_FALSE(r.rejected);
+  std::size_t ball = 0, ball_unscanned = 0, above = 0, above_scanned = 0, between = 0, between_scanned = 0;
+  for (std::size_t z = 0; z < 48; ++z)
+    for (std::size_t y = 0; y < 48; ++y)
+      for (std::size_t x = 0; x < 48; ++x) {
+        const bool on = m[v.index(x, y, z)] != 0;
+        const double rr = (double(x) - 23.5) * (double(x) - 23.5) + (double(y) - 23.5) * (double(y) - 23.5);
+        if (in_ball(x, y, z)) ++ball, ball_unscanned += !on;
+        else if (rr < 36.0 && z >= 1 && z < 10) ++above, above_scanned += on;  // the fluid over the ball (the face
+                                                                                // plane z = 0 is step 3b's)
+        else if (rr < 36.0 && z > 30 && z < 42) ++between, between_scanned += on;  // under it, over the floor
+      }
+  EXPECT_EQ(ball_unscanned, 0u);  // no rim taken from the object: the fluid over it is scanned
+  EXPECT_EQ(above_scanned, above);
+  EXPECT_EQ(between_scanned, between);
+  // The rim (step 4) still grows from what lies outside the data: the
+  // patch's edge beside lines with no data at all, as a sweep's edge.
+  EXPECT_EQ(m[v.index(10, 24, 45)], 0);
+  EXPECT_EQ(m[v.index(11, 24, 45)], 0);
+  EXPECT_EQ(m[v.index(12, 24, 45)], 1);
+  // With 2b' off (fluid_inside above 1) the old rule: the void is unswept,
+  // the fluid over the ball and the ball's outer voxels with it.
+  MaskParams old;
+  old.fluid_inside = 2;
+  const auto mo = scanned_mask(v, old, &r);
+  EXPECT_FALSE(r.fluid_inside);
+  EXPECT_FALSE(r.outside);
+  std::size_t ball_taken = 0;
+  for (std::size_t i = 0; i < mo.size(); ++i) {
+    const std::size_t x = i % 48, y = (i / 48) % 48, z = i / (48 * 48);
+    ball_taken += in_ball(x, y, z) && mo[i] == 0;
+  }
+  EXPECT_GT(ball_taken, 500u);
+  // A sweep's gap between frames: a wedge of zeros through the whole depth,
+  // inside the data's hull but between no echoes along the beam, beside an
+  // unswept slab. Still an unswept region, with its rim.
+  Volume sweep = speckle_volume(dims, test::seed() + 22);
+  for (std::size_t z = 0; z < 48; ++z)
+    for (std::size_t y = 0; y < 48; ++y)
+      for (std::size_t x = 0; x < 48; ++x)
+        if (x < 8 || (x >= 20 && x < 20 + y / 6)) sweep.at(x, y, z) = 0.0f;
+  const auto ms = scanned_mask(sweep, MaskParams{}, &r);
+  EXPECT_LT(r.enclosed_share, 0.01);
+  EXPECT_FALSE(r.fluid_inside);
+  EXPECT_FALSE(r.outside);
+  EXPECT_FALSE(r.rejected);
+  EXPECT_EQ(ms[sweep.index(3, 24, 24)], 0);
+  EXPECT_EQ(ms[sweep.index(8, 24, 24)], 0);  // the rim
+  EXPECT_EQ(ms[sweep.index(21, 40, 24)], 0);  // the gap
 }
 
 TEST(Mask, PhantomsHaveNoUnscannedRegion) {
@@ -1763,6 +1846,22 @@ TEST_F(CliMask, AFanWithZeroShadowsHasItsWedgesMaskedAndSaysSo) {
   const Volume u = read_volume(file("u.nrrd"));
   for (std::size_t i = 0; i < u.voxels(); ++i)
     if (!mask[i]) ASSERT_EQ(u.data[i], 0.0f) << "unscanned voxel " << i;
+}
+
+TEST_F(CliMask, AnObjectInAVoidOfZerosIsDrawnAndTheFluidNamed) {
+  // classify on ball_in_a_void(): step 2b' names the fluid, keeps the rim,
+  // and the ball's top (facing the probe) is drawn; before 2b' the rim and
+  // the fluid over it were masked and u was 0 there.
+  write_volume(file("ball.nrrd"), ball_in_a_void());
+  const test::RunResult r = run({"classify", file("ball.nrrd"), "--iso", "auto", "-o", file("u.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("the part of the zero fill outside the data"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("2-voxel rim"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("% inside the data's hull"), std::string::npos) << r.out;
+  const Volume u = read_volume(file("u.nrrd"));
+  float top = 0;
+  for (std::size_t z = 9; z <= 15; ++z) top = std::max(top, u.at(23, 23, z));
+  EXPECT_GT(top, 0.3f) << "the ball's top is not drawn";
 }
 
 TEST_F(CliMask, MaskFromFileAndIsoAuto) {

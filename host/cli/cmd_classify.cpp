@@ -127,8 +127,12 @@ DataMask make_mask(const std::string& option, const Volume& in) {
     if (r.outside) {
       std::ostringstream t;
       t << "auto: " << percent(r.unscanned) << " (the part of the zero fill outside the data: " << std::fixed
-        << std::setprecision(1) << 100 * r.outside_share << " % of it, no rim; the rest is dark fluid or shadow, "
-        << 100 * r.enclosed_share << " % of the fill lying between echoes along the beam)";
+        << std::setprecision(1) << 100 * r.outside_share << " % of it, "
+        << (r.fluid_inside ? std::to_string(params.grow) + "-voxel rim" : std::string("no rim"))
+        << "; the rest is dark fluid or shadow, "
+        << 100 * r.enclosed_share << " % of the fill lying between echoes along the beam";
+      if (r.fluid_inside) t << ", " << 100 * r.inside_share << " % inside the data's hull";
+      t << ")";
       m.text = t.str();
     } else if (r.rejected) {
       std::ostringstream t;
