@@ -124,6 +124,7 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "near_faint_lines") nf.faint_lines = x;
   else if (k == "near_layer_gap") nf.layer_gap_mm = x;
   else if (k == "near_stay") nf.stay_mm = x;
+  else if (k == "near_layer_dip") nf.layer_dip = x;
   else if (k == "iso_fraction") ap.local_fraction = x;
   else if (k == "iso_field_sigma") ap.field_sigma_mm = x;
   else if (k == "iso_field_depth_sigma") ap.field_depth_sigma_mm = x;

@@ -177,6 +177,11 @@ struct NearFieldParams {
   double stay_mm = 3.0;    // the band ends where the profile stays below halfway this long
   double layer_gap_mm = 6.0;  // a layered band (its lines' median rises again within this under its first layer):
                               // each line's band ends where it stays below halfway this long (0: never)
+  // ... or when that median stays above halfway through a dip of layer_dip
+  // under the brighter of the layers beside it, the next within layer_gap_mm
+  // (a fat layer that only some lines' skin is bright enough to fall below
+  // halfway over; 0: the test above alone).
+  double layer_dip = 0.2;
   double min_ratio = 0.3;  // the top brighter than below it by this share of the top
   // ... or by this smaller share when that is also speckle_sds of the
   // speckle's spread below the top (NearFieldReport::speckle_sd), on at

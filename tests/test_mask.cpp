@@ -519,6 +519,40 @@ TEST(NearField, ALayeredBandWithAThickFatLayerIsFoundToItsMuscle) {
   EXPECT_LT(r.depth_mm, 4.0);
 }
 
+TEST(NearField, AFatLayerThatTheLinesMedianKeepsAboveHalfwayIsStillALayer) {
+  // Skin, fat, muscle (200, 3 mm), then dark tissue (12). Under a bright skin
+  // (240, half the lines) the fat is dark (105) and each of those lines falls
+  // below its own halfway through it; under a dimmer skin (180) the fat is
+  // 150 and the lines do not. The lines' median dips at the fat (about 130)
+  // but stays above halfway (about 110), so the old test saw one layer and
+  // the bright-skin lines ended at the fat, their muscle left to be drawn
+  // (fresh randomised face 1308: 7.1 mm of an 11 mm band removed). The dip
+  // of more than layer_dip under the peaks beside it makes the band layered.
+  const double h = 0.5;
+  const Volume v = speckled({48, 48, 70}, h,
+                            [](double x, double, double z) {
+                              const bool bright = x < 12.0;
+                              if (z < 1.5) return bright ? 240.0 : 180.0;
+                              if (z < 6.0) return bright ? 105.0 : 150.0;
+                              return z < 9.0 ? 200.0 : 12.0;
+                            },
+                            test::seed() + 34);
+  NearFieldReport r;
+  const auto band = near_field_band(v, nullptr, NearFieldParams{}, &r);
+  ASSERT_TRUE(r.found);
+  EXPECT_TRUE(r.layered);
+  EXPECT_NEAR(r.depth_mm, 9.0 + NearFieldParams{}.margin_mm, 1.0);
+  EXPECT_EQ(band[v.index(12, 24, 16)], 1);  // 8 mm under the bright skin: the muscle
+  EXPECT_EQ(band[v.index(36, 24, 16)], 1);
+  EXPECT_EQ(band[v.index(12, 24, 30)], 0);
+  NearFieldParams old;
+  old.layer_dip = 0;
+  const auto band_old = near_field_band(v, nullptr, old, &r);
+  ASSERT_TRUE(r.found);
+  EXPECT_FALSE(r.layered);
+  EXPECT_EQ(band_old[v.index(6, 24, 16)], 0);  // the bright-skin lines ended at the fat
+}
+
 TEST(NearField, ABoneCloseUnderTheBandOnAFewLinesIsNoLayer) {
   // One bright layer (220, 4 mm) over tissue (40), and a bone (200, 2 mm
   // thick) 3 mm under it below a 5 mm wide strip of lines, with its shadow
