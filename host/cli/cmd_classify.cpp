@@ -795,7 +795,8 @@ void add_classify_command(CLI::App& app, Action& action) {
                 "With the local rule: one isovalue (the median of the edges') instead of a field that follows "
                 "depth and local brightness");
   sub->add_option("--mask", o->mask,
-                  "Scanned region: auto (the solid zero fill at the border is unscanned), none, or a volume FILE whose "
+                  "Scanned region: auto (the solid zero fill at the border is unscanned, except dark fluid: zeros "
+                  "between echoes, or around an object inside the data's hull), none, or a volume FILE whose "
                   "nonzero voxels are scanned; unscanned voxels get opacity 0 (docs/real-data.md)")
       ->capture_default_str()
       ->type_name("FILE|auto|none");
