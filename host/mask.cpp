@@ -1159,20 +1159,20 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
       // 113 and 108, halfway 69; 7.1 mm of an 11 mm band removed).
       k = 0;
       while (k < Pc.size() && top_k > k && Pc[k] < half) ++k;
+      const double keep = 1.0 - params.layer_dip;  // a dip is at most this share of a layer beside it
       double peak = -1;
-      for (; k < Pc.size() && Pc[k] >= half && !gap; ++k) {
+      for (; k < Pc.size() && Pc[k] >= half; ++k) {
         peak = std::max(peak, Pc[k]);
-        if (Pc[k] > (1.0 - params.layer_dip) * peak) continue;
-        double next = -1;
-        std::size_t j = k + 1;
-        for (; j < Pc.size() && j <= k + gap_k && Pc[j] >= half; ++j) {
-          next = std::max(next, Pc[j]);
-          if (Pc[k] <= (1.0 - params.layer_dip) * next) break;
+        if (Pc[k] > keep * peak) continue;
+        std::size_t j = k + 1;  // the next layer: the first sample the dip is that far under
+        while (j < Pc.size() && j <= k + gap_k && Pc[j] >= half && Pc[k] > keep * Pc[j]) ++j;
+        if (j < Pc.size() && j <= k + gap_k && Pc[j] >= half) {
+          gap = true;
+          k = j;
+          break;
         }
-        if (j < Pc.size() && j <= k + gap_k && Pc[j] >= half && Pc[k] <= (1.0 - params.layer_dip) * next) gap = true, k = j;
       }
-      if (gap)
-        while (k < Pc.size() && Pc[k] >= half) ++k;  // to the end of the next layer
+      while (gap && k < Pc.size() && Pc[k] >= half) ++k;  // to the end of the next layer
     }
     if (gap) {
       std::size_t run = 0;                                    // the next layer, then a fall that stays
