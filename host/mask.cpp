@@ -814,7 +814,11 @@ namespace {
 // point between the band and it (the gap, from t = 1) by at least
 // echo_rise of the band's top over that gap. Then, in every band line, the
 // voxels from where E rises above halfway between the gap and the peak to
-// where it falls below it again, margin_mm either way, join the band.
+// where it falls below it again, margin_mm either way, join the band. Each
+// interface has its own copy (the fat's bottom at twice its depth lies
+// between the band and the deepest interface's copy), so up to
+// echo_layers - 1 further layers are looked for the same way anywhere under
+// the band, each bounded by the gap on both sides ("Every echo layer").
 template <class Voxel>
 void echo_layer(const HostVector<float>& lp, const std::vector<long>& skin,
                 const std::vector<double>& bottom_mm, NearFieldReport& rep, std::vector<std::uint8_t>& band,
@@ -849,39 +853,58 @@ void echo_layer(const HostVector<float>& lp, const std::vector<long>& skin,
       E[s] = x[x.size() / 2];
     }
   });
-  std::size_t peak = steps;
-  for (std::size_t s = 0; s < steps; ++s) {
-    const double t = 1.0 + double(s) * dt;
-    if (t < params.echo_from || std::isnan(E[s])) continue;
-    if (peak == steps || E[s] > E[peak]) peak = s;
-  }
-  if (peak == steps) return;
-  std::size_t gap = 0;
-  bool any = false;
-  for (std::size_t s = 0; s < peak; ++s)
-    if (!std::isnan(E[s]) && (!any || E[s] < E[gap])) gap = s, any = true;
-  if (!any) return;
-  const double rise = E[peak] - E[gap];
-  if (!(rise >= params.echo_rise * (rep.top - E[gap])) || !(rise > 0)) return;
-  // The layer's extent in t: halfway between the gap and the peak.
-  const double half = E[gap] + 0.5 * rise;
-  std::size_t lo = peak, hi = peak;
-  while (lo > gap && !std::isnan(E[lo - 1]) && E[lo - 1] >= half) --lo;
-  while (hi + 1 < steps && !std::isnan(E[hi + 1]) && E[hi + 1] >= half) ++hi;
-  rep.echo.found = true;
-  rep.echo.from = 1.0 + double(lo) * dt, rep.echo.to = 1.0 + double(hi) * dt;
-  rep.echo.peak = 1.0 + double(peak) * dt;
-  rep.echo.gap = E[gap], rep.echo.level = E[peak];
-  for (std::size_t l : band_lines) {
-    const std::size_t a = l % n_u, bb = l / n_u;
-    const double from = rep.echo.from * bottom_mm[l] - params.margin_mm;
-    const double to = rep.echo.to * bottom_mm[l] + params.margin_mm;
-    for (std::size_t z = std::size_t(skin[l]); z < n_ax; ++z) {
-      const double depth = double(long(z) - skin[l]) * hz;
-      if (depth >= to) break;
-      if (depth < from) continue;
-      std::uint8_t& b = band[voxel(a, bb, z)];
-      if (!b) b = 1, ++rep.echo.voxels, ++rep.voxels;
+  // The layers, brightest first: the first at t >= echo_from, each further
+  // one anywhere under the band (t > 1) outside the layers already taken,
+  // and bounded on both sides (E below its halfway mark before and after
+  // it: a layer, not a rising trend).
+  // A candidate that fails as a further layer is passed over (the band's
+  // own flank just under it, say) and the next brightest tried.
+  std::vector<std::uint8_t> taken(steps, 0), tried(steps, 0);
+  for (int k = 0; k < std::max(params.echo_layers, 0);) {
+    std::size_t peak = steps;
+    for (std::size_t s = 0; s < steps; ++s) {
+      const double t = 1.0 + double(s) * dt;
+      if ((k == 0 && t < params.echo_from) || (k > 0 && s == 0) || taken[s] || tried[s] || std::isnan(E[s])) continue;
+      if (peak == steps || E[s] > E[peak]) peak = s;
+    }
+    if (peak == steps) return;
+    tried[peak] = 1;
+    std::size_t gap = 0;
+    bool any = false;
+    for (std::size_t s = 0; s < peak; ++s)
+      if (!std::isnan(E[s]) && (!any || E[s] < E[gap])) gap = s, any = true;
+    const double rise = any ? E[peak] - E[gap] : 0.0;
+    const bool rises = any && rise >= params.echo_rise * (rep.top - E[gap]) && rise > 0;
+    if (k == 0 && !rises) return;
+    if (!rises) continue;
+    // The layer's extent in t: halfway between the gap and the peak.
+    const double half = E[gap] + 0.5 * rise;
+    std::size_t lo = peak, hi = peak;
+    while (lo > gap && !taken[lo - 1] && !std::isnan(E[lo - 1]) && E[lo - 1] >= half) --lo;
+    while (hi + 1 < steps && !taken[hi + 1] && !std::isnan(E[hi + 1]) && E[hi + 1] >= half) ++hi;
+    if (k > 0 && (lo == gap || hi + 1 >= steps || std::isnan(E[hi + 1]) || taken[hi + 1] || taken[lo - 1])) continue;
+    for (std::size_t s = lo; s <= hi; ++s) taken[s] = 1;
+    const double from_t = 1.0 + double(lo) * dt, to_t = 1.0 + double(hi) * dt;
+    if (k == 0) {
+      rep.echo.found = true;
+      rep.echo.from = from_t, rep.echo.to = to_t;
+      rep.echo.peak = 1.0 + double(peak) * dt;
+      rep.echo.gap = E[gap], rep.echo.level = E[peak];
+    } else {
+      rep.echo.from = std::min(rep.echo.from, from_t), rep.echo.to = std::max(rep.echo.to, to_t);
+    }
+    ++rep.echo.layers, ++k;
+    for (std::size_t l : band_lines) {
+      const std::size_t a = l % n_u, bb = l / n_u;
+      const double from = from_t * bottom_mm[l] - params.margin_mm;
+      const double to = to_t * bottom_mm[l] + params.margin_mm;
+      for (std::size_t z = std::size_t(skin[l]); z < n_ax; ++z) {
+        const double depth = double(long(z) - skin[l]) * hz;
+        if (depth >= to) break;
+        if (depth < from) continue;
+        std::uint8_t& b = band[voxel(a, bb, z)];
+        if (!b) b = 1, ++rep.echo.voxels, ++rep.voxels;
+      }
     }
   }
 }

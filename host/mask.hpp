@@ -201,8 +201,13 @@ struct NearFieldParams {
   // The band's echo layer (near_field_band): a copy of the band's deepest
   // interface looked for at echo_from ... echo_to x each line's band depth,
   // rising above the gap under the band by echo_rise of the band's top.
+  // Up to echo_layers such layers, brightest first (each interface of the
+  // band reverberates at its own multiples: a fascia's copy can lie between
+  // the band and the deepest interface's); after the first, anywhere under
+  // the band, each bounded by the gap on both sides (1: the first alone).
   bool echo_layer = true;
   double echo_from = 1.2, echo_to = 2.4, echo_rise = 0.1;
+  int echo_layers = 3;
   ReverbParams reverb_params;
 };
 struct NearFieldReport {
@@ -219,7 +224,8 @@ struct NearFieldReport {
   ReverbReport reverb;          // remove_near_field with params.reverb
   struct Echo {
     bool found = false;
-    double from = 0, to = 0, peak = 0;  // the layer, in units of each line's band depth
+    double from = 0, to = 0, peak = 0;  // the layer(s) (from the shallowest to the deepest) and the first's peak, in units of each line's band depth
+    int layers = 0;                     // layers found (params.echo_layers at most)
     double gap = 0, level = 0;          // the echo profile at the gap and at the peak (file units)
     std::size_t voxels = 0;             // voxels it added to the band
   } echo;                       // the band's echo layer (params.echo_layer)

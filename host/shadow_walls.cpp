@@ -113,7 +113,7 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
           }
           // Only where the classifier could draw it: the bright side above
           // the isovalue (the dark side, in shadow, is below it).
-          if (!(sample(vs.data, bright[0], bright[1], bright[2]) > iso)) continue;
+          if (!(sample(vs.data, bright[0], bright[1], bright[2]) > iso - params.bright_mm * m)) continue;
           wall.data[i] = float(sample(shadow, dark[0], dark[1], dark[2]) *
                                (1.0 - sample(shadow, bright[0], bright[1], bright[2])));
         }

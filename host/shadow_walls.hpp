@@ -34,6 +34,7 @@ struct ShadowWallParams {
   double reach_mm = 1.5;       // the dark side is probed this far down the gradient
   double smooth_mm = 0.5;      // the wall indicator's lowpass before the weight is taken
   double gap_mm = 6.0;         // shadow only this far below the deepest bright voxel above
+  double bright_mm = 0.0;      // the bright side within this far of the isovalue (its value over iso - bright_mm |grad|)
 };
 
 // The constants for a classification with `p`: both lowpasses are p's

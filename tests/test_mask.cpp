@@ -579,14 +579,17 @@ TEST(NearField, ABoneCloseUnderTheBandOnAFewLinesIsNoLayer) {
 // waving across the probe, b(x) = 7 + 1.5 sin(2 pi x / 24 mm), over dark
 // fluid (30), and optionally the band's echo: a layer of mean `echo` 1.5 mm
 // thick centred at twice b(x), under the dark gap; `object` adds a bright
-// slab (200) from `object_mm` down over the lines with x < 6 mm.
-Volume band_with_echo(double echo, double object_mm, std::uint64_t seed) {
+// slab (200) from `object_mm` down over the lines with x < 6 mm; `echo2` a
+// second layer like the first at 1.35 x b(x), between the band and it (the
+// copy of a shallower interface).
+Volume band_with_echo(double echo, double object_mm, std::uint64_t seed, double echo2 = 0) {
   const double h = 0.5;
   return speckled({48, 32, 90}, h,
                   [&](double x, double, double z) {
                     const double b = 7.0 + 1.5 * std::sin(2 * M_PI * x / 24.0);
                     if (z < b) return z < 2.0 ? 220.0 : z < 4.0 ? 150.0 : 210.0;
                     if (echo > 0 && std::fabs(z - 2 * b) < 0.75) return echo;
+                    if (echo2 > 0 && std::fabs(z - 1.35 * b) < 0.75) return echo2;
                     if (object_mm > 0 && x < 6.0 && z >= object_mm) return 200.0;
                     return 30.0;
                   },
@@ -605,6 +608,7 @@ TEST(NearField, TheBandsEchoAtTwiceItsDepthJoinsTheBand) {
   ASSERT_TRUE(r.found);
   ASSERT_TRUE(r.echo.found);
   EXPECT_NEAR(r.echo.peak, 2.0, 0.15);
+  EXPECT_EQ(r.echo.layers, 1);  // no further layer in the gap or below
   EXPECT_GT(r.echo.voxels, 0u);
   for (std::size_t x : {12u, 36u}) {  // 6 mm: b = 8.5 (crest), 18 mm: b = 5.5 (trough)
     const double b = 7.0 + 1.5 * std::sin(2 * M_PI * double(x) * h / 24.0);
@@ -623,6 +627,41 @@ TEST(NearField, TheBandsEchoAtTwiceItsDepthJoinsTheBand) {
   EXPECT_EQ(r.voxels - r.echo.voxels, r_off.voxels);
 }
 
+TEST(NearField, EveryEchoLayerUnderTheBandJoinsIt) {
+  // Two copies under the band: the brightest (90) at twice its depth, a
+  // fainter one (70) at 1.35 x, between the band and the first, each over
+  // the dark gap (30) on both sides. Both join the band, on the wave's crest
+  // and trough alike; the gaps between them and the fluid below stay. With
+  // echo_layers = 1 only the brightest does (the rule before 2026-11-27).
+  const double h = 0.5;
+  const Volume v = band_with_echo(90.0, 0, test::seed() + 9, 70.0);
+  NearFieldReport r;
+  const auto band = near_field_band(v, nullptr, NearFieldParams{}, &r);
+  ASSERT_TRUE(r.found);
+  ASSERT_TRUE(r.echo.found);
+  EXPECT_EQ(r.echo.layers, 2);
+  EXPECT_NEAR(r.echo.peak, 2.0, 0.15);
+  EXPECT_NEAR(r.echo.from, 1.35, 0.15);
+  NearFieldParams one;
+  one.echo_layers = 1;
+  NearFieldReport r1;
+  const auto band1 = near_field_band(v, nullptr, one, &r1);
+  EXPECT_EQ(r1.echo.layers, 1);
+  EXPECT_NEAR(r1.echo.from, 2.0, 0.15);
+  for (std::size_t x : {12u, 36u}) {  // b = 8.5 (crest), 5.5 (trough)
+    const double b = 7.0 + 1.5 * std::sin(2 * M_PI * double(x) * h / 24.0);
+    const auto at = [&](const std::vector<std::uint8_t>& m, double z_mm) {
+      return m[v.index(x, 16, std::size_t(std::lround(z_mm / h)))];
+    };
+    EXPECT_EQ(at(band, 1.35 * b), 1) << "x " << x;
+    EXPECT_EQ(at(band, 2 * b), 1) << "x " << x;
+    if (b > 8) EXPECT_EQ(at(band, 1.675 * b), 0) << "x " << x;  // the gap between them (at the trough the margins close it)
+    EXPECT_EQ(at(band, 2 * b + 4.0), 0) << "x " << x;
+    EXPECT_EQ(at(band1, 1.35 * b), 0) << "x " << x;
+    EXPECT_EQ(at(band1, 2 * b), 1) << "x " << x;
+  }
+}
+
 TEST(NearField, NoEchoAFaintOneOrAnObjectUnderAFewLinesAddNothing) {
   // Without an echo, or with one only 5 % of the band over the gap (under
   // echo_rise), or with a bright object at 1.8 x the band's depth under an
@@ -634,6 +673,7 @@ TEST(NearField, NoEchoAFaintOneOrAnObjectUnderAFewLinesAddNothing) {
     const auto band = near_field_band(v, nullptr, NearFieldParams{}, &r);
     ASSERT_TRUE(r.found) << echo << " " << object_mm;
     EXPECT_FALSE(r.echo.found) << echo << " " << object_mm;
+    EXPECT_EQ(r.echo.layers, 0);
     EXPECT_EQ(r.echo.voxels, 0u);
     if (object_mm > 0) EXPECT_EQ(band[v.index(4, 16, 28)], 0);  // 14 mm under x = 2 mm: the object
   }

@@ -615,7 +615,8 @@ int run_classify(const ClassifyOptions& given_options) {
       if (nf.faint) t << ", a faint band: speckle spread " << std::setprecision(1) << nf.speckle_sd;
       t << "; --near-field keep to draw it)";
       if (nf.echo.found)
-        t << ", with its echo at " << std::setprecision(2) << nf.echo.from << "-" << nf.echo.to
+        t << ", with its " << (nf.echo.layers > 1 ? std::to_string(nf.echo.layers) + " echo layers" : std::string("echo"))
+          << " at " << std::setprecision(2) << nf.echo.from << "-" << nf.echo.to
           << " x the band's depth (" << nf.echo.voxels << " of those voxels)";
     } else if (nf.too_deep)
       t << "; near field kept: the bright band (" << std::fixed << std::setprecision(1) << nf.depth_mm
@@ -818,8 +819,8 @@ void add_classify_command(CLI::App& app, Action& action) {
       ->check(one_of({"remove", "keep"}));
   sub->add_option("--near-field", o->near_field,
                   "remove: the bright layered band under the probe (skin, fat, muscle) is found from the depth "
-                  "profile and held at u = 0 like unscanned voxels, with its echo (a fainter copy of the band's "
-                  "deepest layer at about twice its depth) when there is one; keep: classify it like the rest")
+                  "profile and held at u = 0 like unscanned voxels, with its echoes (fainter copies of the band's "
+                  "layers at about twice their depth, up to three) when there are any; keep: classify it like the rest")
       ->capture_default_str()
       ->type_name("remove|keep")
       ->check(one_of({"remove", "keep"}));
