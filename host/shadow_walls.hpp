@@ -34,7 +34,11 @@ struct ShadowWallParams {
   double reach_mm = 1.5;       // the dark side is probed this far down the gradient
   double smooth_mm = 0.5;      // the wall indicator's lowpass before the weight is taken
   double gap_mm = 6.0;         // shadow only this far below the deepest bright voxel above
-  double bright_mm = 0.0;      // the bright side within this far of the isovalue (its value over iso - bright_mm |grad|)
+  // The bright side at most this far under the isovalue by the gradient
+  // (its value above iso - bright_mm |grad v|). 0 (the default): above the
+  // isovalue. Half the shell (1 mm) was tried and not kept
+  // (docs/parameters.md, "Shadow walls beside tissue under the isovalue").
+  double bright_mm = 0.0;
 };
 
 // The constants for a classification with `p`: both lowpasses are p's

@@ -66,6 +66,37 @@ TEST(ShadowWalls, TheSidesOfAShadowAreWeightedDownBelowTheGapAndNothingElse) {
   EXPECT_LT(at_mm(wd, v, 10.0, 6.0, 30.0), 0.5f);
 }
 
+TEST(ShadowWalls, AWallWhoseBrightSideLiesJustUnderTheIsovalueIsAWallWithBrightMm) {
+  // The isovalue (160) between the tissue (150) and the bar (240): the
+  // tissue beside the shadow lies under it, but within 1 mm of it by the
+  // gradient. With bright_mm 1 its walls are weighted down; by default
+  // (bright_mm 0: the bright side above the isovalue) they are not. The
+  // lowpassed bar's flank over the tissue beside it also counts as an
+  // occluder at this isovalue, so the weighted band reaches about 1 mm into
+  // the tissue: each side's minimum within 2 mm of the shadow's edge is
+  // looked at. Tissue away from the shadow and the shadow's first 6 mm keep
+  // their edges either way.
+  const Volume v = bar_over_shadow(test::seed() + 11);
+  ShadowWallParams near;
+  near.bright_mm = 1.0;
+  const std::vector<float> w = shadow_wall_weight(test::runtime(), v, nullptr, 160.0, near);
+  const std::vector<float> w0 = shadow_wall_weight(test::runtime(), v, nullptr, 160.0, ShadowWallParams{});
+  const auto lowest = [&](const std::vector<float>& m, double x0, double x1, double z) {
+    float lo = 1.0f;
+    for (double x = x0; x <= x1 + 1e-9; x += kH) lo = std::min(lo, at_mm(m, v, x, 6.0, z));
+    return lo;
+  };
+  for (double z : {18.0, 24.0, 30.0}) {
+    EXPECT_LT(lowest(w, 8.0, 10.5, z), 0.5f) << "left wall at " << z << " mm";
+    EXPECT_LT(lowest(w, 13.5, 16.0, z), 0.5f) << "right wall at " << z << " mm";
+    EXPECT_GT(lowest(w0, 8.0, 10.5, z), 0.99f) << "left wall at " << z << " mm, bright side above the isovalue";
+    EXPECT_GT(lowest(w0, 13.5, 16.0, z), 0.99f) << "right wall at " << z << " mm, bright side above the isovalue";
+    EXPECT_FLOAT_EQ(at_mm(w, v, 20.0, 6.0, z), 1.0f) << "tissue away from the shadow";
+    EXPECT_FLOAT_EQ(at_mm(w, v, 3.0, 6.0, z), 1.0f) << "tissue away from the shadow";
+  }
+  EXPECT_GT(lowest(w, 8.0, 16.0, 12.0), 0.99f);  // the shadow's first 6 mm
+}
+
 TEST(ShadowWalls, AnObjectInFluidKeepsEveryEdge) {
   // A bright block (150) in dark fluid (20): its sides have fluid beside
   // them with nothing bright above; the fluid under it is "shadow", but the
