@@ -1108,8 +1108,55 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     return t - below > params.min_ratio * t || (faint && t - below > params.faint_ratio * t && rep.speckle_sd > 0 &&
                                                 t - below > params.speckle_sds * rep.speckle_sd);
   };
+  // ... or a clipped one (its own top at the data's maximum: a slab
+  // saturated at the top of the range over bright, coarse speckle, which can
+  // be neither min_ratio brighter nor speckle_sds out of the speckle).
+  double vmax = -std::numeric_limits<double>::infinity(), vmin = std::numeric_limits<double>::infinity();
+  if (params.clipped) {
+    for (std::size_t i = 0; i < n; ++i)
+      if (!scanned || (*scanned)[i]) vmax = std::max(vmax, double(v.data[i])), vmin = std::min(vmin, double(v.data[i]));
+  }
+  const double clip_level = vmax - 0.01 * (vmax - vmin);
+  // Per line: clip_share of its raw samples in its first top_mm at that
+  // maximum.
+  // And at least twice the share of the samples under it (top_mm to
+  // search_mm below the skin line, every line) at that maximum: the band is
+  // clipped, the tissue under it much less (tissue that saturates as often
+  // is no clipped band over it).
+  std::vector<std::uint8_t> clipped_top(lines, 0);
+  double under_share = 0;
+  if (params.clipped && vmax > vmin) {
+    std::size_t at_max = 0, count = 0;
+    for (std::size_t l = 0; l < lines; ++l) {
+      if (skin[l] < 0) continue;
+      for (std::size_t k = top_k; k < K_search && std::size_t(skin[l]) + k < d[ax]; ++k) {
+        const std::size_t i = voxel(l % d[u_ax], l / d[u_ax], std::size_t(skin[l]) + k);
+        if (scanned && !(*scanned)[i]) continue;
+        ++count, at_max += double(v.data[i]) >= clip_level;
+      }
+    }
+    under_share = count ? double(at_max) / double(count) : 1.0;
+  }
+  const double clip_share = std::max(params.clip_share, 2.0 * under_share);
+  if (params.clipped && vmax > vmin && clip_share <= 1.0)
+    parallel_ranges(lines, threads, [&](std::size_t l0, std::size_t l1) {
+      for (std::size_t l = l0; l < l1; ++l) {
+        if (skin[l] < 0) continue;
+        std::size_t at_max = 0, count = 0;
+        for (std::size_t k = 0; k < top_k && std::size_t(skin[l]) + k < d[ax]; ++k) {
+          const std::size_t i = voxel(l % d[u_ax], l / d[u_ax], std::size_t(skin[l]) + k);
+          if (scanned && !(*scanned)[i]) continue;
+          ++count, at_max += double(v.data[i]) >= clip_level;
+        }
+        clipped_top[l] = count > 0 && double(at_max) >= clip_share * double(count);
+      }
+    });
+  const auto clipped = [&](std::size_t l) {
+    return clipped_top[l] && double(ltop[l]) - below > params.faint_ratio * double(ltop[l]);
+  };
   const auto candidate = [&](std::size_t l) {
-    return ltop_at[l] >= 0 && bright(double(ltop[l])) && !std::isnan(own_top[l]) && bright(double(own_top[l]));
+    return ltop_at[l] >= 0 && ((bright(double(ltop[l])) && !std::isnan(own_top[l]) && bright(double(own_top[l]))) ||
+                               (faint && clipped(l)));
   };
   parallel_ranges(lines, threads, [&](std::size_t l0, std::size_t l1) {
     for (std::size_t l = l0; l < l1; ++l) {
@@ -1274,6 +1321,9 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     rep.depth_mm = median(depths);
     if (!tops.empty()) rep.top = median(tops);
     rep.faint = faint && !(rep.top - below > params.min_ratio * rep.top);
+    // Clipped: the faint rule's speckle test fails, so its lines came in by
+    // their clipped tops.
+    rep.clipped = rep.faint && !(rep.speckle_sd > 0 && rep.top - below > params.speckle_sds * rep.speckle_sd);
     for (std::size_t bb = 0; bb < d[w_ax]; ++bb)
       for (std::size_t a = 0; a < d[u_ax]; ++a) {
         const std::size_t l = a + bb * d[u_ax];

@@ -189,6 +189,13 @@ struct NearFieldParams {
   // deepening by at most 1 mm per mm across the beam: not the lines that
   // enter a sector down its side).
   double faint_ratio = 0.1, speckle_sds = 2.5, faint_lines = 0.25;
+  // ... or by faint_ratio alone on lines whose own top is clipped: at least
+  // clip_share of their raw samples in their first top_mm at the data's
+  // maximum (within 1 % of its range), and twice the share of the samples
+  // under the tops. A saturated slab over bright, coarse speckle; the same
+  // faint_lines of the lines under the probe must pass.
+  bool clipped = true;
+  double clip_share = 0.25;
   double sigma_mm = 1.0;   // lowpass across the beam of the profile's samples
   int axis = -1;           // beam axis (0 x, 1 y, 2 z); -1: beam_axis_of the data
   double max_share = 0.5;  // a "band" holding more of the scanned voxels is the object, not a near field
@@ -218,6 +225,7 @@ struct NearFieldReport {
   double top = 0, below = 0;    // P at the top and below it (file units)
   double speckle_sd = 0;        // robust spread of the samples about the lowpass below the top (file units)
   bool faint = false;           // found by the faint rule (faint_ratio, speckle_sds, faint_lines): its median top is not min_ratio brighter
+  bool clipped = true;         // ... and by the clipped tops of its lines, not by the speckle test
   bool layered = false;         // a layered band: its lines ended where they stayed below halfway for layer_gap_mm
   std::size_t voxels = 0;       // voxels in the band
   bool too_deep = false;        // a band was found but held more than max_share of the scanned voxels: kept

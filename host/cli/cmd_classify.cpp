@@ -612,7 +612,8 @@ int run_classify(const ClassifyOptions& given_options) {
         << " mm below the skin line along " << "xyz"[nf.axis];
       if (nf.layered) t << " in layers";
       t << " (" << nf.voxels << " voxels, median " << std::setprecision(0) << nf.top << " over " << nf.below << " below";
-      if (nf.faint) t << ", a faint band: speckle spread " << std::setprecision(1) << nf.speckle_sd;
+      if (nf.clipped) t << ", a faint band clipped at the data's maximum";
+      else if (nf.faint) t << ", a faint band: speckle spread " << std::setprecision(1) << nf.speckle_sd;
       t << "; --near-field keep to draw it)";
       if (nf.echo.found)
         t << ", with its " << (nf.echo.layers > 1 ? std::to_string(nf.echo.layers) + " echo layers" : std::string("echo"))
