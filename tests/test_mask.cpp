@@ -423,6 +423,19 @@ TEST(NearField, AnObjectUnderTheBandOnAFewLinesKeepsItsTop) {
   EXPECT_EQ(band[v.index(24, 24, 2)], 1);
 }
 
+// A band 5 mm deep (mean `band`) over tissue (mean `tissue`), both times
+// speckle U(lo, hi) in cells of `grain` voxels, clipped at 255; under every
+// line, or with `corner` only under the lines with x, y < 8 mm (a ninth).
+Volume band_over_tissue(double band, double tissue, bool corner, double lo, double hi, std::size_t grain,
+                        std::uint64_t seed) {
+  return speckled({48, 48, 60}, 0.5,
+                  [&](double x, double y, double z) {
+                    const bool under = !corner || (x < 8.0 && y < 8.0);
+                    return under && z < 5.0 ? band : tissue;
+                  },
+                  seed, lo, hi, grain);
+}
+
 TEST(NearField, ASaturatedBandOverBrightTissueIsFoundAcrossTheProbeOnly) {
   // Bright tissue (180) under a band that saturates (250 x speckle, clipped
   // at 255): the band is only about a quarter brighter than the tissue
@@ -431,15 +444,7 @@ TEST(NearField, ASaturatedBandOverBrightTissueIsFoundAcrossTheProbeOnly) {
   // The same layer under a ninth of the lines (a corner of the probe) is not:
   // the faint rule needs a layer across the probe. Without the faint rule
   // (faint_ratio = min_ratio) neither is found, as before it.
-  const double h = 0.5;
-  const auto scan = [&](bool corner) {
-    return speckled({48, 48, 60}, h,
-                    [&](double x, double y, double z) {
-                      const bool under = !corner || (x < 8.0 && y < 8.0);
-                      return under && z < 5.0 ? 250.0 : 180.0;
-                    },
-                    test::seed() + 31, 0.8, 1.2);
-  };
+  const auto scan = [&](bool corner) { return band_over_tissue(250.0, 180.0, corner, 0.8, 1.2, 3, test::seed() + 31); };
   const Volume v = scan(false);
   NearFieldReport r;
   const auto band = near_field_band(v, nullptr, NearFieldParams{}, &r);
@@ -469,14 +474,7 @@ TEST(NearField, AClippedBandOverCoarseBrightSpeckleIsFoundAcrossTheProbeOnly) {
   // to its bottom. The same layer under a ninth of the lines (a corner of
   // the probe) is not (faint_lines), nor the band with `clipped` off.
   const double h = 0.5;
-  const auto scan = [&](bool corner) {
-    return speckled({48, 48, 60}, h,
-                    [&](double x, double y, double z) {
-                      const bool under = !corner || (x < 8.0 && y < 8.0);
-                      return under && z < 5.0 ? 430.0 : 200.0;
-                    },
-                    test::seed() + 35, 0.6, 1.4, 1);
-  };
+  const auto scan = [&](bool corner) { return band_over_tissue(430.0, 200.0, corner, 0.6, 1.4, 1, test::seed() + 35); };
   const Volume v = scan(false);
   NearFieldReport r;
   const auto band = near_field_band(v, nullptr, NearFieldParams{}, &r);
