@@ -128,6 +128,7 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "near_layer_dip") nf.layer_dip = x;
   else if (k == "near_echo_layers") nf.echo_layers = int(x);
   else if (k == "near_clipped") nf.clipped = x != 0;
+  else if (k == "near_echo_tail") nf.echo_tail = x != 0;
   else if (k == "near_clip_share") nf.clip_share = x;
   else if (k == "iso_fraction") ap.local_fraction = x;
   else if (k == "iso_field_sigma") ap.field_sigma_mm = x;
@@ -338,7 +339,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "usage: softshell_study_shells [--train S,S..] [--test S,S..] [--shapes face,spine] "
                            "[--size N] [--physics NAME] [--tolerance-mm MM] [--variational-only] [--defaults-only] "
                            "[--set iso_fraction=..,iso_clip_fraction=..,iso_field_sigma=..,iso_field_depth_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
-                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,"
+                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,"
                            "mask_grow=..,mask_max_enclosed=..,mask_fluid_enclosed=..,mask_fluid_inside=..] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..] "
                            "[--shadow-walls on|off] [--walls beam_cos=..,reach=..,smooth=..,sigma=..,gap=..,bright=..] [--wall-ref weighted|data]\n");
       return 2;

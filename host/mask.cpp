@@ -853,13 +853,56 @@ void echo_layer(const HostVector<float>& lp, const std::vector<long>& skin,
       E[s] = x[x.size() / 2];
     }
   });
+  // Joins t in [from_t, to_t] of every band line (margin_mm either way) to
+  // the band; returns the voxels added.
+  const auto join = [&](double from_t, double to_t) {
+    std::size_t added = 0;
+    for (std::size_t l : band_lines) {
+      const std::size_t a = l % n_u, bb = l / n_u;
+      const double from = from_t * bottom_mm[l] - params.margin_mm;
+      const double to = to_t * bottom_mm[l] + params.margin_mm;
+      for (std::size_t z = std::size_t(skin[l]); z < n_ax; ++z) {
+        const double depth = double(long(z) - skin[l]) * hz;
+        if (depth >= to) break;
+        if (depth < from) continue;
+        std::uint8_t& b = band[voxel(a, bb, z)];
+        if (!b) b = 1, ++added, ++rep.voxels;
+      }
+    }
+    return added;
+  };
+  std::vector<std::uint8_t> taken(steps, 0), tried(steps, 0);
+  // The band's tail: under a band whose interfaces' copies overlap (no dark
+  // gap between them), E falls from the band's bottom (t = 1) through a
+  // dimmer plateau to the floor under it, the median of E over the deeper
+  // half of t = 1 ... echo_to. When E at the bottom stands echo_rise of the
+  // band's top over that floor above it, the band reaches down to where E
+  // first falls halfway from its bottom to the floor.
+  if (params.echo_tail && !std::isnan(E[0])) {
+    std::vector<double> deep;
+    for (std::size_t s = steps / 2; s < steps; ++s)
+      if (!std::isnan(E[s])) deep.push_back(E[s]);
+    if (!deep.empty()) {
+      std::nth_element(deep.begin(), deep.begin() + long(deep.size() / 2), deep.end());
+      const double floor_level = deep[deep.size() / 2];
+      const double drop = E[0] - floor_level;
+      if (drop > 0 && drop >= params.echo_rise * (rep.top - floor_level)) {
+        std::size_t end = 0;
+        while (end + 1 < steps / 2 && !std::isnan(E[end + 1]) && E[end + 1] > floor_level + 0.5 * drop) ++end;
+        if (end > 0) {
+          for (std::size_t s = 0; s <= end; ++s) taken[s] = 1;
+          rep.echo.tail_to = 1.0 + double(end) * dt;
+          rep.echo.tail_voxels = join(1.0, rep.echo.tail_to);
+        }
+      }
+    }
+  }
   // The layers, brightest first: the first at t >= echo_from, each further
   // one anywhere under the band (t > 1) outside the layers already taken,
   // and bounded on both sides (E below its halfway mark before and after
   // it: a layer, not a rising trend).
   // A candidate that fails as a further layer is passed over (the band's
   // own flank just under it, say) and the next brightest tried.
-  std::vector<std::uint8_t> taken(steps, 0), tried(steps, 0);
   for (int k = 0; k < std::max(params.echo_layers, 0);) {
     std::size_t peak = steps;
     for (std::size_t s = 0; s < steps; ++s) {
@@ -894,18 +937,7 @@ void echo_layer(const HostVector<float>& lp, const std::vector<long>& skin,
       rep.echo.from = std::min(rep.echo.from, from_t), rep.echo.to = std::max(rep.echo.to, to_t);
     }
     ++rep.echo.layers, ++k;
-    for (std::size_t l : band_lines) {
-      const std::size_t a = l % n_u, bb = l / n_u;
-      const double from = from_t * bottom_mm[l] - params.margin_mm;
-      const double to = to_t * bottom_mm[l] + params.margin_mm;
-      for (std::size_t z = std::size_t(skin[l]); z < n_ax; ++z) {
-        const double depth = double(long(z) - skin[l]) * hz;
-        if (depth >= to) break;
-        if (depth < from) continue;
-        std::uint8_t& b = band[voxel(a, bb, z)];
-        if (!b) b = 1, ++rep.echo.voxels, ++rep.voxels;
-      }
-    }
+    rep.echo.voxels += join(from_t, to_t);
   }
 }
 

@@ -215,6 +215,15 @@ struct NearFieldParams {
   bool echo_layer = true;
   double echo_from = 1.2, echo_to = 2.4, echo_rise = 0.1;
   int echo_layers = 3;
+  // The band's tail (echo_tail): copies overlapping into a dimmer plateau
+  // under the band, with no gap, down to the floor (the median of the
+  // profile over the deeper half of 1 ... echo_to): joins the band to where
+  // the profile falls halfway from the band's bottom to that floor, when the
+  // bottom stands echo_rise of the band's top over the floor above it.
+  // Off by default: tried and not kept (docs/parameters.md, "The band's
+  // tail: tried, not kept"): on the PLUS spine sweeps it took structures 2-3
+  // mm under their bands and made one band too deep to remove.
+  bool echo_tail = false;
   ReverbParams reverb_params;
 };
 struct NearFieldReport {
@@ -234,6 +243,8 @@ struct NearFieldReport {
     bool found = false;
     double from = 0, to = 0, peak = 0;  // the layer(s) (from the shallowest to the deepest) and the first's peak, in units of each line's band depth
     int layers = 0;                     // layers found (params.echo_layers at most)
+    double tail_to = 0;                 // the band's tail (params.echo_tail) to this x each line's band depth; 0: none
+    std::size_t tail_voxels = 0;        // voxels the tail added to the band
     double gap = 0, level = 0;          // the echo profile at the gap and at the peak (file units)
     std::size_t voxels = 0;             // voxels it added to the band
   } echo;                       // the band's echo layer (params.echo_layer)

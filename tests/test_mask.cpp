@@ -715,6 +715,47 @@ TEST(NearField, EveryEchoLayerUnderTheBandJoinsIt) {
   }
 }
 
+TEST(NearField, TheBandsTailWithoutAGapJoinsTheBand) {
+  // A band (220, 5 mm) whose interfaces' copies overlap into a dimmer
+  // plateau under it (110, 5-8 mm: no dark gap) over fluid (30). The band
+  // rule stops at halfway (the plateau is under it); the tail joins it, to
+  // where the profile falls halfway from the band's bottom to the fluid, and
+  // the fluid below stays. Off (the default: tried, not kept) the plateau
+  // stays. A band over the fluid without a plateau adds at most a sliver
+  // (inside the band's margin).
+  const double h = 0.5;
+  const auto scan = [&](bool plateau) {
+    return speckled({48, 48, 60}, h,
+                    [&](double, double, double z) { return z < 5.0 ? 220.0 : plateau && z < 8.0 ? 110.0 : 30.0; },
+                    test::seed() + 41);
+  };
+  const Volume v = scan(true);
+  const auto share_at = [&](const std::vector<std::uint8_t>& band, double z_mm) {
+    std::size_t in = 0;
+    for (std::size_t y = 0; y < 48; ++y)
+      for (std::size_t x = 0; x < 48; ++x) in += band[v.index(x, y, std::size_t(std::lround(z_mm / h)))];
+    return double(in) / (48.0 * 48.0);
+  };
+  NearFieldParams on;
+  on.echo_tail = true;
+  NearFieldReport r;
+  const auto band = near_field_band(v, nullptr, on, &r);
+  ASSERT_TRUE(r.found);
+  EXPECT_GT(r.echo.tail_to, 1.3);
+  EXPECT_GT(r.echo.tail_voxels, 0u);
+  EXPECT_GT(share_at(band, 7.5), 0.95);  // the plateau
+  EXPECT_LT(share_at(band, 12.0), 0.05);  // the fluid
+  NearFieldReport r_off;
+  const auto band_off = near_field_band(v, nullptr, NearFieldParams{}, &r_off);  // off by default
+  EXPECT_EQ(r_off.echo.tail_to, 0.0);
+  EXPECT_LT(share_at(band_off, 7.5), 0.05);
+  const Volume sharp = scan(false);
+  NearFieldReport r_sharp;
+  near_field_band(sharp, nullptr, on, &r_sharp);
+  ASSERT_TRUE(r_sharp.found);
+  EXPECT_LT(r_sharp.echo.tail_to * (r_sharp.depth_mm - NearFieldParams{}.margin_mm), r_sharp.depth_mm);
+}
+
 TEST(NearField, NoEchoAFaintOneOrAnObjectUnderAFewLinesAddNothing) {
   // Without an echo, or with one only 5 % of the band over the gap (under
   // echo_rise), or with a bright object at 1.8 x the band's depth under an

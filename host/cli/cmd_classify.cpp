@@ -615,6 +615,9 @@ int run_classify(const ClassifyOptions& given_options) {
       if (nf.clipped) t << ", a faint band clipped at the data's maximum";
       else if (nf.faint) t << ", a faint band: speckle spread " << std::setprecision(1) << nf.speckle_sd;
       t << "; --near-field keep to draw it)";
+      if (nf.echo.tail_to > 0)
+        t << ", with its tail to " << std::setprecision(2) << nf.echo.tail_to << " x the band's depth ("
+          << nf.echo.tail_voxels << " voxels)";
       if (nf.echo.found)
         t << ", with its " << (nf.echo.layers > 1 ? std::to_string(nf.echo.layers) + " echo layers" : std::string("echo"))
           << " at " << std::setprecision(2) << nf.echo.from << "-" << nf.echo.to
