@@ -1008,10 +1008,13 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   const auto top_k = std::size_t(std::ceil(params.top_mm / hz));
   std::vector<float> R;
   std::size_t all = 0;  // scanned voxels
+  // The scanned samples' range (the clipped rule below).
+  double vmax = -std::numeric_limits<double>::infinity(), vmin = std::numeric_limits<double>::infinity();
   {
     const int parts = range_count(d[w_ax], threads);
     std::vector<std::size_t> pall(static_cast<std::size_t>(parts), 0);
     std::vector<std::vector<float>> presid(static_cast<std::size_t>(parts));
+    std::vector<double> pmax(static_cast<std::size_t>(parts), vmax), pmin(static_cast<std::size_t>(parts), vmin);
     parallel_ranges_indexed(d[w_ax], threads, [&](int part, std::size_t b0, std::size_t b1) {
       for (std::size_t z = 0; z < d[ax]; ++z)
         for (std::size_t bb = b0; bb < b1; ++bb)
@@ -1020,6 +1023,8 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
             const std::size_t i = voxel(a, bb, z);
             if (scanned && !(*scanned)[i]) continue;
             ++pall[std::size_t(part)];
+            pmax[std::size_t(part)] = std::max(pmax[std::size_t(part)], double(v.data[i]));
+            pmin[std::size_t(part)] = std::min(pmin[std::size_t(part)], double(v.data[i]));
             const long k = long(z) - skin[l];
             if (k < long(K)) {
               A[l * K + std::size_t(k)] = lp[i];
@@ -1029,6 +1034,8 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     });
     for (std::size_t c : pall) all += c;
     for (const auto& pr : presid) R.insert(R.end(), pr.begin(), pr.end());
+    for (int k = 0; k < parts; ++k)
+      vmax = std::max(vmax, pmax[std::size_t(k)]), vmin = std::min(vmin, pmin[std::size_t(k)]);
   }
   if (all < 100) {
     if (report) *report = rep;
@@ -1143,46 +1150,37 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   // ... or a clipped one (its own top at the data's maximum: a slab
   // saturated at the top of the range over bright, coarse speckle, which can
   // be neither min_ratio brighter nor speckle_sds out of the speckle).
-  double vmax = -std::numeric_limits<double>::infinity(), vmin = std::numeric_limits<double>::infinity();
-  if (params.clipped) {
-    for (std::size_t i = 0; i < n; ++i)
-      if (!scanned || (*scanned)[i]) vmax = std::max(vmax, double(v.data[i])), vmin = std::min(vmin, double(v.data[i]));
-  }
   const double clip_level = vmax - 0.01 * (vmax - vmin);
   // Per line: clip_share of its raw samples in its first top_mm at that
-  // maximum.
-  // And at least twice the share of the samples under it (top_mm to
-  // search_mm below the skin line, every line) at that maximum: the band is
+  // maximum, and at least twice the share of the samples under the tops
+  // (top_mm to search_mm below the skin line, every line) at it: the band is
   // clipped, the tissue under it much less (tissue that saturates as often
-  // is no clipped band over it).
+  // is no clipped band over it). One pass over the lines counts both.
   std::vector<std::uint8_t> clipped_top(lines, 0);
-  double under_share = 0;
   if (params.clipped && vmax > vmin) {
-    std::size_t at_max = 0, count = 0;
-    for (std::size_t l = 0; l < lines; ++l) {
-      if (skin[l] < 0) continue;
-      for (std::size_t k = top_k; k < K_search && std::size_t(skin[l]) + k < d[ax]; ++k) {
-        const std::size_t i = voxel(l % d[u_ax], l / d[u_ax], std::size_t(skin[l]) + k);
-        if (scanned && !(*scanned)[i]) continue;
-        ++count, at_max += double(v.data[i]) >= clip_level;
-      }
-    }
-    under_share = count ? double(at_max) / double(count) : 1.0;
-  }
-  const double clip_share = std::max(params.clip_share, 2.0 * under_share);
-  if (params.clipped && vmax > vmin && clip_share <= 1.0)
-    parallel_ranges(lines, threads, [&](std::size_t l0, std::size_t l1) {
+    std::vector<std::uint32_t> top_at_max(lines, 0), top_count(lines, 0);
+    const int parts = range_count(lines, threads);
+    std::vector<std::size_t> pat(static_cast<std::size_t>(parts), 0), pcount(static_cast<std::size_t>(parts), 0);
+    parallel_ranges_indexed(lines, threads, [&](int part, std::size_t l0, std::size_t l1) {
       for (std::size_t l = l0; l < l1; ++l) {
         if (skin[l] < 0) continue;
-        std::size_t at_max = 0, count = 0;
-        for (std::size_t k = 0; k < top_k && std::size_t(skin[l]) + k < d[ax]; ++k) {
+        for (std::size_t k = 0; k < std::max(top_k, K_search) && std::size_t(skin[l]) + k < d[ax]; ++k) {
           const std::size_t i = voxel(l % d[u_ax], l / d[u_ax], std::size_t(skin[l]) + k);
           if (scanned && !(*scanned)[i]) continue;
-          ++count, at_max += double(v.data[i]) >= clip_level;
+          const bool at_max = double(v.data[i]) >= clip_level;
+          if (k < top_k) ++top_count[l], top_at_max[l] += at_max;
+          else if (k < K_search) ++pcount[std::size_t(part)], pat[std::size_t(part)] += at_max;
         }
-        clipped_top[l] = count > 0 && double(at_max) >= clip_share * double(count);
       }
     });
+    std::size_t at_max = 0, count = 0;
+    for (int k = 0; k < parts; ++k) at_max += pat[std::size_t(k)], count += pcount[std::size_t(k)];
+    const double under_share = count ? double(at_max) / double(count) : 1.0;
+    const double clip_share = std::max(params.clip_share, 2.0 * under_share);
+    if (clip_share <= 1.0)
+      for (std::size_t l = 0; l < lines; ++l)
+        clipped_top[l] = top_count[l] > 0 && double(top_at_max[l]) >= clip_share * double(top_count[l]);
+  }
   const auto clipped = [&](std::size_t l) {
     return clipped_top[l] && double(ltop[l]) - below > params.faint_ratio * double(ltop[l]);
   };

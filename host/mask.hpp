@@ -234,7 +234,7 @@ struct NearFieldReport {
   double top = 0, below = 0;    // P at the top and below it (file units)
   double speckle_sd = 0;        // robust spread of the samples about the lowpass below the top (file units)
   bool faint = false;           // found by the faint rule (faint_ratio, speckle_sds, faint_lines): its median top is not min_ratio brighter
-  bool clipped = true;         // ... and by the clipped tops of its lines, not by the speckle test
+  bool clipped = false;         // ... and by the clipped tops of its lines, not by the speckle test
   bool layered = false;         // a layered band: its lines ended where they stayed below halfway for layer_gap_mm
   std::size_t voxels = 0;       // voxels in the band
   bool too_deep = false;        // a band was found but held more than max_share of the scanned voxels: kept
