@@ -12,8 +12,12 @@
 //
 // --set overrides the classifier's constants for a sweep on training seeds
 // (iso_fraction, shell, beta, kappa, sharpen_barrier, near_min_ratio, ...:
-// apply_override and bench/param_keys.hpp). --shadow-walls off compares without the walls'
-// weights (host/shadow_walls.hpp; on, as classify's default), --walls
+// apply_override and bench/param_keys.hpp). iso_offset=X moves the
+// classifier's isovalue (and the shadow walls') by X (normalised units) after
+// the automatic rule and its levelling: run once per offset, the best row per
+// case is an oracle of what any choice of the isovalue could give
+// (docs/parameters.md, "What no isovalue can fix"). --shadow-walls off
+// compares without the walls' weights (host/shadow_walls.hpp; on, as classify's default), --walls
 // beam_cos=..,reach=..,smooth=..,sigma=..,gap=.. sets their constants and
 // --wall-ref weighted|data the reference edge gradient with them.
 // Baselines (each at one fixed setting for every test case, in the file's
@@ -138,6 +142,7 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "iso_clip_fraction") ap.clip_fraction = x;
   else if (k == "iso_clip_share") ap.clip_share = x;
   else if (k == "iso_clip_margin") ap.clip_margin = x;
+  else if (k == "iso_offset") {}  // added to the classifier's v_iso after the levelling (classify_default)
   else return set_variational_param(p, k, x);
   return true;
 }
@@ -176,13 +181,19 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   const LevelledVolume lv = auto_iso_levelled(in, mp, mp ? &filled : nullptr, ap);
   scale_length_scales(p, scale);
   p.v_iso = lv.data.intensity_map().to_unit(lv.iso);
+  double iso_offset = 0;
+  for (const auto& [k, x] : g_overrides)
+    if (k == "iso_offset") iso_offset += x;
+  p.v_iso += iso_offset;
   cue.axis = nf.axis;
   p.edge_weight = bone_cue_weights(lv.data, mp, mode, cue, cue_report);
   if (g_shadow_walls) {
     ShadowWallParams wp = shadow_wall_params(p, nf.axis);
     for (const auto& [k, x] : g_wall_overrides) set_wall_param(wp, k, x);
     ShadowWallReport wr;
-    auto walls = std::make_shared<const std::vector<float>>(shadow_wall_weight(rt, lv.data, mp, lv.iso, wp, &wr));
+    // At the classifier's isovalue (iso_offset moves both).
+    const double wall_iso = iso_offset != 0 ? lv.data.intensity_map().from_unit(p.v_iso) : lv.iso;
+    auto walls = std::make_shared<const std::vector<float>>(shadow_wall_weight(rt, lv.data, mp, wall_iso, wp, &wr));
     std::fprintf(stderr, "  shadow walls: %.3f of the scanned voxels in shadow, %.3f weighted below 1/2\n", wr.shadow_share,
                  wr.wall_share);
     const bool cued = p.edge_weight != nullptr;
@@ -339,7 +350,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "usage: softshell_study_shells [--train S,S..] [--test S,S..] [--shapes face,spine] "
                            "[--size N] [--physics NAME] [--tolerance-mm MM] [--variational-only] [--defaults-only] "
                            "[--set iso_fraction=..,iso_clip_fraction=..,iso_field_sigma=..,iso_field_depth_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
-                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,"
+                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,iso_offset=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,"
                            "mask_grow=..,mask_max_enclosed=..,mask_fluid_enclosed=..,mask_fluid_inside=..] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..] "
                            "[--shadow-walls on|off] [--walls beam_cos=..,reach=..,smooth=..,sigma=..,gap=..,bright=..] [--wall-ref weighted|data]\n");
       return 2;
