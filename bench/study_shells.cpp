@@ -107,6 +107,10 @@ bool set_wall_param(ShadowWallParams& wp, const std::string& k, double x) {
 // --set key=value,...: the variational classifier's and the automatic
 // isovalue's constants, for sweeps on training seeds (the defaults otherwise).
 std::vector<std::pair<std::string, double>> g_overrides;
+// --set cut_hold=0: with iso_cut_crest_votes=0 (edges whose crest is cut
+// off up the beam give no isovalue), their lines are not held at u = 0
+// either (host/mask.hpp, hold_cut_remnants).
+bool g_no_cut_hold = false;
 
 // mask_grow, mask_max_enclosed, mask_fluid_enclosed and mask_fluid_inside:
 // the scanned-region mask's constants (host/mask.hpp).
@@ -142,6 +146,8 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "iso_clip_fraction") ap.clip_fraction = x;
   else if (k == "iso_clip_share") ap.clip_share = x;
   else if (k == "iso_clip_margin") ap.clip_margin = x;
+  else if (k == "iso_cut_crest_votes") ap.cut_crest_votes = x != 0;
+  else if (k == "cut_hold") g_no_cut_hold = x == 0;
   else if (k == "iso_offset") {}  // added to the classifier's v_iso after the levelling (classify_default)
   else return set_variational_param(p, k, x);
   return true;
@@ -178,7 +184,16 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   const double scale = small_volume_scale(in.dims, in.spacing, kSmallVolumeMm);
   scale_length_scales(ap, scale);
   ap.beam_axis = nf.axis;
-  const LevelledVolume lv = auto_iso_levelled(in, mp, mp ? &filled : nullptr, ap);
+  AutoIsoReport iso_report;
+  const LevelledVolume lv = auto_iso_levelled(in, mp, mp ? &filled : nullptr, ap, &iso_report);
+  // Crests cut off up the beam (--set iso_cut_crest_votes=0): their lines up
+  // to the cut held at u = 0, as classify does (host/mask.hpp,
+  // hold_cut_remnants); none are listed by default.
+  if (mp && !g_no_cut_hold) {
+    const std::size_t reach = std::size_t(std::max(1.0, std::round(kCutRemnantMm / in.spacing[std::size_t(nf.axis)])));
+    const std::size_t held = hold_cut_remnants(mask, in.dims, nf.axis, iso_report.cut_edges, reach);
+    std::fprintf(stderr, "  cut crests: %zu edges, %zu voxels held\n", iso_report.cut_edges.size(), held);
+  }
   scale_length_scales(p, scale);
   p.v_iso = lv.data.intensity_map().to_unit(lv.iso);
   double iso_offset = 0;
@@ -350,7 +365,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "usage: softshell_study_shells [--train S,S..] [--test S,S..] [--shapes face,spine] "
                            "[--size N] [--physics NAME] [--tolerance-mm MM] [--variational-only] [--defaults-only] "
                            "[--set iso_fraction=..,iso_clip_fraction=..,iso_field_sigma=..,iso_field_depth_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
-                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,iso_offset=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,"
+                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,iso_offset=..,iso_cut_crest_votes=..,cut_hold=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,"
                            "mask_grow=..,mask_max_enclosed=..,mask_fluid_enclosed=..,mask_fluid_inside=..] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..] "
                            "[--shadow-walls on|off] [--walls beam_cos=..,reach=..,smooth=..,sigma=..,gap=..,bright=..] [--wall-ref weighted|data]\n");
       return 2;

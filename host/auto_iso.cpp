@@ -396,6 +396,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   float clip_level = std::numeric_limits<float>::infinity();
   double clipped_share = 0;
   std::size_t clipped_edges = 0;
+  std::vector<std::size_t> cut_edges;
   // Climbs v~ from voxel (x, y, z) through the 26 neighbours, up (sign 1) or
   // down (sign -1), at most climb_steps; returns the voxel reached.
   // The 26 neighbours as index offsets, in the order (dz, dy, dx) ascending:
@@ -459,7 +460,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     // Per range of planes its own lists, joined in z order: the serial order.
     struct Found {
       std::vector<float> crests, locals;
-      std::vector<std::size_t> local_at;
+      std::vector<std::size_t> local_at, cut;
       std::size_t clipped = 0;
     };
     // The strong edges crowd into some planes: chunks of a few planes each,
@@ -483,6 +484,28 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
       clipped_share = share;
       if (scanned && share >= params.clip_share) clip_level = float(double(top) - params.clip_margin * (hi - lo));
     }
+    // Crests cut off up the beam (AutoIsoParams::cut_crest_votes): an
+    // unusable voxel (NaN) among the nine of the plane above the crest, one
+    // step toward the probe, other than the volume's side faces (a crest
+    // beside a side face is not cut up the beam). A crest is usable, so
+    // interior: the nine exist.
+    const bool cut_test = params.rule == AutoIsoRule::Local && !params.cut_crest_votes;
+    const int beam = std::clamp(params.beam_axis, 0, 2);
+    const int a1 = beam == 0 ? 1 : 0, a2 = beam == 2 ? 1 : 2;
+    const long st[3] = {1, long(d[0]), long(d[0] * d[1])};
+    auto cut_up = [&](std::size_t i) {
+      const std::size_t c[3] = {i % d[0], (i / d[0]) % d[1], i / (d[0] * d[1])};
+      for (int u = -1; u <= 1; ++u) {
+        const std::size_t p1 = std::size_t(long(c[a1]) + u);
+        if (p1 == 0 || p1 + 1 == d[std::size_t(a1)]) continue;
+        for (int w = -1; w <= 1; ++w) {
+          const std::size_t p2 = std::size_t(long(c[a2]) + w);
+          if (p2 == 0 || p2 + 1 == d[std::size_t(a2)]) continue;
+          if (std::isnan(num[std::size_t(long(i) - st[beam] + u * st[a1] + w * st[a2])])) return true;
+        }
+      }
+      return false;
+    };
     std::vector<Found> found(std::size_t(range_count(inner_planes, chunks)));
     parallel_chunks(inner_planes, threads, chunks, [&](int k, std::size_t a, std::size_t b) {
       Found& f = found[std::size_t(k)];
@@ -491,10 +514,15 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
           for (std::size_t x = 1; x + 1 < d[0]; ++x) {
             const std::size_t i = v.index(x, y, z);
             if (!(gfield[i] >= edge_threshold) || gfield[i] <= 0) continue;
-            const float crest = num[climb(x, y, z, 1.0f)];
+            const std::size_t at_crest = climb(x, y, z, 1.0f);
+            const float crest = num[at_crest];
             f.crests.push_back(crest);
             if (params.rule == AutoIsoRule::Local) {
               const float trough = num[climb(x, y, z, -1.0f)];
+              if (cut_test && cut_up(at_crest)) {
+                f.cut.push_back(i);
+                continue;
+              }
               const bool clipped = crest >= clip_level;
               f.clipped += clipped;
               const double fraction = clipped ? params.clip_fraction : params.local_fraction;
@@ -504,6 +532,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
           }
     });
     for (const Found& f : found) {
+      cut_edges.insert(cut_edges.end(), f.cut.begin(), f.cut.end());
       crests.insert(crests.end(), f.crests.begin(), f.crests.end());
       locals.insert(locals.end(), f.locals.begin(), f.locals.end());
       local_at.insert(local_at.end(), f.local_at.begin(), f.local_at.end());
@@ -619,6 +648,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     report->clipped_share = clipped_share;
     report->clip_level = clip_level;
     report->clipped_edges = clipped_edges;
+    report->cut_edges = std::move(cut_edges);
     report->field = std::move(field);
   }
   return iso;

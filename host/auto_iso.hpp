@@ -63,6 +63,18 @@ struct AutoIsoParams {
   double clip_fraction = 0.9;
   double clip_share = 0.01;
   double clip_margin = 0.03;
+  // Local, crests cut off up the beam: an edge whose climb to its crest ends
+  // against unusable voxels on the probe's side (the plane above the crest,
+  // along beam_axis: the removed near field, unscanned fill or the volume's
+  // face) did not reach its own crest; it may be the tail of what was cut
+  // away (the near field's band) rather than a boundary of the object. With
+  // cut_crest_votes false it gives no isovalue, AutoIsoReport::cut_edges
+  // lists it, and classify holds its line up to the cut at u = 0
+  // (hold_cut_remnants, host/mask.hpp). Tried and not kept: the phantoms
+  // gained, but on the PLUS sweeps it took bony pieces that lie under the
+  // sweep's edge (docs/parameters.md, "Crests cut off up the beam"). true
+  // (the default): every edge votes, as before.
+  bool cut_crest_votes = true;
   bool want_field = false;      // Local: fill AutoIsoReport::field (or level auto_iso's `level`)
   int threads = 0;              // host threads (0: every core); the results are the same for any count
 };
@@ -79,6 +91,7 @@ struct AutoIsoReport {
   double clipped_share = 0;           // Local: share of the scanned samples at the largest one
   double clip_level = 0;              // Local: crests from here up count as clipped (+inf: the data do not clip)
   std::size_t clipped_edges = 0;      // Local: edges whose crest was clipped
+  std::vector<std::size_t> cut_edges; // Local: edges whose crest was cut off up the beam (voxel indices, z order)
   HostVector<float> field;            // Local, want_field: the isovalue per voxel, file units
 };
 

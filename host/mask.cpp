@@ -15,6 +15,7 @@
 #include <limits>
 #include <numeric>
 #include <stdexcept>
+#include <utility>
 
 #include "error.hpp"
 #include "filter.hpp"
@@ -596,6 +597,31 @@ std::vector<std::uint8_t> read_mask(const std::string& path, const Dims3& dims) 
 
 std::size_t count_unscanned(const std::vector<std::uint8_t>& mask) {
   return static_cast<std::size_t>(std::count(mask.begin(), mask.end(), std::uint8_t{0}));
+}
+
+std::size_t hold_cut_remnants(std::vector<std::uint8_t>& mask, const Dims3& dims, int axis,
+                              const std::vector<std::size_t>& edges, std::size_t reach) {
+  const std::size_t n = dims[0] * dims[1] * dims[2];
+  if (mask.size() != n) throw std::invalid_argument("hold_cut_remnants: mask size differs from the volume");
+  if (axis < 0 || axis > 2) throw std::invalid_argument("hold_cut_remnants: beam axis must be 0, 1 or 2");
+  const std::size_t stride = axis == 0 ? 1 : axis == 1 ? dims[0] : dims[0] * dims[1];
+  // Decide every line on the mask as it came (the holds of one edge do not
+  // make another's reach), then hold.
+  std::vector<std::pair<std::size_t, std::size_t>> runs;  // edge, the last voxel walked (nearest the cut)
+  for (std::size_t i : edges) {
+    if (i >= n || !mask[i]) continue;
+    std::size_t j = i, steps = 0;
+    while (steps < reach && (j / stride) % dims[std::size_t(axis)] > 0 && mask[j - stride]) j -= stride, ++steps;
+    if ((j / stride) % dims[std::size_t(axis)] > 0 && !mask[j - stride]) runs.emplace_back(i, j);
+  }
+  std::size_t held = 0;
+  for (const auto& [i, j] : runs)
+    for (std::size_t q = i;; q -= stride) {
+      held += mask[q] != 0;
+      mask[q] = 0;
+      if (q == j) break;
+    }
+  return held;
 }
 
 int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int threads, std::size_t plane_step) {

@@ -291,6 +291,19 @@ void fill_unscanned_in_place(Volume& v, const std::vector<std::uint8_t>& mask, i
 // Number of unscanned (0) entries.
 std::size_t count_unscanned(const std::vector<std::uint8_t>& mask);
 
+// The remnants under a cut (docs/parameters.md, "Crests cut off up the
+// beam"; with AutoIsoParams::cut_crest_votes false, not the default): for each voxel of `edges` (AutoIsoReport::cut_edges: edges
+// whose crest the automatic isovalue found cut off up the beam), walk up its
+// beam line (`axis`, depth growing with the index) over scanned voxels; when
+// an unscanned one comes within `reach` voxels, the voxels walked (the edge's
+// included) are set unscanned, held at u = 0 like the near field above them.
+// Lines that reach the volume's face or stay scanned are left. Returns the
+// voxels newly held; the same for any order of `edges`.
+std::size_t hold_cut_remnants(std::vector<std::uint8_t>& mask, const Dims3& dims, int axis,
+                              const std::vector<std::size_t>& edges, std::size_t reach);
+// The reach for a volume: kCutRemnantMm along the beam, at least one voxel.
+constexpr double kCutRemnantMm = 6.0;
+
 // 6-neighbour dilation of the unscanned set by `voxels` layers (in place);
 // with `within`, only into voxels where (*within)[i] != 0.
 void grow_unscanned(std::vector<std::uint8_t>& mask, const Dims3& dims, int voxels,

@@ -1633,6 +1633,94 @@ TEST(IsoAuto, ClippedEchoesTakeTheClipFraction) {
   EXPECT_EQ(rep_few.clipped_edges, 0u);
 }
 
+// A band removed under the probe (z < 8, unscanned) whose tail the removal
+// left (230 fading to the tissue's 100 over z 8-11), tissue to z 29, fluid
+// (20) below. The tail's edges climb to a crest against the cut: with the
+// rule they give no isovalue, and every vote left is the tissue-fluid
+// boundary's (0.75 of the way from 20 to 100: 80).
+Volume band_tail_over_tissue(std::uint64_t seed, std::vector<std::uint8_t>& scanned) {
+  Volume v({36, 36, 48}, {1, 1, 1}, ScalarType::Float32);
+  scanned.assign(v.voxels(), 1);
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> noise(0.0, 3.0);
+  const double tail[4] = {230, 190, 150, 115};
+  for (std::size_t z = 0; z < 48; ++z)
+    for (std::size_t y = 0; y < 36; ++y)
+      for (std::size_t x = 0; x < 36; ++x) {
+        const double level = z < 8 ? 250.0 : z < 12 ? tail[z - 8] : z < 30 ? 100.0 : 20.0;
+        v.at(x, y, z) = float(std::clamp(level + noise(rng), 0.0, 255.0));
+        if (z < 8) scanned[v.index(x, y, z)] = 0;
+      }
+  return v;
+}
+
+TEST(IsoAuto, ACrestCutOffUpTheBeamGivesNoVoteWithTheRule) {
+  // docs/parameters.md, "Crests cut off up the beam" (a switch, off by
+  // default).
+  std::vector<std::uint8_t> scanned;
+  const Volume v = band_tail_over_tissue(test::seed() + 51, scanned);
+  AutoIsoParams ap, old;  // old: the default, every edge votes
+  ap.edge_share = old.edge_share = 0.15;  // both boundaries among the strong edges
+  ap.cut_crest_votes = false;
+  AutoIsoReport rep, rep_old;
+  const double iso = auto_iso(v, &scanned, ap, &rep), iso_old = auto_iso(v, &scanned, old, &rep_old);
+  std::cout << "[ iso      ] band's tail over tissue over fluid: " << rep.cut_edges.size() << " of " << rep.crests
+            << " strong edges cut off up the beam; isovalue " << iso << " (with their votes " << iso_old << ")\n";
+  ASSERT_FALSE(rep.cut_edges.empty());
+  EXPECT_TRUE(rep_old.cut_edges.empty()) << "with cut_crest_votes every edge votes";
+  for (std::size_t i : rep.cut_edges) {
+    const std::size_t z = i / (36 * 36);
+    EXPECT_GE(z, 9u);
+    EXPECT_LE(z, 14u) << "only the tail's edges are cut off";
+  }
+  EXPECT_NEAR(iso, 20 + 0.75 * (100 - 20), 8) << "the tissue-fluid boundary's isovalue alone";
+  EXPECT_GT(iso_old, iso + 15) << "the tail's votes (near 0.75 of the way from 100 to its crest) pull it up";
+  // The same boundary at the volume's bottom, cut by the face down the beam:
+  // a cut below the crest is no cut of this rule.
+  std::vector<std::uint8_t> all(v.voxels(), 1);
+  Volume flipped = v;
+  for (std::size_t z = 0; z < 48; ++z)
+    for (std::size_t y = 0; y < 36; ++y)
+      for (std::size_t x = 0; x < 36; ++x) flipped.at(x, y, z) = v.at(x, y, 47 - z);
+  for (std::size_t i = 0; i < v.voxels(); ++i) all[i] = scanned[(47 - i / (36 * 36)) * 36 * 36 + i % (36 * 36)];
+  AutoIsoReport rep_flip;
+  auto_iso(flipped, &all, ap, &rep_flip);
+  EXPECT_TRUE(rep_flip.cut_edges.empty()) << "the beam runs along +z: the cut lies below those crests";
+}
+
+TEST(Mask, HoldCutRemnantsHoldsALineUpToTheCutWithinReach) {
+  // z < 3 unscanned on every line but (3, 3), which is scanned throughout.
+  const Dims3 d{4, 4, 10};
+  std::vector<std::uint8_t> mask(4 * 4 * 10, 1);
+  for (std::size_t z = 0; z < 3; ++z)
+    for (std::size_t y = 0; y < 4; ++y)
+      for (std::size_t x = 0; x < 4; ++x)
+        if (!(x == 3 && y == 3)) mask[x + 4 * (y + 4 * z)] = 0;
+  const auto at = [](std::size_t x, std::size_t y, std::size_t z) { return x + 4 * (y + 4 * z); };
+  const std::vector<std::size_t> edges{at(1, 1, 5),   // 3 steps under the cut: z 3-5 held
+                                       at(2, 2, 8),   // 6 steps: beyond the reach of 4
+                                       at(3, 3, 4),   // a line without a cut: up to the face
+                                       at(0, 0, 1)};  // already unscanned
+  std::vector<std::uint8_t> held = mask;
+  EXPECT_EQ(hold_cut_remnants(held, d, 2, edges, 4), 3u);
+  for (std::size_t z = 0; z < 10; ++z) {
+    EXPECT_EQ(held[at(1, 1, z)], z >= 6 ? 1 : 0) << "z " << z;
+    EXPECT_EQ(held[at(2, 2, z)], mask[at(2, 2, z)]) << "z " << z;
+    EXPECT_EQ(held[at(3, 3, z)], 1) << "z " << z;
+  }
+  // The same along x (the beam along the first axis): the cut at x 0.
+  std::vector<std::uint8_t> mx(4 * 4 * 10, 1);
+  for (std::size_t z = 0; z < 10; ++z)
+    for (std::size_t y = 0; y < 4; ++y) mx[at(0, y, z)] = 0;
+  EXPECT_EQ(hold_cut_remnants(mx, d, 0, {at(2, 1, 7)}, 4), 2u);
+  EXPECT_EQ(mx[at(1, 1, 7)], 0);
+  EXPECT_EQ(mx[at(2, 1, 7)], 0);
+  EXPECT_EQ(mx[at(3, 1, 7)], 1);
+  EXPECT_THROW(hold_cut_remnants(mx, d, 3, {}, 4), std::invalid_argument);
+  std::vector<std::uint8_t> small(10, 1);
+  EXPECT_THROW(hold_cut_remnants(small, d, 2, {}, 4), std::invalid_argument);
+}
+
 TEST(IsoAuto, ConstantOrEmptyInputsFailCleanly) {
   Volume c({10, 10, 10}, {1, 1, 1}, ScalarType::UInt8);
   for (float& f : c.data) f = 50;
