@@ -186,10 +186,10 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   ap.beam_axis = nf.axis;
   AutoIsoReport iso_report;
   const LevelledVolume lv = auto_iso_levelled(in, mp, mp ? &filled : nullptr, ap, &iso_report);
-  // Crests cut off up the beam (--set iso_cut_crest_votes=0): their lines up
-  // to the cut held at u = 0, as classify does (host/mask.hpp,
-  // hold_cut_remnants); none are listed by default.
-  if (mp && !g_no_cut_hold) {
+  // Crests cut off up the beam (--set iso_cut_crest_votes=0; none are listed
+  // by default): their lines up to the cut held at u = 0 (host/mask.hpp,
+  // hold_cut_remnants). Only the study takes this switch.
+  if (mp && !g_no_cut_hold && !iso_report.cut_edges.empty()) {
     const std::size_t reach = std::size_t(std::max(1.0, std::round(kCutRemnantMm / in.spacing[std::size_t(nf.axis)])));
     const std::size_t held = hold_cut_remnants(mask, in.dims, nf.axis, iso_report.cut_edges, reach);
     std::fprintf(stderr, "  cut crests: %zu edges, %zu voxels held\n", iso_report.cut_edges.size(), held);

@@ -518,11 +518,11 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
             const float crest = num[at_crest];
             f.crests.push_back(crest);
             if (params.rule == AutoIsoRule::Local) {
-              const float trough = num[climb(x, y, z, -1.0f)];
               if (cut_test && cut_up(at_crest)) {
                 f.cut.push_back(i);
                 continue;
               }
+              const float trough = num[climb(x, y, z, -1.0f)];
               const bool clipped = crest >= clip_level;
               f.clipped += clipped;
               const double fraction = clipped ? params.clip_fraction : params.local_fraction;

@@ -68,9 +68,10 @@ struct AutoIsoParams {
   // along beam_axis: the removed near field, unscanned fill or the volume's
   // face) did not reach its own crest; it may be the tail of what was cut
   // away (the near field's band) rather than a boundary of the object. With
-  // cut_crest_votes false it gives no isovalue, AutoIsoReport::cut_edges
-  // lists it, and classify holds its line up to the cut at u = 0
-  // (hold_cut_remnants, host/mask.hpp). Tried and not kept: the phantoms
+  // cut_crest_votes false it gives no isovalue and AutoIsoReport::cut_edges
+  // lists it; the study (--set iso_cut_crest_votes=0) then holds its line up
+  // to the cut at u = 0 (hold_cut_remnants, host/mask.hpp). classify and the
+  // viewer keep the default and do neither. Tried and not kept: the phantoms
   // gained, but on the PLUS sweeps it took bony pieces that lie under the
   // sweep's edge (docs/parameters.md, "Crests cut off up the beam"). true
   // (the default): every edge votes, as before.

@@ -100,13 +100,7 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
     AutoIsoParams ap;
     scale_length_scales(ap, scale);
     ap.beam_axis = nf.axis;
-    AutoIsoReport rep;
-    in.iso = auto_iso_level_in_place(v, mask, ap, &rep);
-    // The remnants under crests cut off up the beam held at u = 0, as
-    // classify does (host/mask.hpp, hold_cut_remnants).
-    if (mask && !rep.cut_edges.empty())
-      hold_cut_remnants(in.mask, v.dims, nf.axis, rep.cut_edges,
-                        std::size_t(std::max(1.0, std::round(kCutRemnantMm / v.spacing[std::size_t(nf.axis)]))));
+    in.iso = auto_iso_level_in_place(v, mask, ap);
     in.data = std::move(v);
   } else {
     char* end = nullptr;

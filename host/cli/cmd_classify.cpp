@@ -683,27 +683,13 @@ int run_classify(const ClassifyOptions& given_options) {
     ap.clip_fraction = o.iso_clip_fraction;
     ap.field_sigma_mm = o.iso_field_sigma;
     ap.field_depth_sigma_mm = o.iso_field_depth_sigma;
-    if (ap.rule == AutoIsoRule::Local) ap.beam_axis = beam_axis_now();
+    if (ap.want_field) ap.beam_axis = beam_axis_now();
     ap.sigma_mm = o.auto_iso_sigma;
     // The local isovalue field levelled out as it is formed: the classifier
     // then works at one isovalue on data whose brightness no longer drifts
     // (host/auto_iso.hpp).
     AutoIsoReport rep;
     iso = auto_iso(in, mask.scanned.empty() ? nullptr : &mask.scanned, ap, &rep, &in);
-    // Crests cut off up the beam, when AutoIsoParams::cut_crest_votes is
-    // false (not the default): no votes (above), and their lines up to the
-    // cut held at u = 0 with the near field (host/mask.hpp).
-    if (variational && !mask.scanned.empty() && !rep.cut_edges.empty()) {
-      const std::size_t reach =
-          std::size_t(std::max(1.0, std::round(kCutRemnantMm / in.spacing[std::size_t(ap.beam_axis)])));
-      const std::size_t held = hold_cut_remnants(mask.scanned, in.dims, ap.beam_axis, rep.cut_edges, reach);
-      if (held) {
-        std::ostringstream t;
-        t << "; under crests cut off up the beam " << held << " voxels held (" << rep.cut_edges.size()
-          << " edges without a vote)";
-        mask.text += t.str();
-      }
-    }
     iso_text = ap.rule == AutoIsoRule::Local ? (!ap.want_field ? " (auto: local rule, one value"
                                                                : " (auto: local rule, the median of a field")
                : ap.rule == AutoIsoRule::EchoRidge ? " (auto: echo ridge"
