@@ -111,6 +111,11 @@ std::vector<std::pair<std::string, double>> g_overrides;
 // off up the beam give no isovalue), their lines are not held at u = 0
 // either (host/mask.hpp, hold_cut_remnants).
 bool g_no_cut_hold = false;
+// The band's underside held when drawn as a sheet (host/mask.hpp,
+// hold_band_sheet): --set band_sheet=0 turns it off, band_sheet_mm and
+// band_sheet_patch set its window and cover.
+bool g_band_sheet = true;
+BandSheetParams g_band_sheet_params;
 
 // mask_grow, mask_max_enclosed, mask_fluid_enclosed and mask_fluid_inside:
 // the scanned-region mask's constants (host/mask.hpp).
@@ -148,6 +153,9 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "iso_clip_margin") ap.clip_margin = x;
   else if (k == "iso_cut_crest_votes") ap.cut_crest_votes = x != 0;
   else if (k == "cut_hold") g_no_cut_hold = x == 0;
+  else if (k == "band_sheet") g_band_sheet = x != 0;
+  else if (k == "band_sheet_mm") g_band_sheet_params.window_mm = x;
+  else if (k == "band_sheet_patch") g_band_sheet_params.min_patch = x;
   else if (k == "iso_offset") {}  // added to the classifier's v_iso after the levelling (classify_default)
   else return set_variational_param(p, k, x);
   return true;
@@ -174,6 +182,7 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   VariationalParams p;
   NearFieldParams np;
   for (const auto& [k, x] : g_overrides) apply_override(k, x, p, ap, np);
+  const std::vector<std::uint8_t> before = mask;
   const NearFieldReport nf = remove_near_field(in, mask, np);
   std::fprintf(stderr, "  near field %s (%.1f mm), reverberation %s\n", nf.found ? "removed" : "none", nf.depth_mm,
                nf.reverb.found ? "removed" : "none");
@@ -216,7 +225,16 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
     if (!cued) p.edge_reference = g_wall_reference;  // --wall-ref data: the comparison in docs/parameters.md
   }
   *iso_out = lv.iso;
-  return classify_variational(rt, lv.data, p, SolverParams{}, rep, nullptr, mp);
+  Volume u = classify_variational(rt, lv.data, p, SolverParams{}, rep, nullptr, mp);
+  if (g_band_sheet && nf.found && mp) {
+    const std::vector<std::uint8_t> window =
+        band_underside(in.dims, in.spacing[std::size_t(nf.axis)], nf.axis, before, mask, g_band_sheet_params.window_mm);
+    const BandSheetReport bs = hold_band_sheet(u, window, nf.axis, mask, g_band_sheet_params);
+    std::fprintf(stderr, "  band sheet: drawn on %zu of %zu lines, largest patch %.3f%s\n", bs.drawn, bs.lines, bs.largest,
+                 bs.held ? ", held" : "");
+    if (bs.held) u = classify_variational(rt, lv.data, p, SolverParams{}, rep, nullptr, mp);
+  }
+  return u;
 }
 
 Metrics score(const Volume& u, const Case& c, double tol_mm) {
@@ -365,7 +383,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "usage: softshell_study_shells [--train S,S..] [--test S,S..] [--shapes face,spine] "
                            "[--size N] [--physics NAME] [--tolerance-mm MM] [--variational-only] [--defaults-only] "
                            "[--set iso_fraction=..,iso_clip_fraction=..,iso_field_sigma=..,iso_field_depth_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
-                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,iso_offset=..,iso_cut_crest_votes=..,cut_hold=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,"
+                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,iso_offset=..,iso_cut_crest_votes=..,cut_hold=..,band_sheet=..,band_sheet_mm=..,band_sheet_patch=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,"
                            "mask_grow=..,mask_max_enclosed=..,mask_fluid_enclosed=..,mask_fluid_inside=..] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..] "
                            "[--shadow-walls on|off] [--walls beam_cos=..,reach=..,smooth=..,sigma=..,gap=..,bright=..] [--wall-ref weighted|data]\n");
       return 2;

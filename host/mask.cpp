@@ -624,6 +624,93 @@ std::size_t hold_cut_remnants(std::vector<std::uint8_t>& mask, const Dims3& dims
   return held;
 }
 
+std::vector<std::uint8_t> band_underside(const Dims3& dims, double spacing_mm, int axis,
+                                         const std::vector<std::uint8_t>& before,
+                                         const std::vector<std::uint8_t>& after, double window_mm) {
+  const std::size_t n = dims[0] * dims[1] * dims[2];
+  if (axis < 0 || axis > 2) throw std::invalid_argument("band_underside: beam axis must be 0, 1 or 2");
+  if ((!before.empty() && before.size() != n) || (!after.empty() && after.size() != n))
+    throw std::invalid_argument("band_underside: mask size differs from the volume");
+  if (after.empty() || !(spacing_mm > 0) || !(window_mm > 0)) return {};
+  const auto a = std::size_t(axis);
+  const std::size_t stride = a == 0 ? 1 : a == 1 ? dims[0] : dims[0] * dims[1];
+  const std::size_t u_ax = a == 0 ? 1 : 0, w_ax = a == 2 ? 1 : 2;
+  const std::size_t su = u_ax == 0 ? 1 : dims[0], sw = w_ax == 1 ? dims[0] : dims[0] * dims[1];
+  const std::size_t len = dims[a];
+  std::vector<std::uint8_t> window(n, 0);
+  bool any = false;
+  for (std::size_t w = 0; w < dims[w_ax]; ++w)
+    for (std::size_t u = 0; u < dims[u_ax]; ++u) {
+      const std::size_t base = u * su + w * sw;
+      std::size_t k = 0;
+      while (k < len && !before.empty() && !before[base + k * stride]) ++k;  // the skin line
+      if (k == len || after[base + k * stride]) continue;                       // no band on this line
+      while (k < len && !after[base + k * stride]) ++k;                         // the band
+      for (const std::size_t b = k; k < len && double(k - b) * spacing_mm < window_mm - 1e-9; ++k)
+        if (after[base + k * stride]) window[base + k * stride] = 1, any = true;
+    }
+  if (!any) window.clear();
+  return window;
+}
+
+BandSheetReport hold_band_sheet(const Volume& u, const std::vector<std::uint8_t>& window, int axis,
+                                std::vector<std::uint8_t>& scanned, const BandSheetParams& params) {
+  BandSheetReport rep;
+  const std::size_t n = u.voxels();
+  if (window.empty()) return rep;
+  if (window.size() != n || scanned.size() != n)
+    throw std::invalid_argument("hold_band_sheet: window or mask size differs from the volume");
+  if (axis < 0 || axis > 2) throw std::invalid_argument("hold_band_sheet: beam axis must be 0, 1 or 2");
+  const Dims3& d = u.dims;
+  const auto a = std::size_t(axis);
+  const std::size_t stride = a == 0 ? 1 : a == 1 ? d[0] : d[0] * d[1];
+  const std::size_t u_ax = a == 0 ? 1 : 0, w_ax = a == 2 ? 1 : 2;
+  const std::size_t su = u_ax == 0 ? 1 : d[0], sw = w_ax == 1 ? d[0] : d[0] * d[1];
+  const std::size_t nu = d[u_ax], nw = d[w_ax];
+  // Per beam line (q + nu w): 0 no window, 1 a window, 2 drawn in it.
+  std::vector<std::uint8_t> line(nu * nw, 0);
+  for (std::size_t w = 0; w < nw; ++w)
+    for (std::size_t q = 0; q < nu; ++q) {
+      std::uint8_t& l = line[q + nu * w];
+      for (std::size_t k = 0, i = q * su + w * sw; k < d[a]; ++k, i += stride)
+        if (window[i]) l = std::max<std::uint8_t>(l, u.data[i] > params.threshold ? 2 : 1);
+      rep.lines += l > 0, rep.drawn += l == 2;
+    }
+  if (rep.lines == 0) return rep;
+  // The drawn lines' patches: 4-connected across the beam.
+  std::vector<std::uint32_t> patch(nu * nw, 0);
+  std::vector<std::size_t> stack, members;
+  std::uint32_t next = 0;
+  for (std::size_t s = 0; s < line.size(); ++s) {
+    if (line[s] != 2 || patch[s]) continue;
+    ++next;
+    members.clear();
+    stack.assign(1, s);
+    patch[s] = next;
+    while (!stack.empty()) {
+      const std::size_t c = stack.back();
+      stack.pop_back();
+      members.push_back(c);
+      const std::size_t q = c % nu, w = c / nu;
+      const std::size_t nb[4] = {q > 0 ? c - 1 : c, q + 1 < nu ? c + 1 : c, w > 0 ? c - nu : c, w + 1 < nw ? c + nu : c};
+      for (std::size_t m : nb)
+        if (line[m] == 2 && !patch[m]) patch[m] = next, stack.push_back(m);
+    }
+    const double share = double(members.size()) / double(rep.lines);
+    rep.largest = std::max(rep.largest, share);
+    if (share < params.min_patch) continue;
+    ++rep.patches;
+    rep.held_lines += members.size();
+    for (std::size_t c : members) {
+      const std::size_t q = c % nu, w = c / nu;
+      for (std::size_t k = 0, i = q * su + w * sw; k < d[a]; ++k, i += stride)
+        if (window[i] && scanned[i]) scanned[i] = 0, ++rep.voxels;
+    }
+  }
+  rep.held = rep.patches > 0;
+  return rep;
+}
+
 int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int threads, std::size_t plane_step) {
   // Speckle is finest along the beam (the axial resolution is the best of
   // the three), so the data's mean squared difference between neighbours, per

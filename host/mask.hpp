@@ -304,6 +304,47 @@ std::size_t hold_cut_remnants(std::vector<std::uint8_t>& mask, const Dims3& dims
 // The reach for a volume: kCutRemnantMm along the beam, at least one voxel.
 constexpr double kCutRemnantMm = 6.0;
 
+// The band's underside drawn as a sheet (docs/parameters.md, "The band's
+// underside"). Under a removed near-field band the data can stay above the
+// isovalue for a few mm (copies of the band's layers overlapping into a
+// plateau with no dark gap), and the shell then forms a sheet just under the
+// band: a curtain over the object. Anatomy just under a band (a lamina, a
+// head's crown) is drawn there too, in pieces. So after a solve, the beam
+// lines on which the drawn opacity (u > threshold) reaches into the window
+// of window_mm under the band are joined into patches (4-connected across
+// the beam); a patch of at least min_patch of the band's lines is a sheet,
+// and its lines' windows are held at u = 0 and the classification solved
+// again. (The laminae of the real spine sweeps under their bands came in
+// pieces of at most 10 % of the band's lines; the phantoms' sheets 15-50 %.)
+struct BandSheetParams {
+  double window_mm = 3.0;
+  double min_patch = 0.15;
+  float threshold = 0.2f;  // the splat threshold
+};
+// The window under the band (1; 0 elsewhere): on each beam line along `axis`
+// (depth growing with the index) whose first voxel scanned in `before` (the
+// skin line; empty: every voxel scanned) is unscanned in `after` (the band
+// removed, remove_near_field), the voxels scanned in `after` from the end of
+// that unscanned run down to window_mm below it. Empty when no line has a
+// band.
+std::vector<std::uint8_t> band_underside(const Dims3& dims, double spacing_mm, int axis,
+                                         const std::vector<std::uint8_t>& before,
+                                         const std::vector<std::uint8_t>& after, double window_mm);
+struct BandSheetReport {
+  std::size_t lines = 0;       // beam lines with a window
+  std::size_t drawn = 0;       // ... on which u > threshold in the window
+  double largest = 0;          // the largest patch of drawn lines, as a share of `lines`
+  int patches = 0;             // patches held (min_patch of `lines` or more)
+  std::size_t held_lines = 0;  // their lines
+  bool held = false;           // patches > 0
+  std::size_t voxels = 0;      // voxels held
+};
+// Decides on `u` (a solved opacity) and sets the sheets' windows unscanned
+// in `scanned` (of the volume's size). `window` from band_underside(); an
+// empty one decides nothing. The same for any order of the lines.
+BandSheetReport hold_band_sheet(const Volume& u, const std::vector<std::uint8_t>& window, int axis,
+                                std::vector<std::uint8_t>& scanned, const BandSheetParams& params = {});
+
 // 6-neighbour dilation of the unscanned set by `voxels` layers (in place);
 // with `within`, only into voxels where (*within)[i] != 0.
 void grow_unscanned(std::vector<std::uint8_t>& mask, const Dims3& dims, int voxels,

@@ -1721,6 +1721,105 @@ TEST(Mask, HoldCutRemnantsHoldsALineUpToTheCutWithinReach) {
   EXPECT_THROW(hold_cut_remnants(small, d, 2, {}, 4), std::invalid_argument);
 }
 
+TEST(BandSheet, TheUndersideIsTheWindowUnderEachLinesBand) {
+  // 6 x 5 lines along z (0.5 mm), 20 deep. The zero fill above the skin at
+  // z < 2, except line (0, 0), scanned from z 0; the band 4 voxels from each
+  // skin on lines x < 5 (x = 5: no band); an echo layer deeper on (1, 1); on
+  // (2, 2) one unscanned voxel inside the window.
+  const Dims3 d{6, 5, 20};
+  const auto at = [](std::size_t x, std::size_t y, std::size_t z) { return x + 6 * (y + 5 * z); };
+  std::vector<std::uint8_t> before(6 * 5 * 20, 1);
+  for (std::size_t y = 0; y < 5; ++y)
+    for (std::size_t x = 0; x < 6; ++x)
+      for (std::size_t z = 0; z < 2; ++z)
+        if (x || y) before[at(x, y, z)] = 0;
+  std::vector<std::uint8_t> after = before;
+  for (std::size_t y = 0; y < 5; ++y)
+    for (std::size_t x = 0; x < 5; ++x) {
+      const std::size_t skin = x || y ? 2 : 0;
+      for (std::size_t z = skin; z < skin + 4; ++z) after[at(x, y, z)] = 0;
+    }
+  after[at(1, 1, 12)] = after[at(1, 1, 13)] = 0;
+  after[at(2, 2, 7)] = 0;
+  const std::vector<std::uint8_t> w = band_underside(d, 0.5, 2, before, after, 2.0);  // 4 voxels
+  ASSERT_EQ(w.size(), after.size());
+  for (std::size_t y = 0; y < 5; ++y)
+    for (std::size_t x = 0; x < 6; ++x)
+      for (std::size_t z = 0; z < 20; ++z) {
+        const std::size_t from = x || y ? 6 : 4;
+        const bool want = x < 5 && z >= from && z < from + 4 && !(x == 2 && y == 2 && z == 7);
+        ASSERT_EQ(w[at(x, y, z)], want ? 1 : 0) << x << " " << y << " " << z;
+      }
+  // No band anywhere (after == before), or no mask after: no window.
+  EXPECT_TRUE(band_underside(d, 0.5, 2, before, before, 2.0).empty());
+  EXPECT_TRUE(band_underside(d, 0.5, 2, before, {}, 2.0).empty());
+  // Every voxel scanned before (empty): the skin at the volume's face.
+  std::vector<std::uint8_t> top(6 * 5 * 20, 1);
+  for (std::size_t y = 0; y < 5; ++y)
+    for (std::size_t x = 0; x < 6; ++x) top[at(x, y, 0)] = top[at(x, y, 1)] = 0;
+  const std::vector<std::uint8_t> wt = band_underside(d, 0.5, 2, {}, top, 1.0);
+  ASSERT_FALSE(wt.empty());
+  for (std::size_t z = 0; z < 20; ++z) EXPECT_EQ(wt[at(3, 3, z)], z == 2 || z == 3 ? 1 : 0) << "z " << z;
+  // Along x: the band at x < 2 on every line.
+  std::vector<std::uint8_t> bx(6 * 5 * 20, 1);
+  for (std::size_t z = 0; z < 20; ++z)
+    for (std::size_t y = 0; y < 5; ++y) bx[at(0, y, z)] = bx[at(1, y, z)] = 0;
+  const std::vector<std::uint8_t> wx = band_underside(d, 1.0, 0, {}, bx, 2.0);
+  for (std::size_t x = 0; x < 6; ++x) EXPECT_EQ(wx[at(x, 2, 9)], x == 2 || x == 3 ? 1 : 0) << "x " << x;
+  EXPECT_THROW(band_underside(d, 0.5, 3, before, after, 2.0), std::invalid_argument);
+  EXPECT_THROW(band_underside(d, 0.5, 2, std::vector<std::uint8_t>(7, 1), after, 2.0), std::invalid_argument);
+}
+
+TEST(BandSheet, OnlyAPatchOfAtLeastMinPatchOfTheBandsLinesIsHeld) {
+  // 10 x 10 lines along z, the window at z = 3 on every line. Drawn in it: a
+  // block of 20 lines (x < 4, y < 5: 0.2 of the lines), a block of 9 lines
+  // touching it only at a corner (x 4-6, y 5-7), two lines at (8, 8-9);
+  // drawn outside the window on (9, 0).
+  const Dims3 d{10, 10, 8};
+  const auto at = [](std::size_t x, std::size_t y, std::size_t z) { return x + 10 * (y + 10 * z); };
+  std::vector<std::uint8_t> window(800, 0), scanned(800, 1);
+  Volume u(d, {1, 1, 1}, ScalarType::Float32);
+  for (std::size_t y = 0; y < 10; ++y)
+    for (std::size_t x = 0; x < 10; ++x) {
+      window[at(x, y, 3)] = 1;
+      const bool big = x < 4 && y < 5, corner = x >= 4 && x <= 6 && y >= 5 && y <= 7, pair = x == 8 && y >= 8;
+      u.at(x, y, 3) = big || corner || pair ? 0.5f : 0.1f;
+    }
+  u.at(9, 0, 5) = 0.9f;
+  std::vector<std::uint8_t> held = scanned;
+  const BandSheetReport r = hold_band_sheet(u, window, 2, held);
+  EXPECT_EQ(r.lines, 100u);
+  EXPECT_EQ(r.drawn, 31u);
+  EXPECT_DOUBLE_EQ(r.largest, 0.2);
+  EXPECT_EQ(r.patches, 1);
+  EXPECT_EQ(r.held_lines, 20u);
+  EXPECT_TRUE(r.held);
+  EXPECT_EQ(r.voxels, 20u);
+  for (std::size_t y = 0; y < 10; ++y)
+    for (std::size_t x = 0; x < 10; ++x)
+      for (std::size_t z = 0; z < 8; ++z)
+        ASSERT_EQ(held[at(x, y, z)], z == 3 && x < 4 && y < 5 ? 0 : 1) << x << " " << y << " " << z;
+  // A smaller patch size takes the corner block too, not the pair.
+  BandSheetParams p;
+  p.min_patch = 0.05;
+  held = scanned;
+  const BandSheetReport r2 = hold_band_sheet(u, window, 2, held, p);
+  EXPECT_EQ(r2.patches, 2);
+  EXPECT_EQ(r2.voxels, 29u);
+  EXPECT_EQ(held[at(5, 6, 3)], 0);
+  EXPECT_EQ(held[at(8, 9, 3)], 1);
+  // No patch large enough: nothing held.
+  p.min_patch = 0.25;
+  held = scanned;
+  const BandSheetReport r3 = hold_band_sheet(u, window, 2, held, p);
+  EXPECT_FALSE(r3.held);
+  EXPECT_EQ(r3.voxels, 0u);
+  EXPECT_EQ(held, scanned);
+  // An empty window decides nothing; a window of another size is an error.
+  EXPECT_EQ(hold_band_sheet(u, {}, 2, held).lines, 0u);
+  EXPECT_THROW(hold_band_sheet(u, std::vector<std::uint8_t>(5, 1), 2, held), std::invalid_argument);
+}
+
 TEST(IsoAuto, ConstantOrEmptyInputsFailCleanly) {
   Volume c({10, 10, 10}, {1, 1, 1}, ScalarType::UInt8);
   for (float& f : c.data) f = 50;
@@ -2188,6 +2287,45 @@ TEST_F(CliMask, NearFieldIsRemovedByDefaultAndKeptOnRequest) {
   float cued_max = 0;
   for (std::size_t z = 1; z < 10; ++z) cued_max = std::max(cued_max, uc.at(16, 16, z));
   EXPECT_LT(cued_max, 0.2f) << "the cue draws no flat bright layer";
+}
+
+TEST_F(CliMask, TheBandsUndersideDrawnAsASheetIsHeldAndKeptOnRequest) {
+  // A bright band (230, 3 mm) over a dimmer plateau (125, 3 mm) over dark
+  // tissue (40): the band is removed down to its bottom and margin (about
+  // 4 mm), and at the isovalue 80 the plateau's lower edge (6 mm) is a sheet
+  // under it on every line (host/mask.hpp, hold_band_sheet). By default the
+  // 3 mm under the band are held at u = 0; --band-sheet keep draws the sheet.
+  // A bright block deeper down (15-18 mm) is drawn either way.
+  Volume v = layered_scan({32, 32, 48}, {0.5, 0.5, 0.5}, 2, {{3.0, 230}, {3.0, 125}}, 40, test::seed() + 11);
+  for (std::size_t z = 30; z < 36; ++z)
+    for (std::size_t y = 10; y < 22; ++y)
+      for (std::size_t x = 10; x < 22; ++x) v.at(x, y, z) = 200;
+  write_volume(file("tail.nrrd"), v);
+  const test::RunResult r = run({"classify", file("tail.nrrd"), "--iso", "80", "-o", file("u.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("near field removed"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("the band's underside drawn as a sheet: 1 patch on"), std::string::npos) << r.out;
+  const test::RunResult k =
+      run({"classify", file("tail.nrrd"), "--iso", "80", "--band-sheet", "keep", "-o", file("k.nrrd")});
+  ASSERT_EQ(k.status, 0) << k.err;
+  EXPECT_EQ(k.out.find("underside"), std::string::npos) << k.out;
+  const Volume u = read_volume(file("u.nrrd")), uk = read_volume(file("k.nrrd"));
+  std::size_t lines_kept = 0, lines_held = 0;
+  for (std::size_t y = 4; y < 28; ++y)
+    for (std::size_t x = 4; x < 28; ++x) {
+      float mk = 0, mh = 0;
+      for (std::size_t z = 6; z < 18; ++z) mk = std::max(mk, uk.at(x, y, z)), mh = std::max(mh, u.at(x, y, z));
+      lines_kept += mk > 0.2f, lines_held += mh > 0.2f;
+    }
+  EXPECT_GT(lines_kept, 24u * 24u * 3 / 4) << "kept: the plateau's edge is a sheet";
+  EXPECT_EQ(lines_held, 0u) << "held: no sheet under the band";
+  float block = 0, block_kept = 0;
+  for (std::size_t z = 26; z < 34; ++z) block = std::max(block, u.at(16, 16, z)), block_kept = std::max(block_kept, uk.at(16, 16, z));
+  EXPECT_GT(block, 0.5f) << "the block's top is drawn";
+  EXPECT_GT(block_kept, 0.5f);
+  expect_one_line_error(run({"classify", file("tail.nrrd"), "--iso", "80", "--band-sheet", "drop", "-o", file("x.nrrd")}),
+                        {"--band-sheet", "hold", "keep"});
+  EXPECT_FALSE(fs::exists(file("x.nrrd")));
 }
 
 TEST_F(CliMask, ShadowWallsAreWeightedDownByDefaultAndKeptOnRequest) {

@@ -86,7 +86,12 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   MaskReport mr;
   in.mask = scanned_mask(v, MaskParams{}, &mr);
   if (mr.unscanned == 0) in.mask.clear();
+  const std::vector<std::uint8_t> before = in.mask;
   const NearFieldReport nf = remove_near_field(v, in.mask);  // the near field is an occluder (docs/real-data.md)
+  // The window under the band, held when the shell draws a sheet there (as classify does; host/mask.hpp).
+  const std::vector<std::uint8_t> underside =
+      nf.found ? band_underside(v.dims, v.spacing[std::size_t(nf.axis)], nf.axis, before, in.mask, BandSheetParams().window_mm)
+               : std::vector<std::uint8_t>();
   const std::vector<std::uint8_t>* mask = in.mask.empty() ? nullptr : &in.mask;
   // In place: the isovalue reads the scanned samples only, as classify does.
   if (mask) fill_unscanned_in_place(v, in.mask);
@@ -128,6 +133,14 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   }
   set_edge_weights(in.params, bone_cue_weights(in.data, mask, bone_cue, bp, &br), in.walls);
   in.u = reclassify(rt, in, in.params, nullptr, &in.report);  // keeps in.classifier
+  BandSheetReport sheet;
+  if (!underside.empty() && in.report.converged) {
+    sheet = hold_band_sheet(in.u, underside, nf.axis, in.mask);
+    if (sheet.held) {
+      in.classifier.reset();  // its fixed voxels change: a new one, on the new mask
+      in.u = reclassify(rt, in, in.params, nullptr, &in.report);
+    }
+  }
   in.classified = true;
   std::ostringstream note;
   note << "classified " << path << " (" << scalar_type_name(in.data.source_type) << (weights ? ") with the given weights: iso " : ") with the defaults: iso ")
@@ -136,6 +149,9 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
        << (in.report.residuals.empty() ? 0.0 : in.report.residuals.back())
        << (in.report.converged ? "" : " (NOT converged)") << ", bone cue " << (br.on ? "on" : "off")
        << ", shadow walls " << (in.walls ? "weighted down" : "kept");
+  if (sheet.held)
+    note << ", the band's underside held (a sheet on " << std::fixed << std::setprecision(0)
+         << 100.0 * double(sheet.held_lines) / double(sheet.lines) << " % of its lines)";
   in.note = note.str();
   return in;
 }

@@ -37,6 +37,7 @@ namespace {
 struct ClassifyOptions {
   std::string in, out, device, method = "variational", iso, init, cycle = "pcg", smoother = "gs", mask = "auto";
   std::string near_field = "remove", reverb = "remove", depth_clip;
+  std::string band_sheet = "hold";  // host/mask.hpp, hold_band_sheet
   std::string params;  // --params FILE
   std::vector<std::string> inputs;  // IN...: one volume, or a sequence's 3-D files (names or quoted patterns)
   std::vector<std::string> files;   // a sequence given as files (expand_input_files); empty otherwise
@@ -92,6 +93,11 @@ std::string format_iso(double iso) {
 struct DataMask {
   std::vector<std::uint8_t> scanned;  // empty: every voxel scanned
   std::string text;                   // for the report
+  // The window under a removed near-field band (host/mask.hpp,
+  // band_underside; empty: none) and the beam axis it lies along: held at
+  // u = 0 and solved again when the shell draws a sheet in it.
+  std::vector<std::uint8_t> underside;
+  int axis = -1;
 };
 
 // A mask or initial opacity of the volume's dims is used index by index; if
@@ -270,6 +276,26 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
   Volume u = classify_variational(rt, in, p, sp, &report, init ? &*init : nullptr,
                                  mask.scanned.empty() ? nullptr : &mask.scanned, &timing,
                                  o.hooks ? &o.hooks->start : nullptr);
+  // The band's underside drawn as a sheet (host/mask.hpp, hold_band_sheet):
+  // held at u = 0 and solved again, at the same isovalue.
+  std::string sheet_text;
+  if (!mask.underside.empty() && report.converged) {
+    std::vector<std::uint8_t> held = mask.scanned;
+    const BandSheetReport bs = hold_band_sheet(u, mask.underside, mask.axis, held);
+    if (bs.held) {
+      const ClassifyTiming first = timing;  // both classifications' times are reported
+      std::optional<progress::Stage> stage(std::in_place, "band sheet");
+      u = classify_variational(rt, in, p, sp, &report, init ? &*init : nullptr, &held, &timing,
+                               o.hooks ? &o.hooks->start : nullptr);
+      timing.setup += first.setup, timing.solve += first.solve;
+      std::ostringstream t;
+      t << std::fixed << std::setprecision(0) << "; the band's underside drawn as a sheet: " << bs.patches
+        << (bs.patches == 1 ? " patch" : " patches") << " on " << 100.0 * double(bs.held_lines) / double(bs.lines)
+        << " % of its lines, the " << std::setprecision(1) << BandSheetParams().window_mm
+        << " mm under it held at u = 0 there (" << bs.voxels << " voxels) and solved again (--band-sheet keep to keep it)";
+      sheet_text = t.str();
+    }
+  }
   auto history = [&] {
     std::ostringstream s;
     s << std::scientific << std::setprecision(2);
@@ -296,7 +322,7 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
     std::cout << std::fixed << std::setprecision(3) << "classify (variational) " << o.in << " -> " << o.out << '\n'
               << "  volume   " << dims_text(in.dims) << ' ' << scalar_type_name(in.source_type) << ", iso " << iso
               << iso_text << " (" << p.v_iso << " normalised, " << map.describe() << ")\n"
-              << "  mask     " << mask.text << '\n'
+              << "  mask     " << mask.text << sheet_text << '\n'
               << (o.scale_text.empty() ? "" : "  scale    " + o.scale_text + "\n")
               << "  params   alpha " << p.alpha << " beta " << p.beta << " gamma " << p.gamma << " omega " << p.omega
               << " delta " << p.delta << " epsilon " << p.epsilon << " u_ind " << p.u_ind << " sigma " << p.sigma_mm
@@ -455,6 +481,8 @@ int run_classify(const ClassifyOptions& given_options) {
   }
   if (o.reverb != "remove" && o.reverb != "keep")
     throw InputError("--reverb: expected remove or keep, got '" + o.reverb + "'");
+  if (o.band_sheet != "hold" && o.band_sheet != "keep")
+    throw InputError("--band-sheet: expected hold or keep, got '" + o.band_sheet + "'");
   BoneCueMode cue_mode = BoneCueMode::Off;
   if (!parse_bone_cue_mode(o.bone_cue, cue_mode))
     throw InputError("--bone-cue: expected auto, on or off, got '" + o.bone_cue + "'");
@@ -604,8 +632,15 @@ int run_classify(const ClassifyOptions& given_options) {
     NearFieldParams np;
     np.reverb = o.reverb == "remove";
     np.band = o.near_field == "remove";
+    const std::vector<std::uint8_t> before = variational && np.band && o.band_sheet == "hold" ? mask.scanned
+                                                                                             : std::vector<std::uint8_t>();
     const NearFieldReport nf = remove_near_field(in, mask.scanned, np);
     beam_axis = nf.axis;
+    if (nf.found && variational && o.band_sheet == "hold") {
+      mask.underside = band_underside(in.dims, in.spacing[std::size_t(nf.axis)], nf.axis, before, mask.scanned,
+                                      BandSheetParams().window_mm);
+      mask.axis = nf.axis;
+    }
     std::ostringstream t;
     if (nf.found) {
       t << "; near field removed: the first " << std::fixed << std::setprecision(1) << nf.depth_mm
@@ -828,6 +863,14 @@ void add_classify_command(CLI::App& app, Action& action) {
       ->capture_default_str()
       ->type_name("remove|keep")
       ->check(one_of({"remove", "keep"}));
+  sub->add_option("--band-sheet", o->band_sheet,
+                  "hold: when the variational shell draws a sheet just under a removed near-field band (in the "
+                  "3 mm under it, one patch on at least 15 % of its beam lines: the band's fading copies, not anatomy), "
+                  "those 3 mm are held at u = 0 like the band and the volume solved again; keep: left as drawn "
+                  "(docs/parameters.md, \"The band's underside\")")
+      ->capture_default_str()
+      ->type_name("hold|keep")
+      ->check(one_of({"hold", "keep"}));
   sub->add_option("--reverb", o->reverb,
                   "remove: when a flat reflector's echo repeats at equal spacing below it along the beam "
                   "(reverberation), the region below each beam line's first strong echo is held at u = 0; keep: "
