@@ -95,10 +95,17 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
 
 // beam_axis_of: an axis other than z wins only by this factor over z.
 constexpr double kBeamAxisMargin = 1.1;
+// ... and only when the data's brightness profile along z (the mean per
+// slice, over about 3 mm) does not vary kBeamProfileMargin times as much as
+// along that axis, with a total variation of at least kBeamProfileFloor of
+// the data's mean (docs/real-data.md, "The beam axis").
+constexpr double kBeamProfileMargin = 1.5, kBeamProfileFloor = 0.3;
 // The beam axis of a scan, from the data: speckle is finest along the beam,
 // so the mean squared difference between neighbours (per mm, scanned
 // nonzero samples) is largest along it. Another axis than z wins only by
 // kBeamAxisMargin over z; less is a tie, and ties go to z (the default beam).
+// Brightness varies with depth along the beam: a winner other than z whose
+// profile varies much less than z's (kBeamProfileMargin) gives z too.
 // `threads` (0: every core) does not change the result.
 // `plane_step` > 1 sums every plane_step-th z-plane only (a cheaper estimate).
 int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int threads = 0, std::size_t plane_step = 1);
