@@ -624,6 +624,26 @@ std::size_t hold_cut_remnants(std::vector<std::uint8_t>& mask, const Dims3& dims
   return held;
 }
 
+namespace {
+
+// The beam lines of a grid along `axis`: line l = u + nu w over the two
+// lateral axes (the first fastest), its voxels `len` steps of `stride` from
+// start(l).
+struct BeamLines {
+  std::size_t stride, su, sw, nu, nw, len;
+  BeamLines(const Dims3& d, std::size_t a)
+      : stride(a == 0 ? 1 : a == 1 ? d[0] : d[0] * d[1]),
+        su(a == 0 ? d[0] : 1),
+        sw(a == 2 ? d[0] : d[0] * d[1]),
+        nu(d[a == 0 ? 1 : 0]),
+        nw(d[a == 2 ? 1 : 2]),
+        len(d[a]) {}
+  std::size_t count() const { return nu * nw; }
+  std::size_t start(std::size_t l) const { return (l % nu) * su + (l / nu) * sw; }
+};
+
+}  // namespace
+
 std::vector<std::uint8_t> band_underside(const Dims3& dims, double spacing_mm, int axis,
                                          const std::vector<std::uint8_t>& before,
                                          const std::vector<std::uint8_t>& after, double window_mm) {
@@ -632,23 +652,18 @@ std::vector<std::uint8_t> band_underside(const Dims3& dims, double spacing_mm, i
   if ((!before.empty() && before.size() != n) || (!after.empty() && after.size() != n))
     throw std::invalid_argument("band_underside: mask size differs from the volume");
   if (after.empty() || !(spacing_mm > 0) || !(window_mm > 0)) return {};
-  const auto a = std::size_t(axis);
-  const std::size_t stride = a == 0 ? 1 : a == 1 ? dims[0] : dims[0] * dims[1];
-  const std::size_t u_ax = a == 0 ? 1 : 0, w_ax = a == 2 ? 1 : 2;
-  const std::size_t su = u_ax == 0 ? 1 : dims[0], sw = w_ax == 1 ? dims[0] : dims[0] * dims[1];
-  const std::size_t len = dims[a];
+  const BeamLines lines(dims, std::size_t(axis));
   std::vector<std::uint8_t> window(n, 0);
   bool any = false;
-  for (std::size_t w = 0; w < dims[w_ax]; ++w)
-    for (std::size_t u = 0; u < dims[u_ax]; ++u) {
-      const std::size_t base = u * su + w * sw;
-      std::size_t k = 0;
-      while (k < len && !before.empty() && !before[base + k * stride]) ++k;  // the skin line
-      if (k == len || after[base + k * stride]) continue;                       // no band on this line
-      while (k < len && !after[base + k * stride]) ++k;                         // the band
-      for (const std::size_t b = k; k < len && double(k - b) * spacing_mm < window_mm - 1e-9; ++k)
-        if (after[base + k * stride]) window[base + k * stride] = 1, any = true;
-    }
+  for (std::size_t l = 0; l < lines.count(); ++l) {
+    const std::size_t base = lines.start(l), stride = lines.stride, len = lines.len;
+    std::size_t k = 0;
+    while (k < len && !before.empty() && !before[base + k * stride]) ++k;  // the skin line
+    if (k == len || after[base + k * stride]) continue;                       // no band on this line
+    while (k < len && !after[base + k * stride]) ++k;                         // the band
+    for (const std::size_t b = k; k < len && double(k - b) * spacing_mm < window_mm - 1e-9; ++k)
+      if (after[base + k * stride]) window[base + k * stride] = 1, any = true;
+  }
   if (!any) window.clear();
   return window;
 }
@@ -661,24 +676,18 @@ BandSheetReport hold_band_sheet(const Volume& u, const std::vector<std::uint8_t>
   if (window.size() != n || scanned.size() != n)
     throw std::invalid_argument("hold_band_sheet: window or mask size differs from the volume");
   if (axis < 0 || axis > 2) throw std::invalid_argument("hold_band_sheet: beam axis must be 0, 1 or 2");
-  const Dims3& d = u.dims;
-  const auto a = std::size_t(axis);
-  const std::size_t stride = a == 0 ? 1 : a == 1 ? d[0] : d[0] * d[1];
-  const std::size_t u_ax = a == 0 ? 1 : 0, w_ax = a == 2 ? 1 : 2;
-  const std::size_t su = u_ax == 0 ? 1 : d[0], sw = w_ax == 1 ? d[0] : d[0] * d[1];
-  const std::size_t nu = d[u_ax], nw = d[w_ax];
-  // Per beam line (q + nu w): 0 no window, 1 a window, 2 drawn in it.
-  std::vector<std::uint8_t> line(nu * nw, 0);
-  for (std::size_t w = 0; w < nw; ++w)
-    for (std::size_t q = 0; q < nu; ++q) {
-      std::uint8_t& l = line[q + nu * w];
-      for (std::size_t k = 0, i = q * su + w * sw; k < d[a]; ++k, i += stride)
-        if (window[i]) l = std::max<std::uint8_t>(l, u.data[i] > params.threshold ? 2 : 1);
-      rep.lines += l > 0, rep.drawn += l == 2;
-    }
+  const BeamLines lines(u.dims, std::size_t(axis));
+  const std::size_t nu = lines.nu, nw = lines.nw;
+  // Per beam line: 0 no window, 1 a window, 2 drawn in it.
+  std::vector<std::uint8_t> line(lines.count(), 0);
+  for (std::size_t l = 0; l < line.size(); ++l) {
+    for (std::size_t k = 0, i = lines.start(l); k < lines.len; ++k, i += lines.stride)
+      if (window[i]) line[l] = std::max<std::uint8_t>(line[l], u.data[i] > params.threshold ? 2 : 1);
+    rep.lines += line[l] > 0, rep.drawn += line[l] == 2;
+  }
   if (rep.lines == 0) return rep;
   // The drawn lines' patches: 4-connected across the beam.
-  std::vector<std::uint32_t> patch(nu * nw, 0);
+  std::vector<std::uint32_t> patch(line.size(), 0);
   std::vector<std::size_t> stack, members;
   std::uint32_t next = 0;
   for (std::size_t s = 0; s < line.size(); ++s) {
@@ -701,11 +710,9 @@ BandSheetReport hold_band_sheet(const Volume& u, const std::vector<std::uint8_t>
     if (share < params.min_patch) continue;
     ++rep.patches;
     rep.held_lines += members.size();
-    for (std::size_t c : members) {
-      const std::size_t q = c % nu, w = c / nu;
-      for (std::size_t k = 0, i = q * su + w * sw; k < d[a]; ++k, i += stride)
+    for (std::size_t c : members)
+      for (std::size_t k = 0, i = lines.start(c); k < lines.len; ++k, i += lines.stride)
         if (window[i] && scanned[i]) scanned[i] = 0, ++rep.voxels;
-    }
   }
   rep.held = rep.patches > 0;
   return rep;
@@ -714,7 +721,7 @@ BandSheetReport hold_band_sheet(const Volume& u, const std::vector<std::uint8_t>
 namespace {
 
 // Total variation of a brightness profile (the mean of the scanned nonzero
-// samples per slice across `axis`, slices with samples only, averaged over
+// samples per slice across an axis, slices with samples only, averaged over
 // a moving window of about 3 mm), over the data's mean.
 double profile_variation(const std::vector<double>& sum, const std::vector<std::size_t>& count, double slice_mm,
                          double mean) {
@@ -739,6 +746,43 @@ double profile_variation(const std::vector<double>& sum, const std::vector<std::
   return tv / mean;
 }
 
+// profile_variation() of the slices across `axis` and across z, {axis's, z's}
+// (every `step`-th z-plane): one pass, sums per z-plane added in z order, so
+// the same for any thread count.
+std::pair<double, double> brightness_variation(const Volume& v, const std::vector<std::uint8_t>* scanned, int axis,
+                                               int threads, std::size_t step) {
+  const Dims3& d = v.dims;
+  const std::size_t plane = d[0] * d[1];
+  const std::size_t na = d[std::size_t(axis)];  // axis 0 or 1
+  std::vector<double> zsum(d[2], 0.0), asum(d[2] * na, 0.0);
+  std::vector<std::size_t> zcount(d[2], 0), acount(d[2] * na, 0);
+  parallel_ranges(d[2], host_threads(threads), [&](std::size_t z0, std::size_t z1) {
+    for (std::size_t z = z0; z < z1; ++z) {
+      if (z % step != 0) continue;
+      for (std::size_t y = 0; y < d[1]; ++y)
+        for (std::size_t x = 0, i = z * plane + y * d[0]; x < d[0]; ++x, ++i) {
+          if (v.data[i] == 0.0f || (scanned && !(*scanned)[i])) continue;
+          const double s = v.data[i];
+          const std::size_t k = z * na + (axis == 0 ? x : y);
+          zsum[z] += s, ++zcount[z];
+          asum[k] += s, ++acount[k];
+        }
+    }
+  });
+  std::vector<double> zs, as(na, 0.0);
+  std::vector<std::size_t> zc, ac(na, 0);
+  double all = 0;
+  std::size_t n_all = 0;
+  for (std::size_t z = 0; z < d[2]; z += step) {
+    zs.push_back(zsum[z]), zc.push_back(zcount[z]);
+    all += zsum[z], n_all += zcount[z];
+    for (std::size_t k = 0; k < na; ++k) as[k] += asum[z * na + k], ac[k] += acount[z * na + k];
+  }
+  const double mean = n_all ? all / double(n_all) : 0;
+  return {profile_variation(as, ac, v.spacing[std::size_t(axis)], mean),
+          profile_variation(zs, zc, v.spacing[2] * double(step), mean)};
+}
+
 }  // namespace
 
 int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int threads, std::size_t plane_step) {
@@ -750,26 +794,12 @@ int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int 
   double energy[3] = {0, 0, 0};
   // Sums per z-plane, added in z order: the same for any thread count.
   const std::size_t plane = d[0] * d[1];
-  const std::size_t step = std::max<std::size_t>(1, plane_step);
   std::vector<double> psum(3 * d[2], 0.0);
   std::vector<std::size_t> pcount(3 * d[2], 0);
-  // The brightness profiles (scanned nonzero samples): per z-plane, and per
-  // x and per y within each z-plane (added over the planes afterwards).
-  std::vector<double> zsum(d[2], 0.0), xsum(d[2] * d[0], 0.0), ysum(d[2] * d[1], 0.0);
-  std::vector<std::size_t> zcount(d[2], 0), xcount(d[2] * d[0], 0), ycount(d[2] * d[1], 0);
   parallel_ranges(d[2], host_threads(threads), [&](std::size_t z0, std::size_t z1) {
-    for (std::size_t z = z0; z < z1; ++z) {
-      if (z % step != 0) continue;
-      for (std::size_t y = 0; y < d[1]; ++y)
-        for (std::size_t x = 0, i = z * plane + y * d[0]; x < d[0]; ++x, ++i) {
-          if (v.data[i] == 0.0f || (scanned && !(*scanned)[i])) continue;
-          const double s = v.data[i];
-          zsum[z] += s, ++zcount[z];
-          xsum[z * d[0] + x] += s, ++xcount[z * d[0] + x];
-          ysum[z * d[1] + y] += s, ++ycount[z * d[1] + y];
-        }
+    for (std::size_t z = z0; z < z1; ++z)
       for (int a = 0; a < 3; ++a) {
-        if (d[a] < 2) continue;
+        if (d[a] < 2 || z % std::max<std::size_t>(1, plane_step) != 0) continue;
         double sum = 0;
         std::size_t count = 0;
         if (a == 2 && z + 1 >= d[2]) continue;
@@ -786,7 +816,6 @@ int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int 
         }
         psum[3 * z + std::size_t(a)] = sum, pcount[3 * z + std::size_t(a)] = count;
       }
-    }
   });
   for (int a = 0; a < 3; ++a) {
     double sum = 0;
@@ -795,31 +824,20 @@ int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int 
     energy[a] = count ? sum / double(count) : 0;
   }
   const int best = int(std::max_element(energy, energy + 3) - energy);
+  if (best == 2) return best;
   // A PSF finer than the voxels along two axes leaves their grain alike
   // (white speckle at the voxel scale): when z ties with the winner, the
   // data does not tell, and the beam is the classifier's default, +z
   // (docs/real-data.md, "The beam axis").
-  if (best != 2 && !(energy[best] >= kBeamAxisMargin * energy[2])) return 2;
-  if (best == 2) return best;
+  if (!(energy[best] >= kBeamAxisMargin * energy[2])) return 2;
   // An almost isotropic PSF can give another axis the finer grain by more
   // than the margin (a fan phantom: 0.22 mm axial, 0.35 lateral, 0.37
   // elevation). Brightness changes with depth along the beam (the near-field
   // band, attenuation, gain drifting with depth), much less across it: when
-  // the profile along z varies kBeamProfileMargin as much as along the
-  // grain's winner, and clearly more than noise, the beam stays z.
-  std::vector<double> zs, xs(d[0], 0.0), ys(d[1], 0.0);
-  std::vector<std::size_t> zc, xc(d[0], 0), yc(d[1], 0);
-  double all = 0;
-  std::size_t n_all = 0;
-  for (std::size_t z = 0; z < d[2]; z += step) {
-    zs.push_back(zsum[z]), zc.push_back(zcount[z]);
-    all += zsum[z], n_all += zcount[z];
-    for (std::size_t x = 0; x < d[0]; ++x) xs[x] += xsum[z * d[0] + x], xc[x] += xcount[z * d[0] + x];
-    for (std::size_t y = 0; y < d[1]; ++y) ys[y] += ysum[z * d[1] + y], yc[y] += ycount[z * d[1] + y];
-  }
-  const double mean = n_all ? all / double(n_all) : 0;
-  const double tv_z = profile_variation(zs, zc, v.spacing[2] * double(step), mean);
-  const double tv_best = best == 0 ? profile_variation(xs, xc, v.spacing[0], mean) : profile_variation(ys, yc, v.spacing[1], mean);
+  // the profile across z's slices varies kBeamProfileMargin as much as
+  // across the winner's, and clearly more than noise, the beam stays z.
+  const auto [tv_best, tv_z] =
+      brightness_variation(v, scanned, best, threads, std::max<std::size_t>(1, plane_step));
   if (tv_z >= kBeamProfileFloor && tv_z >= kBeamProfileMargin * tv_best) return 2;
   return best;
 }

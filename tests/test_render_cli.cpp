@@ -6,7 +6,6 @@
 #include <array>
 #include <cmath>
 #include <cstdlib>
-#include <random>
 
 #include "cli_fixture.hpp"
 #include "image.hpp"
@@ -297,15 +296,9 @@ TEST_F(RenderCli, ViewerHoldsTheBandsUndersideSheetAndItsReSolvesKeepIt) {
   // isovalue 80: the plateau's lower edge would be a sheet under the removed
   // band. The viewer's input holds the 3 mm under the band at u = 0, says
   // so, and a re-solve at another isovalue keeps it held.
-  Volume v({32, 32, 48}, {0.5, 0.5, 0.5}, ScalarType::UInt8);
-  std::mt19937_64 rng(test::seed() + 3);
-  std::uniform_real_distribution<double> speckle(0.6, 1.4);
-  for (std::size_t z = 0; z < 48; ++z)
-    for (std::size_t y = 0; y < 32; ++y)
-      for (std::size_t x = 0; x < 32; ++x) {
-        const double mean = z < 6 ? 230 : z < 12 ? 125 : 40;
-        v.at(x, y, z) = float(std::clamp(std::round(mean * speckle(rng)), 1.0, 255.0));
-      }
+  const Volume v = test::speckled(
+      {32, 32, 48}, 0.5, [](double, double, double z) { return z < 3.0 ? 230.0 : z < 6.0 ? 125.0 : 40.0; },
+      test::seed() + 3);
   write_volume(file("tail.nrrd"), v);
   viewer::OpacityInput input = viewer::load_opacity(runtime(), file("tail.nrrd"), viewer::InputKind::Auto, "80");
   ASSERT_TRUE(input.classified);
