@@ -150,6 +150,10 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "iso_field_prior") ap.field_prior = x;
   else if (k == "iso_clip_fraction") ap.clip_fraction = x;
   else if (k == "iso_clip_share") ap.clip_share = x;
+  else if (k == "iso_floor_fraction") ap.floor_fraction = x;
+  else if (k == "iso_floor_share") ap.floor_share = x;
+  else if (k == "iso_floor_reach") ap.floor_reach_mm = x;
+  else if (k == "iso_floor_drop") ap.floor_drop = x;
   else if (k == "iso_clip_margin") ap.clip_margin = x;
   else if (k == "iso_cut_crest_votes") ap.cut_crest_votes = x != 0;
   else if (k == "cut_hold") g_no_cut_hold = x == 0;
@@ -382,7 +386,7 @@ int main(int argc, char** argv) {
     } else {
       std::fprintf(stderr, "usage: softshell_study_shells [--train S,S..] [--test S,S..] [--shapes face,spine] "
                            "[--size N] [--physics NAME] [--tolerance-mm MM] [--variational-only] [--defaults-only] "
-                           "[--set iso_fraction=..,iso_clip_fraction=..,iso_field_sigma=..,iso_field_depth_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
+                           "[--set iso_fraction=..,iso_clip_fraction=..,iso_floor_fraction=..,iso_floor_share=..,iso_field_sigma=..,iso_field_depth_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
                            "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,iso_offset=..,iso_cut_crest_votes=..,cut_hold=..,band_sheet=..,band_sheet_mm=..,band_sheet_patch=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,"
                            "mask_grow=..,mask_max_enclosed=..,mask_fluid_enclosed=..,mask_fluid_inside=..] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..] "
                            "[--shadow-walls on|off] [--walls beam_cos=..,reach=..,smooth=..,sigma=..,gap=..,bright=..] [--wall-ref weighted|data]\n");

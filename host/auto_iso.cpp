@@ -240,8 +240,9 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   // the plane is in cache.
   constexpr float kNone = -std::numeric_limits<float>::infinity();
   const bool want_top = params.rule == AutoIsoRule::Local;
-  std::vector<float> plane_top(want_top ? d[2] : 0, kNone);
-  std::vector<std::size_t> plane_at_top(plane_top.size(), 0), plane_scanned(plane_top.size(), 0);
+  std::vector<float> plane_top(want_top ? d[2] : 0, kNone), plane_bottom(plane_top.size(), -kNone);
+  std::vector<std::size_t> plane_at_top(plane_top.size(), 0), plane_at_bottom(plane_top.size(), 0),
+      plane_scanned(plane_top.size(), 0);
   blur_3d(num.data(), mask ? den.data() : nullptr, d, w[0], w[1], w[2], threads, [&](std::size_t z) {
     const std::size_t i0 = z * plane, i1 = i0 + plane;
     if (mask) {
@@ -253,17 +254,21 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
       std::copy(v.data.begin() + std::ptrdiff_t(i0), v.data.begin() + std::ptrdiff_t(i1), num.data() + i0);
     }
     if (!want_top) return;
-    float top = kNone;
-    std::size_t at_top = 0, scanned = plane;
+    float top = kNone, bottom = -kNone;
+    std::size_t at_top = 0, at_bottom = 0, scanned = plane;
     if (mask) {
       scanned = 0;
-      for (std::size_t i = i0; i < i1; ++i) top = std::max(top, den[i] > 0.0f ? num[i] : kNone);
-      for (std::size_t i = i0; i < i1; ++i) at_top += (den[i] > 0.0f) & (num[i] == top), scanned += den[i] > 0.0f;
+      for (std::size_t i = i0; i < i1; ++i)
+        top = std::max(top, den[i] > 0.0f ? num[i] : kNone), bottom = std::min(bottom, den[i] > 0.0f ? num[i] : -kNone);
+      for (std::size_t i = i0; i < i1; ++i)
+        at_top += (den[i] > 0.0f) & (num[i] == top), at_bottom += (den[i] > 0.0f) & (num[i] == bottom),
+            scanned += den[i] > 0.0f;
     } else {
-      for (std::size_t i = i0; i < i1; ++i) top = std::max(top, num[i]);
-      for (std::size_t i = i0; i < i1; ++i) at_top += num[i] == top;
+      for (std::size_t i = i0; i < i1; ++i) top = std::max(top, num[i]), bottom = std::min(bottom, num[i]);
+      for (std::size_t i = i0; i < i1; ++i) at_top += num[i] == top, at_bottom += num[i] == bottom;
     }
     plane_top[z] = top, plane_at_top[z] = at_top, plane_scanned[z] = scanned;
+    plane_bottom[z] = bottom, plane_at_bottom[z] = at_bottom;
   });
   // Voxels that count: inside, scanned with their six neighbours; a flag
   // per voxel (1: usable; 0 on the volume's faces), formed a row at a time
@@ -396,6 +401,10 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   float clip_level = std::numeric_limits<float>::infinity();
   double clipped_share = 0;
   std::size_t clipped_edges = 0;
+  float floor_level = -std::numeric_limits<float>::infinity();
+  double floor_share = 0;
+  std::size_t floored_edges = 0;
+  float floor_drop = 0;
   std::vector<std::size_t> cut_edges;
   // Climbs v~ from voxel (x, y, z) through the 26 neighbours, up (sign 1) or
   // down (sign -1), at most climb_steps; returns the voxel reached.
@@ -462,6 +471,9 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
       std::vector<float> crests, locals;
       std::vector<std::size_t> local_at, cut;
       std::size_t clipped = 0;
+      std::vector<float> drops;
+      std::vector<std::size_t> floor_at;
+      std::vector<std::array<float, 2>> floor_tc;
     };
     // The strong edges crowd into some planes: chunks of a few planes each,
     // handed to the threads as they become free.
@@ -483,6 +495,17 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
       const double share = scanned ? double(at_top) / double(scanned) : 0.0;
       clipped_share = share;
       if (scanned && share >= params.clip_share) clip_level = float(double(top) - params.clip_margin * (hi - lo));
+      // The same at the floor (the smallest scanned sample): fluid below the
+      // display's floor.
+      float bottom = -kNone;
+      std::size_t at_bottom = 0;
+      for (std::size_t z = 0; z < d[2]; ++z) {
+        if (plane_bottom[z] < bottom) bottom = plane_bottom[z], at_bottom = 0;
+        if (plane_bottom[z] == bottom) at_bottom += plane_at_bottom[z];
+      }
+      floor_share = scanned ? double(at_bottom) / double(scanned) : 0.0;
+      if (scanned && floor_share >= params.floor_share)
+        floor_level = float(double(bottom) + params.clip_margin * (hi - lo));
     }
     // Crests cut off up the beam (AutoIsoParams::cut_crest_votes): an
     // unusable voxel (NaN) among the nine of the plane above the crest, one
@@ -522,21 +545,65 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
                 f.cut.push_back(i);
                 continue;
               }
-              const float trough = num[climb(x, y, z, -1.0f)];
+              const std::size_t at_trough = climb(x, y, z, -1.0f);
+              const float trough = num[at_trough];
               const bool clipped = crest >= clip_level;
+              const bool floored = !clipped && trough <= floor_level;
               f.clipped += clipped;
+              if (floored) {
+                // How far v~ falls floor_reach_mm past the crest, on from the
+                // trough, as a share of the edge's contrast (the volume's
+                // median decides below).
+                const std::size_t ct[3] = {at_crest % d[0], (at_crest / d[0]) % d[1], at_crest / (d[0] * d[1])};
+                const std::size_t tt[3] = {at_trough % d[0], (at_trough / d[0]) % d[1], at_trough / (d[0] * d[1])};
+                double dir[3], len = 0;
+                for (int a = 0; a < 3; ++a)
+                  dir[a] = (double(ct[a]) - double(tt[a])) * v.spacing[std::size_t(a)], len += dir[a] * dir[a];
+                len = std::sqrt(len);
+                if (len > 0 && crest > trough) {
+                  std::size_t q[3];
+                  for (int a = 0; a < 3; ++a)
+                    q[a] = std::size_t(std::clamp(std::lround(double(ct[a]) + params.floor_reach_mm * dir[a] / len /
+                                                                              v.spacing[std::size_t(a)]),
+                                                  0L, long(d[std::size_t(a)]) - 1));
+                  const float beyond = num[v.index(q[0], q[1], q[2])];
+                  if (std::isfinite(beyond)) {
+                    f.drops.push_back(float((crest - beyond) / (crest - trough)));
+                    f.floor_at.push_back(f.locals.size());
+                    f.floor_tc.push_back({trough, crest});
+                  }
+                }
+              }
               const double fraction = clipped ? params.clip_fraction : params.local_fraction;
               f.locals.push_back(float(trough + fraction * (crest - trough)));
               f.local_at.push_back(i);
             }
           }
     });
+    std::vector<float> drops;
+    std::vector<std::size_t> floor_at;
+    std::vector<std::array<float, 2>> floor_tc;
     for (const Found& f : found) {
+      for (std::size_t j : f.floor_at) floor_at.push_back(locals.size() + j);
+      floor_tc.insert(floor_tc.end(), f.floor_tc.begin(), f.floor_tc.end());
+      drops.insert(drops.end(), f.drops.begin(), f.drops.end());
       cut_edges.insert(cut_edges.end(), f.cut.begin(), f.cut.end());
       crests.insert(crests.end(), f.crests.begin(), f.crests.end());
       locals.insert(locals.end(), f.locals.begin(), f.locals.end());
       local_at.insert(local_at.end(), f.local_at.begin(), f.local_at.end());
       clipped_edges += f.clipped;
+    }
+    if (!drops.empty()) {
+      // The floored edges' crests are peaks, not plateaus, in their median
+      // (AutoIsoParams::floor_drop): they take floor_fraction.
+      std::nth_element(drops.begin(), drops.begin() + long(drops.size() / 2), drops.end());
+      floor_drop = drops[drops.size() / 2];
+      if (params.floor_fraction != params.local_fraction && double(floor_drop) >= params.floor_drop)
+        for (std::size_t j = 0; j < floor_at.size(); ++j) {
+          const auto [t, c] = floor_tc[j];
+          locals[floor_at[j]] = float(t + params.floor_fraction * (c - t));
+        }
+      floored_edges = floor_at.size();
     }
   }
   if (crests.empty())  // no usable voxel has a gradient (e.g. a one-voxel checkerboard)
@@ -648,6 +715,10 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     report->clipped_share = clipped_share;
     report->clip_level = clip_level;
     report->clipped_edges = clipped_edges;
+    report->floor_share = floor_share;
+    report->floor_level = floor_level;
+    report->floored_edges = floored_edges;
+    report->floor_drop = floor_drop;
     report->cut_edges = std::move(cut_edges);
     report->field = std::move(field);
   }

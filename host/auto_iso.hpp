@@ -63,6 +63,20 @@ struct AutoIsoParams {
   double clip_fraction = 0.9;
   double clip_share = 0.01;
   double clip_margin = 0.03;
+  // Local, fluid at the floor (opt-in: `classify --iso-floor-fraction`;
+  // docs/parameters.md, "Fluid at the floor"): where the data sit at their
+  // floor (the smallest scanned sample) on at least floor_share of the
+  // scanned samples, an edge whose trough (of v~) lies within clip_margin of
+  // v~'s range above it, and whose crest is not clipped, is floored. When
+  // the floored edges' crests are peaks -- v~ floor_reach_mm past the crest,
+  // on from the trough, has fallen by at least floor_drop of the edge's
+  // contrast, in their median -- they take floor_fraction instead of
+  // local_fraction: a peak overstates the level behind the boundary. Equal
+  // to local_fraction (the default): off, the same bits as without the rule.
+  double floor_fraction = 0.75;
+  double floor_share = 0.01;
+  double floor_reach_mm = 2.5;
+  double floor_drop = 0.2;
   // Local, crests cut off up the beam: an edge whose climb to its crest ends
   // against unusable voxels on the probe's side (the plane above the crest,
   // along beam_axis: the removed near field, unscanned fill or the volume's
@@ -92,6 +106,10 @@ struct AutoIsoReport {
   double clipped_share = 0;           // Local: share of the scanned samples at the largest one
   double clip_level = 0;              // Local: crests from here up count as clipped (+inf: the data do not clip)
   std::size_t clipped_edges = 0;      // Local: edges whose crest was clipped
+  double floor_share = 0;             // Local: share of the scanned samples at the smallest one
+  double floor_level = 0;             // Local: troughs up to here count as floored (-inf: the data do not floor)
+  std::size_t floored_edges = 0;      // Local: edges whose trough lay at the floor (and crest was not clipped)
+  double floor_drop = 0;              // Local: their median drop past the crest (share of their contrast)
   std::vector<std::size_t> cut_edges; // Local: edges whose crest was cut off up the beam (voxel indices, z order)
   HostVector<float> field;            // Local, want_field: the isovalue per voxel, file units
 };

@@ -1652,6 +1652,64 @@ TEST(IsoAuto, ClippedEchoesTakeTheClipFraction) {
   EXPECT_EQ(rep_few.clipped_edges, 0u);
 }
 
+// Fluid at the data's floor (exact 0, z < 16) under a bright side: a thin
+// echo (2 planes) over tissue, or tissue with no echo. Small noise, never 0
+// on the bright side.
+Volume floor_step(double echo, double tissue, std::uint64_t seed) {
+  Volume v({32, 32, 40}, {1, 1, 1}, ScalarType::Float32);
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> noise(0.0, 4.0);
+  for (std::size_t z = 0; z < 40; ++z)
+    for (std::size_t y = 0; y < 32; ++y)
+      for (std::size_t x = 0; x < 32; ++x) {
+        const double level = z < 16 ? 0.0 : z < 18 ? echo : tissue;
+        v.at(x, y, z) = z < 16 ? 0.0f : float(std::clamp(level + noise(rng), 1.0, 255.0));
+      }
+  return v;
+}
+
+TEST(IsoAuto, FlooredEdgesWhoseCrestsArePeaksTakeTheFloorFraction) {
+  // docs/parameters.md, "Fluid at the floor" (opt-in). The fluid sits at the data's
+  // floor (40 % of the samples are 0), so the edges' troughs are the floor,
+  // not the fluid's level. Over a thin echo the crests are peaks: 2.5 mm
+  // past the crest v~ has fallen by most of the contrast, the median drop
+  // is at least floor_drop, and the floored edges take floor_fraction.
+  // Over tissue with no echo the crest is a plateau (no drop): the old rule,
+  // bit for bit; so too fluid above the floor.
+  AutoIsoParams ap, off;
+  EXPECT_EQ(off.floor_fraction, off.local_fraction) << "off by default";
+  ap.floor_fraction = 0.5;
+  AutoIsoReport rep, rep_off;
+  const Volume peaked = floor_step(150, 60, test::seed() + 51);
+  const double iso = auto_iso(peaked, nullptr, ap, &rep), iso_off = auto_iso(peaked, nullptr, off, &rep_off);
+  std::cout << "[ iso      ] thin echo over fluid at the floor: " << 100 * rep.floor_share << " % of the samples at 0, "
+            << rep.floored_edges << " of " << rep.crests << " edges floored, median drop " << rep.floor_drop
+            << "; isovalue " << iso << " (without the rule " << iso_off << ")\n";
+  EXPECT_GT(rep.floor_share, 0.3);
+  EXPECT_GT(double(rep.floored_edges), 0.5 * double(rep.crests)) << "most strong edges face the fluid";
+  EXPECT_GE(rep.floor_drop, ap.floor_drop);
+  EXPECT_EQ(rep_off.floored_edges, rep.floored_edges) << "which edges are floored does not depend on the fraction";
+  // Trough 0: the isovalue scales with the fraction.
+  EXPECT_NEAR(iso / iso_off, ap.floor_fraction / ap.local_fraction, 0.05);
+
+  AutoIsoReport rep_flat, rep_flat_off;
+  const Volume flat = floor_step(100, 100, test::seed() + 53);
+  const double f = auto_iso(flat, nullptr, ap, &rep_flat), f_off = auto_iso(flat, nullptr, off, &rep_flat_off);
+  EXPECT_GT(double(rep_flat.floored_edges), 0.5 * double(rep_flat.crests));
+  EXPECT_LT(rep_flat.floor_drop, ap.floor_drop) << "a plateau behind the boundary";
+  EXPECT_EQ(f, f_off) << "no peaks: the old isovalue";
+
+  Volume lifted = peaked;
+  std::mt19937_64 rng(test::seed() + 55);
+  std::normal_distribution<double> jitter(0.0, 2.0);
+  for (float& x : lifted.data) x += float(20.0 + jitter(rng));  // fluid near 20, no repeated minimum: no floor
+  AutoIsoReport rep_lift;
+  const double l = auto_iso(lifted, nullptr, ap, &rep_lift), l_off = auto_iso(lifted, nullptr, off);
+  EXPECT_LT(rep_lift.floor_share, 0.01);
+  EXPECT_EQ(rep_lift.floored_edges, 0u);
+  EXPECT_EQ(l, l_off) << "data that do not floor keep the old isovalue";
+}
+
 // A band removed under the probe (z < 8, unscanned) whose tail the removal
 // left (230 fading to the tissue's 100 over z 8-11), tissue to z 29, fluid
 // (20) below. The tail's edges climb to a crest against the cut: with the
@@ -2344,6 +2402,34 @@ TEST_F(CliMask, TheBandsUndersideDrawnAsASheetIsHeldAndKeptOnRequest) {
   EXPECT_GT(block_kept, 0.5f);
   expect_one_line_error(run({"classify", file("tail.nrrd"), "--iso", "80", "--band-sheet", "drop", "-o", file("x.nrrd")}),
                         {"--band-sheet", "hold", "keep"});
+  EXPECT_FALSE(fs::exists(file("x.nrrd")));
+}
+
+TEST_F(CliMask, FluidAtTheFloorIsOptIn) {
+  // The thin echo over fluid at 0 of IsoAuto.FlooredEdges...: by default the
+  // isovalue is the old rule's and nothing is said; with
+  // --iso-floor-fraction 0.5 the classify line names the rule and the
+  // isovalue falls to about 2/3 of it.
+  write_volume(file("floor.nrrd"), floor_step(150, 60, test::seed() + 57));
+  const std::vector<std::string> common = {"classify", file("floor.nrrd"), "--iso", "auto", "--mask", "none",
+                                           "--near-field", "keep"};
+  auto with = [&](std::vector<std::string> extra, const std::string& out) {
+    std::vector<std::string> a = common;
+    a.insert(a.end(), extra.begin(), extra.end());
+    a.insert(a.end(), {"-o", file(out)});
+    return run(a);
+  };
+  const auto iso_of = [](const std::string& out) {
+    const std::size_t at = out.find(" iso ");
+    return at == std::string::npos ? -1.0 : std::stod(out.substr(at + 5));
+  };
+  const test::RunResult d = with({}, "d.nrrd"), f = with({"--iso-floor-fraction", "0.5"}, "f.nrrd");
+  ASSERT_EQ(d.status, 0) << d.err;
+  ASSERT_EQ(f.status, 0) << f.err;
+  EXPECT_EQ(d.out.find("fluid at the floor"), std::string::npos) << d.out;
+  EXPECT_NE(f.out.find("fluid at the floor: 40.0 % of the samples at the minimum"), std::string::npos) << f.out;
+  EXPECT_NEAR(iso_of(f.out) / iso_of(d.out), 0.5 / 0.75, 0.05) << d.out << f.out;
+  expect_one_line_error(with({"--iso-floor-fraction", "1.5"}, "x.nrrd"), {"--iso-floor-fraction"});
   EXPECT_FALSE(fs::exists(file("x.nrrd")));
 }
 

@@ -48,6 +48,7 @@ struct ClassifyOptions {
   double iso_fraction = AutoIsoParams().local_fraction, iso_field_sigma = AutoIsoParams().field_sigma_mm;
   double iso_field_depth_sigma = AutoIsoParams().field_depth_sigma_mm;
   double iso_clip_fraction = AutoIsoParams().clip_fraction;
+  double iso_floor_fraction = AutoIsoParams().floor_fraction;
   std::optional<double> sigma;  // unset: 1 mm for variational, 0 (raw) for levoy
   VariationalParams vp;
   SolverParams sp;
@@ -716,6 +717,7 @@ int run_classify(const ClassifyOptions& given_options) {
     ap.want_field = ap.rule == AutoIsoRule::Local && !o.no_iso_field;
     ap.local_fraction = o.iso_fraction;
     ap.clip_fraction = o.iso_clip_fraction;
+    ap.floor_fraction = o.iso_floor_fraction;
     ap.field_sigma_mm = o.iso_field_sigma;
     ap.field_depth_sigma_mm = o.iso_field_depth_sigma;
     if (ap.want_field) ap.beam_axis = beam_axis_now();
@@ -742,6 +744,17 @@ int run_classify(const ClassifyOptions& given_options) {
       t << std::fixed << std::setprecision(1) << "; clipped echoes: " << 100 * rep.clipped_share
         << " % of the samples at the maximum, " << 100.0 * double(rep.clipped_edges) / double(rep.crests)
         << " % of the edges placed at " << std::setprecision(2) << ap.clip_fraction << " of their contrast";
+      iso_text += t.str();
+    }
+    if (ap.rule == AutoIsoRule::Local && ap.floor_fraction != ap.local_fraction && rep.floored_edges &&
+        rep.floor_drop >= ap.floor_drop) {
+      // The rule for fluid at the floor under peaked crests was used: say so.
+      std::ostringstream t;
+      t << std::fixed << std::setprecision(1) << "; fluid at the floor: " << 100 * rep.floor_share
+        << " % of the samples at the minimum, " << 100.0 * double(rep.floored_edges) / double(rep.crests)
+        << " % of the edges placed at " << std::setprecision(2) << ap.floor_fraction
+        << " of their contrast (their crests fall by " << rep.floor_drop << " of it within "
+        << std::setprecision(1) << ap.floor_reach_mm << " mm)";
       iso_text += t.str();
     }
     iso_text += ")";
@@ -819,6 +832,13 @@ void add_classify_command(CLI::App& app, Action& action) {
                   "The local rule: the same for a boundary whose echo is clipped (its crest at the data's maximum, "
                   "where at least 1 % of the samples lie): its true crest is higher (docs/real-data.md, \"Clipped "
                   "echoes\"); equal to --iso-fraction turns the rule off")
+      ->capture_default_str()
+      ->check(real_range(0, 1));
+  sub->add_option("--iso-floor-fraction", o->iso_floor_fraction,
+                  "The local rule: the same for a boundary whose dark side lies at the data's floor (where at least "
+                  "1 % of the samples lie) when the boundaries' crests are peaks, not plateaus (docs/parameters.md, "
+                  "\"Fluid at the floor\"); off by default (equal to --iso-fraction): it helped faint heads in fluid at 0 and cost "
+                  "others as much")
       ->capture_default_str()
       ->check(real_range(0, 1));
   sub->add_option("--iso-field-sigma", o->iso_field_sigma,
