@@ -1560,18 +1560,25 @@ TEST(IsoField, FloatDataNearTheTopOfItsRangeGivesAFiniteFieldThatFollowsTheDrift
 
 // Fluid (40) over tissue (200) with a bright echo 6 voxels thick on the
 // boundary, its level `echo` before the display's ceiling of 255 cuts it.
-Volume echo_over_tissue(double echo, std::uint64_t seed) {
+// Layers along z in a 32 x 32 x 40 volume: `fluid` for z < fluid_end (an
+// exact 0 stays 0: fluid at the data's floor), `echo` to echo_end, `tissue`
+// below; Gaussian noise (sd 4) elsewhere, clamped to [1, 255].
+Volume layers_along_z(double fluid, std::size_t fluid_end, double echo, std::size_t echo_end, double tissue,
+                      std::uint64_t seed) {
   Volume v({32, 32, 40}, {1, 1, 1}, ScalarType::Float32);
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> noise(0.0, 4.0);
   for (std::size_t z = 0; z < 40; ++z)
     for (std::size_t y = 0; y < 32; ++y)
       for (std::size_t x = 0; x < 32; ++x) {
-        const double level = z < 14 ? 40.0 : z < 20 ? echo : 200.0;
-        v.at(x, y, z) = float(std::clamp(level + noise(rng), 0.0, 255.0));
+        const double level = z < fluid_end ? fluid : z < echo_end ? echo : tissue;
+        const double sample = std::clamp(level + noise(rng), 1.0, 255.0);
+        v.at(x, y, z) = level == 0.0 ? 0.0f : float(sample);
       }
   return v;
 }
+
+Volume echo_over_tissue(double echo, std::uint64_t seed) { return layers_along_z(40, 14, echo, 20, 200, seed); }
 
 TEST(IsoAuto, LocalFieldIsLongAlongTheBeamAndShortAcrossIt) {
   // A dim block (fluid 20 / tissue 160: its edges' isovalues near 125) lies
@@ -1653,20 +1660,8 @@ TEST(IsoAuto, ClippedEchoesTakeTheClipFraction) {
 }
 
 // Fluid at the data's floor (exact 0, z < 16) under a bright side: a thin
-// echo (2 planes) over tissue, or tissue with no echo. Small noise, never 0
-// on the bright side.
-Volume floor_step(double echo, double tissue, std::uint64_t seed) {
-  Volume v({32, 32, 40}, {1, 1, 1}, ScalarType::Float32);
-  std::mt19937_64 rng(seed);
-  std::normal_distribution<double> noise(0.0, 4.0);
-  for (std::size_t z = 0; z < 40; ++z)
-    for (std::size_t y = 0; y < 32; ++y)
-      for (std::size_t x = 0; x < 32; ++x) {
-        const double level = z < 16 ? 0.0 : z < 18 ? echo : tissue;
-        v.at(x, y, z) = z < 16 ? 0.0f : float(std::clamp(level + noise(rng), 1.0, 255.0));
-      }
-  return v;
-}
+// echo (2 planes) over tissue, or tissue with no echo.
+Volume floor_step(double echo, double tissue, std::uint64_t seed) { return layers_along_z(0, 16, echo, 18, tissue, seed); }
 
 TEST(IsoAuto, FlooredEdgesWhoseCrestsArePeaksTakeTheFloorFraction) {
   // docs/parameters.md, "Fluid at the floor" (opt-in). The fluid sits at the data's
