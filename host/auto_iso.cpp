@@ -466,14 +466,19 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     return i;
   };
   {
+    // An edge whose trough lies at the data's floor: its place in `locals`,
+    // its trough and crest, and how far v~ falls past the crest (a share of
+    // the contrast).
+    struct Floored {
+      std::size_t local;
+      float trough, crest, drop;
+    };
     // Per range of planes its own lists, joined in z order: the serial order.
     struct Found {
       std::vector<float> crests, locals;
       std::vector<std::size_t> local_at, cut;
       std::size_t clipped = 0;
-      std::vector<float> drops;
-      std::vector<std::size_t> floor_at;
-      std::vector<std::array<float, 2>> floor_tc;
+      std::vector<Floored> floored;
     };
     // The strong edges crowd into some planes: chunks of a few planes each,
     // handed to the threads as they become free.
@@ -516,8 +521,12 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     const int beam = std::clamp(params.beam_axis, 0, 2);
     const int a1 = beam == 0 ? 1 : 0, a2 = beam == 2 ? 1 : 2;
     const long st[3] = {1, long(d[0]), long(d[0] * d[1])};
+    // A voxel's (x, y, z) from its index.
+    const auto voxel_of = [&](std::size_t i) {
+      return std::array<std::size_t, 3>{i % d[0], (i / d[0]) % d[1], i / (d[0] * d[1])};
+    };
     auto cut_up = [&](std::size_t i) {
-      const std::size_t c[3] = {i % d[0], (i / d[0]) % d[1], i / (d[0] * d[1])};
+      const std::array<std::size_t, 3> c = voxel_of(i);
       for (int u = -1; u <= 1; ++u) {
         const std::size_t p1 = std::size_t(long(c[a1]) + u);
         if (p1 == 0 || p1 + 1 == d[std::size_t(a1)]) continue;
@@ -548,14 +557,13 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
               const std::size_t at_trough = climb(x, y, z, -1.0f);
               const float trough = num[at_trough];
               const bool clipped = crest >= clip_level;
-              const bool floored = !clipped && trough <= floor_level;
+              const bool at_floor = !clipped && trough <= floor_level;
               f.clipped += clipped;
-              if (floored) {
+              if (at_floor) {
                 // How far v~ falls floor_reach_mm past the crest, on from the
                 // trough, as a share of the edge's contrast (the volume's
                 // median decides below).
-                const std::size_t ct[3] = {at_crest % d[0], (at_crest / d[0]) % d[1], at_crest / (d[0] * d[1])};
-                const std::size_t tt[3] = {at_trough % d[0], (at_trough / d[0]) % d[1], at_trough / (d[0] * d[1])};
+                const std::array<std::size_t, 3> ct = voxel_of(at_crest), tt = voxel_of(at_trough);
                 double dir[3], len = 0;
                 for (int a = 0; a < 3; ++a)
                   dir[a] = (double(ct[a]) - double(tt[a])) * v.spacing[std::size_t(a)], len += dir[a] * dir[a];
@@ -567,11 +575,8 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
                                                                               v.spacing[std::size_t(a)]),
                                                   0L, long(d[std::size_t(a)]) - 1));
                   const float beyond = num[v.index(q[0], q[1], q[2])];
-                  if (std::isfinite(beyond)) {
-                    f.drops.push_back(float((crest - beyond) / (crest - trough)));
-                    f.floor_at.push_back(f.locals.size());
-                    f.floor_tc.push_back({trough, crest});
-                  }
+                  if (std::isfinite(beyond))
+                    f.floored.push_back({f.locals.size(), trough, crest, float((crest - beyond) / (crest - trough))});
                 }
               }
               const double fraction = clipped ? params.clip_fraction : params.local_fraction;
@@ -580,30 +585,25 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
             }
           }
     });
-    std::vector<float> drops;
-    std::vector<std::size_t> floor_at;
-    std::vector<std::array<float, 2>> floor_tc;
+    std::vector<Floored> floored;
     for (const Found& f : found) {
-      for (std::size_t j : f.floor_at) floor_at.push_back(locals.size() + j);
-      floor_tc.insert(floor_tc.end(), f.floor_tc.begin(), f.floor_tc.end());
-      drops.insert(drops.end(), f.drops.begin(), f.drops.end());
+      for (Floored e : f.floored) e.local += locals.size(), floored.push_back(e);
       cut_edges.insert(cut_edges.end(), f.cut.begin(), f.cut.end());
       crests.insert(crests.end(), f.crests.begin(), f.crests.end());
       locals.insert(locals.end(), f.locals.begin(), f.locals.end());
       local_at.insert(local_at.end(), f.local_at.begin(), f.local_at.end());
       clipped_edges += f.clipped;
     }
-    if (!drops.empty()) {
+    if (!floored.empty()) {
       // The floored edges' crests are peaks, not plateaus, in their median
       // (AutoIsoParams::floor_drop): they take floor_fraction.
+      std::vector<float> drops(floored.size());
+      for (std::size_t j = 0; j < floored.size(); ++j) drops[j] = floored[j].drop;
       std::nth_element(drops.begin(), drops.begin() + long(drops.size() / 2), drops.end());
       floor_drop = drops[drops.size() / 2];
       if (params.floor_fraction != params.local_fraction && double(floor_drop) >= params.floor_drop)
-        for (std::size_t j = 0; j < floor_at.size(); ++j) {
-          const auto [t, c] = floor_tc[j];
-          locals[floor_at[j]] = float(t + params.floor_fraction * (c - t));
-        }
-      floored_edges = floor_at.size();
+        for (const Floored& e : floored) locals[e.local] = float(e.trough + params.floor_fraction * (e.crest - e.trough));
+      floored_edges = floored.size();
     }
   }
   if (crests.empty())  // no usable voxel has a gradient (e.g. a one-voxel checkerboard)
