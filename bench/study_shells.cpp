@@ -43,6 +43,7 @@
 #include "levoy.hpp"
 #include "mask.hpp"
 #include "metrics.hpp"
+#include "orientation.hpp"
 #include "param_keys.hpp"
 #include "phantom.hpp"
 #include "variational.hpp"
@@ -116,6 +117,10 @@ bool g_no_cut_hold = false;
 // band_sheet_patch set its window and cover.
 bool g_band_sheet = true;
 BandSheetParams g_band_sheet_params;
+// --set data_normals=1: the normal error scores the splats' orientation by
+// the data (render --orientation data: the structure tensor of the B-mode
+// volume's orientation field, host/orientation.hpp) instead of u's.
+bool g_data_normals = false;
 
 // mask_grow, mask_max_enclosed, mask_fluid_enclosed and mask_fluid_inside:
 // the scanned-region mask's constants (host/mask.hpp).
@@ -158,6 +163,7 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "iso_cut_crest_votes") ap.cut_crest_votes = x != 0;
   else if (k == "cut_hold") g_no_cut_hold = x == 0;
   else if (k == "band_sheet") g_band_sheet = x != 0;
+  else if (k == "data_normals") g_data_normals = x != 0;
   else if (k == "band_sheet_mm") g_band_sheet_params.window_mm = x;
   else if (k == "band_sheet_patch") g_band_sheet_params.min_patch = x;
   else if (k == "iso_offset") {}  // added to the classifier's v_iso after the levelling (classify_default)
@@ -246,6 +252,11 @@ Metrics score(const Volume& u, const Case& c, double tol_mm) {
   mp.beam = c.ph.beam;
   if (!c.ph.shadow_db.data.empty()) mp.shadow_db = &c.ph.shadow_db;
   if (tol_mm > 0) mp.tolerance_mm = tol_mm;
+  Volume field;
+  if (g_data_normals) {
+    field = data_orientation_field(c.ph.volume);
+    mp.orientation_field = &field;
+  }
   return evaluate_opacity(u, c.ph.truth_sdf, mp);
 }
 
@@ -387,7 +398,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "usage: softshell_study_shells [--train S,S..] [--test S,S..] [--shapes face,spine] "
                            "[--size N] [--physics NAME] [--tolerance-mm MM] [--variational-only] [--defaults-only] "
                            "[--set iso_fraction=..,iso_clip_fraction=..,iso_floor_fraction=..,iso_floor_share=..,iso_field_sigma=..,iso_field_depth_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
-                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,iso_offset=..,iso_cut_crest_votes=..,cut_hold=..,band_sheet=..,band_sheet_mm=..,band_sheet_patch=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,"
+                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,iso_offset=..,iso_cut_crest_votes=..,cut_hold=..,band_sheet=..,data_normals=..,band_sheet_mm=..,band_sheet_patch=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,"
                            "mask_grow=..,mask_max_enclosed=..,mask_fluid_enclosed=..,mask_fluid_inside=..] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..] "
                            "[--shadow-walls on|off] [--walls beam_cos=..,reach=..,smooth=..,sigma=..,gap=..,bright=..] [--wall-ref weighted|data]\n");
       return 2;

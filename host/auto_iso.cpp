@@ -16,6 +16,7 @@
 #include <stdexcept>
 #include <thread>
 
+#include "blur.hpp"
 #include "error.hpp"
 #include "filter.hpp"
 #include "io.hpp"
@@ -23,111 +24,6 @@
 
 namespace softshell {
 namespace {
-
-// out[i] = sum_k w[k] rows[k][i] for i < m, the terms added in k order from
-// 0 (the order of a per-sample loop over the taps, so the same bits). Blocks
-// of 16 outputs keep their sums in registers over all taps (GCC vector
-// types; built for AVX2 too, with products and sums as written, no fused
-// multiply-add: the same bits in either build); summing each tap into the
-// output row in memory was bound by the L1's loads and stores.
-__attribute__((target_clones("avx2", "default"))) void weighted_rows(float* out, const float* const* rows,
-                                                                  const float* w, std::size_t taps, std::size_t m) {
-  typedef float v8f __attribute__((vector_size(32)));
-  std::size_t i0 = 0;
-  for (; i0 + 16 <= m; i0 += 16) {
-    v8f a0 = {0, 0, 0, 0, 0, 0, 0, 0}, a1 = a0;
-    for (std::size_t k = 0; k < taps; ++k) {
-      v8f f0, f1;
-      std::memcpy(&f0, rows[k] + i0, sizeof f0);
-      std::memcpy(&f1, rows[k] + i0 + 8, sizeof f1);
-      a0 += w[k] * f0, a1 += w[k] * f1;
-    }
-    std::memcpy(out + i0, &a0, sizeof a0);
-    std::memcpy(out + i0 + 8, &a1, sizeof a1);
-  }
-  std::fill(out + i0, out + m, 0.0f);
-  for (std::size_t k = 0; k < taps && i0 < m; ++k) {
-    const float wk = w[k];
-    const float* src = rows[k];
-    for (std::size_t i = i0; i < m; ++i) out[i] += wk * src[i];
-  }
-}
-
-// A thread's scratch for the blurs below.
-struct BlurScratch {
-  std::vector<float> pad, out;
-  std::vector<const float*> rows;
-};
-
-// Gaussian weights w along x of one row of `len` samples, in place,
-// clamp-to-edge like the device lowpass.
-void blur_row_x(float* line, std::size_t len, const std::vector<float>& w, BlurScratch& s) {
-  const long r = static_cast<long>(w.size() / 2);
-  if (r == 0 || len < 2) return;
-  s.pad.resize(len + 2 * std::size_t(r));
-  s.rows.resize(w.size());
-  for (long i = -r; i < long(len) + r; ++i) s.pad[std::size_t(i + r)] = line[std::size_t(std::clamp(i, 0L, long(len) - 1))];
-  for (std::size_t k = 0; k < w.size(); ++k) s.rows[k] = s.pad.data() + k;
-  weighted_rows(line, s.rows.data(), w.data(), w.size(), len);
-}
-
-// The same along y of one plane of nx x ny samples, in place.
-void blur_plane_y(float* plane, std::size_t nx, std::size_t ny, const std::vector<float>& w, BlurScratch& s) {
-  const long r = static_cast<long>(w.size() / 2);
-  if (r == 0 || ny < 2) return;
-  s.out.resize(nx * ny);
-  s.rows.resize(w.size());
-  for (std::size_t y = 0; y < ny; ++y) {
-    for (std::size_t k = 0; k < w.size(); ++k)
-      s.rows[k] = plane + std::size_t(std::clamp(long(y) + long(k) - r, 0L, long(ny) - 1)) * nx;
-    weighted_rows(s.out.data() + y * nx, s.rows.data(), w.data(), w.size(), nx);
-  }
-  std::copy_n(s.out.data(), nx * ny, plane);
-}
-
-// In-place separable Gaussian of one or two fields (b may be null), wx, wy
-// and wz the weights along each axis, clamp-to-edge like the device
-// lowpass. x and y are blurred a z-plane at a time while the plane is in
-// cache (prepare(z) first writes plane z of both fields, or does nothing), then
-// z a y-slice at a time. Each output sample sums its taps in a fixed order
-// and the work is split by whole planes or slices, so the result does not
-// depend on the thread count.
-template <class Prepare>
-void blur_3d(float* a, float* b, const Dims3& d, const std::vector<float>& wx, const std::vector<float>& wy,
-             const std::vector<float>& wz, int max_threads, Prepare&& prepare) {
-  const std::size_t nx = d[0], ny = d[1], nz = d[2], plane = nx * ny;
-  const int threads = host_threads(max_threads);
-  parallel_ranges(nz, threads, [&](std::size_t z0, std::size_t z1) {
-    BlurScratch s;
-    for (std::size_t z = z0; z < z1; ++z) {
-      prepare(z);
-      for (float* f : {a, b}) {
-        if (!f) continue;
-        float* const p = f + z * plane;
-        for (std::size_t y = 0; y < ny; ++y) blur_row_x(p + y * nx, nx, wx, s);
-        blur_plane_y(p, nx, ny, wy, s);
-      }
-    }
-  });
-  const long r = static_cast<long>(wz.size() / 2);
-  if (r == 0 || nz < 2) return;
-  const std::size_t taps = wz.size();
-  parallel_ranges(ny, threads, [&](std::size_t y0, std::size_t y1) {
-    std::vector<float> slice(nz * nx);  // the rows (z, y) of one y, z-major
-    std::vector<const float*> rows(taps);
-    for (float* f : {a, b}) {
-      if (!f) continue;
-      for (std::size_t y = y0; y < y1; ++y) {
-        for (std::size_t z = 0; z < nz; ++z) std::copy_n(f + (z * ny + y) * nx, nx, slice.data() + z * nx);
-        for (std::size_t z = 0; z < nz; ++z) {
-          for (std::size_t k = 0; k < taps; ++k)
-            rows[k] = slice.data() + std::size_t(std::clamp(long(z) + long(k) - r, 0L, long(nz) - 1)) * nx;
-          weighted_rows(f + (z * ny + y) * nx, rows.data(), wz.data(), taps, nx);
-        }
-      }
-    }
-  });
-}
 
 // For x in [0, len) of a row of v~ (c: its first voxel; sy, sz: the strides):
 // g[x] = |central-difference gradient| (h2: twice the spacings) and bin[x] =

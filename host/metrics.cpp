@@ -273,6 +273,14 @@ void validate(const Volume& opacity, const Volume& truth, const MetricsParams& p
     throw InputError("blob_rel must be in (0, 1], got " + std::to_string(p.blob_rel));
   if (!(p.tensor_sigma >= 0 && p.tensor_sigma <= 8))
     throw InputError("tensor sigma must be in [0, 8] voxels, got " + std::to_string(p.tensor_sigma));
+  if (p.orientation_field) {
+    if (p.orientation_field->dims != opacity.dims)
+      throw InputError("dims differ: orientation field " + dims_text(p.orientation_field->dims) + " vs opacity " +
+                       dims_text(opacity.dims));
+    if (p.orientation_field->data.size() != p.orientation_field->voxels())
+      throw InputError("evaluate: orientation field sample count does not match the dims");
+    if (!(p.tensor_sigma > 0)) throw InputError("orientation by the data needs a tensor sigma > 0");
+  }
   if (p.shadow_db) {
     if (p.shadow_db->dims != truth.dims)
       throw InputError("dims differ: shadow " + dims_text(p.shadow_db->dims) + " vs truth SDF " + dims_text(truth.dims));
@@ -402,13 +410,15 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
             s.near_u += ui;
             g.gradient(u, i, x, y, z, gu);
             double nu = std::sqrt(gu[0] * gu[0] + gu[1] * gu[1] + gu[2] * gu[2]);
-            if (p.tensor_sigma > 0) {  // the renderer's default orientation
-              const std::array<double, 3> t =
-                  tensor_orientation_reference(opacity, {double(x), double(y), double(z)}, p.tensor_sigma);
+            if (p.tensor_sigma > 0) {  // the renderer's default orientation (of u, or of the data)
+              const std::array<double, 3> t = tensor_orientation_reference(
+                  p.orientation_field ? *p.orientation_field : opacity, {double(x), double(y), double(z)},
+                  p.tensor_sigma);
               gu[0] = t[0], gu[1] = t[1], gu[2] = t[2];
               nu = std::sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]);
             }
-            if (nu > min_grad_u) {
+            // u's flat spots have no orientation; the data field is in its own units (any non-zero rms gradient).
+            if (p.orientation_field ? nu > 0 : nu > min_grad_u) {
               g.gradient(sdf, i, x, y, z, gs);
               have_gs = true;
               const double ns = std::sqrt(gs[0] * gs[0] + gs[1] * gs[1] + gs[2] * gs[2]);
@@ -637,6 +647,7 @@ std::string metrics_json(const Metrics& m, const MetricsParams& p) {
     << ", \"blob_rel\": " << json_number(p.blob_rel) << ", \"blob_threshold\": " << json_number(m.blob_threshold)
     << ", \"profile_radius_mm\": " << json_number(m.profile_radius_mm)
     << ", \"facing_cos\": " << json_number(p.facing_cos) << ", \"tensor_sigma\": " << json_number(p.tensor_sigma)
+    << ", \"orientation\": \"" << (p.tensor_sigma > 0 ? (p.orientation_field ? "data" : "tensor") : "gradient") << "\""
     << ", \"beam\": [" << json_number(b[0] + 0.0) << ", "
     << json_number(b[1] + 0.0) << ", " << json_number(b[2] + 0.0) << "]}";
   return o.str();

@@ -33,6 +33,11 @@ struct MetricsParams {
   // sigma in voxels (the renderer's default, host/orientation.hpp); 0 = grad u
   // by central differences (the paper's orientation).
   double tensor_sigma = 1.5;
+  // Orientation by the data (`render --orientation data`): the data's
+  // orientation field (host/orientation.hpp, data_orientation_field; same
+  // dims as u), whose structure tensor (tensor_sigma > 0) gives the normal
+  // instead of u's. Null: u orients.
+  const Volume* orientation_field = nullptr;
   // Visibility (recall_visible): a volume of the two-way shadow loss in dB
   // (the phantom's shadow_db.nrrd, same dims as the truth) and the loss
   // below which a surface voxel counts as visible. Null: recall_visible is

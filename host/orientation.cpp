@@ -6,10 +6,25 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "blur.hpp"
 #include "error.hpp"
+#include "filter.hpp"
 #include "grid.h"
 
 namespace softshell {
+
+Volume data_orientation_field(const Volume& bmode, int threads) {
+  if (bmode.voxels() == 0 || bmode.data.size() != bmode.voxels())
+    throw InputError("the data orientation field needs a non-empty volume");
+  const double finest = std::min({bmode.spacing[0], bmode.spacing[1], bmode.spacing[2]});
+  std::array<std::vector<float>, 3> w;
+  for (int a = 0; a < 3; ++a)
+    w[std::size_t(a)] = gaussian_weights(kDataLowpassVoxels * finest / bmode.spacing[std::size_t(a)], 3.0);
+  Volume f = bmode.with_data(bmode.data, ScalarType::Float32);
+  blur_3d(f.data.data(), nullptr, f.dims, w[0], w[1], w[2], threads, [](std::size_t) {});
+  return f;
+}
+
 std::array<double, 3> tensor_orientation_reference(const Volume& u, const std::array<double, 3>& p, double sigma) {
   if (!(sigma > 0)) throw std::invalid_argument("tensor sigma must be > 0");
   if (u.voxels() == 0) throw std::invalid_argument("empty volume");

@@ -11,6 +11,8 @@
 #include <utility>
 
 #include "error.hpp"
+#include "orientation.hpp"
+#include "text.hpp"
 
 namespace softshell {
 
@@ -18,6 +20,7 @@ const char* splat_normals_name(SplatNormals n) {
   switch (n) {
     case SplatNormals::Gradient: return "gradient";
     case SplatNormals::Tensor: return "tensor";
+    case SplatNormals::Data: return "data";
   }
   return "?";
 }
@@ -25,6 +28,7 @@ const char* splat_normals_name(SplatNormals n) {
 bool parse_splat_normals(const std::string& name, SplatNormals& out) {
   if (name == "gradient") out = SplatNormals::Gradient;
   else if (name == "tensor") out = SplatNormals::Tensor;
+  else if (name == "data") out = SplatNormals::Data;
   else return false;
   return true;
 }
@@ -68,12 +72,13 @@ double SplatSet::isotropic_size() const { return a * std::cbrt(spacing[0] * spac
 SplatGenerator::SplatGenerator(Runtime& rt, const GridDesc& grid, const SplatParams& params)
     : rt_(rt), grid_(grid), params_(params) {
   splat_lambda(params.threshold, params.gaussian);  // validates the threshold
-  if (params.normals == SplatNormals::Tensor && !(params.tensor_sigma > 0 && params.tensor_sigma <= 8))
+  const bool tensor = params.normals == SplatNormals::Tensor || params.normals == SplatNormals::Data;
+  if (tensor && !(params.tensor_sigma > 0 && params.tensor_sigma <= 8))
     throw InputError("tensor sigma must be in (0, 8] voxels");
   std::string options = "-D SPLAT_NORMALS=" + std::to_string(static_cast<int>(params.normals)) +
                         " -D SPLAT_CENTRES=" + std::to_string(static_cast<int>(params.centres)) +
                         " -D SPLAT_OCCLUSION=" + std::string(params.occlusion ? "1" : "0");
-  if (params.normals == SplatNormals::Tensor) {
+  if (tensor) {
     char sigma[64];
     std::snprintf(sigma, sizeof sigma, " -D TENSOR_SIGMA=%.9gf", params.tensor_sigma);
     options += sigma;
@@ -82,7 +87,10 @@ SplatGenerator::SplatGenerator(Runtime& rt, const GridDesc& grid, const SplatPar
   emit_ = rt.kernel("splat.cl", "splat_emit", options);
 }
 
-SplatSet SplatGenerator::generate(const cl::Buffer& u, const Vec3d& origin, SplatTiming* timing) const {
+SplatSet SplatGenerator::generate(const cl::Buffer& u, const Vec3d& origin, SplatTiming* timing,
+                                  const cl::Buffer* field) const {
+  if (params_.normals == SplatNormals::Data && !field)
+    throw InputError("splat orientation 'data' needs the B-mode volume behind the opacity");
   const auto t0 = std::chrono::steady_clock::now();
   const std::size_t rows = std::size_t(grid_.ny) * std::size_t(grid_.nz);
   cl::Buffer counts = rt_.buffer(rows * sizeof(cl_uint));
@@ -119,7 +127,8 @@ SplatSet SplatGenerator::generate(const cl::Buffer& u, const Vec3d& origin, Spla
   cl::Buffer out = rt_.buffer(bytes);
   rt_.queue().enqueueWriteBuffer(counts, CL_FALSE, 0, rows * sizeof(cl_uint), offsets.data());
   const cl_float4 org{{float(origin[0]), float(origin[1]), float(origin[2]), 0.0f}};
-  Runtime::set_args(emit_, u, counts, out, grid_, org, params_.threshold, static_cast<float>(set.a));
+  const cl::Buffer& f = params_.normals == SplatNormals::Data ? *field : u;
+  Runtime::set_args(emit_, u, f, counts, out, grid_, org, params_.threshold, static_cast<float>(set.a));
   cl::Event ee = rt_.enqueue_1d(emit_, rows);
   rt_.queue().enqueueReadBuffer(out, CL_TRUE, 0, bytes, set.splats.data());
   if (timing) {
@@ -129,12 +138,30 @@ SplatSet SplatGenerator::generate(const cl::Buffer& u, const Vec3d& origin, Spla
   return set;
 }
 
-SplatSet generate_splats(Runtime& rt, const Volume& u, const SplatParams& params, SplatTiming* timing) {
+cl::Buffer upload_orientation_field(Runtime& rt, const Volume& bmode, const Dims3& u_dims) {
+  if (bmode.voxels() == 0)
+    throw InputError("splat orientation 'data' needs the B-mode volume behind the opacity");
+  if (bmode.dims != u_dims)
+    throw InputError("splat orientation 'data': the B-mode volume has dims " + dims_text(bmode.dims) + ", the opacity " +
+                     dims_text(u_dims));
+  const Volume f = data_orientation_field(bmode);
+  const std::size_t bytes = f.voxels() * sizeof(float);
+  cl::Buffer fb = rt.buffer(bytes, CL_MEM_READ_ONLY);
+  rt.queue().enqueueWriteBuffer(fb, CL_TRUE, 0, bytes, f.data.data());
+  return fb;
+}
+
+SplatSet generate_splats(Runtime& rt, const Volume& u, const SplatParams& params, SplatTiming* timing,
+                         const Volume* bmode) {
   const GridDesc g = make_grid(u.dims, u.spacing);
+  const SplatGenerator gen(rt, g, params);  // validates the parameters before any upload
   const std::size_t bytes = u.voxels() * sizeof(float);
   cl::Buffer ub = rt.buffer(bytes, CL_MEM_READ_ONLY);
   rt.queue().enqueueWriteBuffer(ub, CL_TRUE, 0, bytes, u.data.data());
-  return SplatGenerator(rt, g, params).generate(ub, u.origin, timing);
+  if (params.normals != SplatNormals::Data) return gen.generate(ub, u.origin, timing);
+  if (!bmode) throw InputError("splat orientation 'data' needs the B-mode volume behind the opacity");
+  const cl::Buffer fb = upload_orientation_field(rt, *bmode, u.dims);
+  return gen.generate(ub, u.origin, timing, &fb);
 }
 
 std::vector<std::uint32_t> axis_order(const SplatSet& set, int axis, bool descending) {

@@ -20,9 +20,10 @@ namespace softshell {
 enum class SplatNormals : int {
   Gradient = 0,  // central-difference grad u per mm (the paper)
   Tensor = 1,    // structure tensor of u (kernels/orientation.h; the default)
+  Data = 2,      // the same tensor of the data (host/orientation.hpp, data_orientation_field)
 };
-const char* splat_normals_name(SplatNormals n);  // "gradient", "tensor"
-// Parses "gradient" / "tensor"; false when unknown.
+const char* splat_normals_name(SplatNormals n);  // "gradient", "tensor", "data"
+// Parses "gradient" / "tensor" / "data"; false when unknown.
 bool parse_splat_normals(const std::string& name, SplatNormals& out);
 
 // How lambda follows from epsilon. The paper prints lambda = -0.25 ln eps
@@ -49,7 +50,7 @@ struct SplatParams {
   // falls to epsilon at the inscribed circle (paper: 0.2).
   float threshold = 0.2f;
   SplatNormals normals = SplatNormals::Tensor;
-  double tensor_sigma = 1.5;  // voxels, for SplatNormals::Tensor (host/orientation.hpp), in (0, 8]
+  double tensor_sigma = 1.5;  // voxels, for SplatNormals::Tensor and Data (host/orientation.hpp), in (0, 8]
   SplatGaussian gaussian = SplatGaussian::Paper;
   SplatCentres centres = SplatCentres::Shell;
   // Ambient occlusion from u (kernels/splat.cl, splat_occlusion) on both
@@ -102,8 +103,11 @@ class SplatGenerator {
  public:
   SplatGenerator(Runtime& rt, const GridDesc& grid, const SplatParams& params = {});
   // `u` holds grid voxels floats; origin in mm. Blocks until the splats are
-  // on the host.
-  SplatSet generate(const cl::Buffer& u, const Vec3d& origin, SplatTiming* timing = nullptr) const;
+  // on the host. `field`: the data orientation field on the device (grid
+  // voxels floats, data_orientation_field), needed by SplatNormals::Data
+  // (InputError without it) and ignored otherwise.
+  SplatSet generate(const cl::Buffer& u, const Vec3d& origin, SplatTiming* timing = nullptr,
+                    const cl::Buffer* field = nullptr) const;
 
  private:
   Runtime& rt_;
@@ -112,9 +116,15 @@ class SplatGenerator {
   mutable cl::Kernel count_, emit_;
 };
 
-// Uploads `u` (opacity in [0, 1]) and generates its splats.
+// Uploads `u` (opacity in [0, 1]) and generates its splats. `bmode`: the
+// B-mode volume behind u (same dims), needed by SplatNormals::Data, which
+// orients by its data_orientation_field; InputError when that is missing
+// or its dims differ.
 SplatSet generate_splats(Runtime& rt, const Volume& u, const SplatParams& params = {},
-                         SplatTiming* timing = nullptr);
+                         SplatTiming* timing = nullptr, const Volume* bmode = nullptr);
+// The data orientation field of `bmode` on the device, for
+// SplatGenerator::generate (InputError unless its dims are `u_dims`).
+cl::Buffer upload_orientation_field(Runtime& rt, const Volume& bmode, const Dims3& u_dims);
 
 // Back-to-front draw orders (indices into SplatSet::splats).
 // The paper's presorted lists: splats by centre coordinate along `axis`

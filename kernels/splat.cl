@@ -10,7 +10,8 @@
  *
  * Output record, 7 float4 per splat (host/splats.hpp, struct Splat):
  *   [0] centre in mm (origin + h * index), alpha = u
- *   [1] unit normal (mm space), w = |normal field| before normalising
+ *   [1] unit normal (mm space), w = |normal field| before normalising (per
+ *       mm, in the units of the field that orients: u or the data)
  *   [2] S, [3] T: the triangle's half-axes in mm; the vertices are
  *       centre + S, centre - (S + sqrt3 T) / 2, centre - (S - sqrt3 T) / 2
  *   [4..6] unit normals midway between the centre and vertex 0, 1, 2 (the
@@ -30,6 +31,10 @@
  *      tensor of u with Gaussian sigma -D TENSOR_SIGMA (voxels), evaluated at
  *      the point itself (orientation.h, which says why: on the middle sheet
  *      of a shell grad u has no reliable direction).
+ *   2  data: the same tensor of the data's orientation field (the B-mode
+ *      volume lowpassed by a voxel, host/orientation.hpp) instead of u.
+ * splat_emit takes the field as `f`: u itself for 0 and 1. Everything else
+ * (which voxels, alpha, the shell centre, the occlusion) reads u.
  *
  * The splat centre, chosen by -D SPLAT_CENTRES:
  *   0  voxel: the voxel's centre (the paper).
@@ -59,10 +64,11 @@
 
 #define SPLAT_NORMALS_GRADIENT 0
 #define SPLAT_NORMALS_TENSOR 1
+#define SPLAT_NORMALS_DATA 2
 #ifndef SPLAT_NORMALS
 #define SPLAT_NORMALS SPLAT_NORMALS_TENSOR
 #endif
-#if SPLAT_NORMALS == SPLAT_NORMALS_TENSOR
+#if SPLAT_NORMALS == SPLAT_NORMALS_TENSOR || SPLAT_NORMALS == SPLAT_NORMALS_DATA
 #include "orientation.h"
 #ifndef TENSOR_SIGMA
 #define TENSOR_SIGMA 1.5f
@@ -75,9 +81,10 @@ inline float3 splat_gradient_at(__global const float* restrict u, const GridDesc
 }
 
 /* The splat normal field at a point p in voxel coordinates (p = index at
- * voxel centres; clamped into the grid), in mm space, not normalised. This is
- * the one place that decides splat orientation and shading normals. */
-inline float3 splat_normal(__global const float* restrict u, const GridDesc g, float3 p) {
+ * voxel centres; clamped into the grid), in mm space, not normalised, from
+ * the field f (u, or the data's orientation field). This is the one place
+ * that decides splat orientation and shading normals. */
+inline float3 splat_normal(__global const float* restrict f, const GridDesc g, float3 p) {
 #if SPLAT_NORMALS == SPLAT_NORMALS_GRADIENT
   p = clamp(p, (float3)(0.0f), (float3)((float)(g.nx - 1), (float)(g.ny - 1), (float)(g.nz - 1)));
   const float3 f0 = floor(p);
@@ -86,14 +93,14 @@ inline float3 splat_normal(__global const float* restrict u, const GridDesc g, f
   const int x1 = min(x0 + 1, g.nx - 1), y1 = min(y0 + 1, g.ny - 1), z1 = min(z0 + 1, g.nz - 1);
   /* At a voxel centre every weight but one is 0: skip the other corners so
    * the centre normal is exactly the voxel's central difference. */
-  if (w.x == 0.0f && w.y == 0.0f && w.z == 0.0f) return splat_gradient_at(u, g, x0, y0, z0);
-  const float3 c00 = mix(splat_gradient_at(u, g, x0, y0, z0), splat_gradient_at(u, g, x1, y0, z0), w.x);
-  const float3 c10 = mix(splat_gradient_at(u, g, x0, y1, z0), splat_gradient_at(u, g, x1, y1, z0), w.x);
-  const float3 c01 = mix(splat_gradient_at(u, g, x0, y0, z1), splat_gradient_at(u, g, x1, y0, z1), w.x);
-  const float3 c11 = mix(splat_gradient_at(u, g, x0, y1, z1), splat_gradient_at(u, g, x1, y1, z1), w.x);
+  if (w.x == 0.0f && w.y == 0.0f && w.z == 0.0f) return splat_gradient_at(f, g, x0, y0, z0);
+  const float3 c00 = mix(splat_gradient_at(f, g, x0, y0, z0), splat_gradient_at(f, g, x1, y0, z0), w.x);
+  const float3 c10 = mix(splat_gradient_at(f, g, x0, y1, z0), splat_gradient_at(f, g, x1, y1, z0), w.x);
+  const float3 c01 = mix(splat_gradient_at(f, g, x0, y0, z1), splat_gradient_at(f, g, x1, y0, z1), w.x);
+  const float3 c11 = mix(splat_gradient_at(f, g, x0, y1, z1), splat_gradient_at(f, g, x1, y1, z1), w.x);
   return mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
-#elif SPLAT_NORMALS == SPLAT_NORMALS_TENSOR
-  return tensor_orientation(u, g, p, TENSOR_SIGMA);  /* handles points outside the grid */
+#elif SPLAT_NORMALS == SPLAT_NORMALS_TENSOR || SPLAT_NORMALS == SPLAT_NORMALS_DATA
+  return tensor_orientation(f, g, p, TENSOR_SIGMA);  /* handles points outside the grid */
 #else
 #error "unknown SPLAT_NORMALS"
 #endif
@@ -160,7 +167,8 @@ __kernel void splat_count(__global const float* restrict u, __global uint* restr
 /* Writes each row's splats at offsets[row] (exclusive prefix sum of counts).
  * origin.xyz is the position of voxel (0, 0, 0) in mm; a is the triangle
  * size in voxels (paper: a = sqrt(1 / lambda)). */
-__kernel void splat_emit(__global const float* restrict u, __global const uint* restrict offsets,
+__kernel void splat_emit(__global const float* restrict u, __global const float* restrict f,
+                         __global const uint* restrict offsets,
                          __global float4* restrict out, const GridDesc g, const float4 origin, const float threshold,
                          const float a) {
   const size_t row = get_global_id(0);
@@ -176,7 +184,7 @@ __kernel void splat_emit(__global const float* restrict u, __global const uint* 
     const float alpha = r[x];
     if (!(alpha > threshold)) continue;
     float3 p = (float3)((float)x, (float)y, (float)z);
-    float3 grad = splat_normal(u, g, p);
+    float3 grad = splat_normal(f, g, p);
     /* A flat spot has no orientation; face the transducer (-z). */
     float3 n = splat_unit(grad, (float3)(0.0f, 0.0f, -1.0f));
     /* Plane basis in voxel coordinates, perpendicular to the covector n h. */
@@ -208,7 +216,7 @@ __kernel void splat_emit(__global const float* restrict u, __global const uint* 
       const float c = clamp(mass > 0.0f ? moment / mass : 0.0f, -1.0f, 1.0f);
       if (c != 0.0f) {
         p += c * nv;
-        grad = splat_normal(u, g, p);
+        grad = splat_normal(f, g, p);
         const float3 n2 = splat_unit(grad, n);
         n = dot(n2, n) < 0.0f ? -n2 : n2;
         nv = splat_unit(n * h, n);
@@ -227,7 +235,7 @@ __kernel void splat_emit(__global const float* restrict u, __global const uint* 
     for (int c = 0; c < 3; ++c) {
       /* Midway between the centre and vertex c, in voxel coordinates. */
       const float3 q = p + 0.5f * a * (corner[c].x * s + corner[c].y * t);
-      float3 m = splat_unit(splat_normal(u, g, q), n);
+      float3 m = splat_unit(splat_normal(f, g, q), n);
       if (dot(m, n) < 0.0f) m = -m;
       float w = 0.0f;  /* [4].w, [5].w: the occlusion along and against n; [6].w unused */
 #if SPLAT_OCCLUSION

@@ -16,6 +16,7 @@
 #include "error.hpp"
 #include "io.hpp"
 #include "metrics.hpp"
+#include "orientation.hpp"
 #include "test_support.hpp"
 #include "text.hpp"
 
@@ -287,6 +288,41 @@ TEST(MetricsSphere, RandomOpacityAlongTheSurfaceRaisesNormalError) {
   EXPECT_GT(b.normal_error_deg, a.normal_error_deg + 10.0) << a.normal_error_deg << " vs " << b.normal_error_deg;
   EXPECT_LE(b.normal_error_deg, 90.0);
   EXPECT_GT(b.precision, a.precision) << "the damped outskirts fall below the threshold";
+}
+
+TEST(MetricsSphere, OrientationByTheDataScoresTheDatasNormals) {
+  // u is a shell striped along x (opacity 0.1-1 with a period of 7
+  // voxels): the stripes' gradients, along the surface, tilt u's own tensor;
+  // the orientation field is a clean radial field (a smooth step across the
+  // sphere), whose tensor is right: scored with it, the error falls to a few
+  // degrees. A field of parallel planes scores as badly as its tilt.
+  const Volume sdf = sphere_sdf();
+  Volume u = smooth_shell(sdf, 1.5);
+  Volume radial = sdf, planes = sdf;
+  for (std::size_t i = 0; i < sdf.voxels(); ++i) {
+    const double x = double(i % kN);
+    u.data[i] = float(u.data[i] * (0.55 + 0.45 * std::sin(0.9 * x)));
+    radial.data[i] = float(200.0 / (1.0 + std::exp(double(sdf.data[i]) / 2.0)));
+    planes.data[i] = float(x);
+  }
+  const Metrics by_u = evaluate_opacity(u, sdf);
+  MetricsParams p;
+  p.orientation_field = &radial;
+  const Metrics by_data = evaluate_opacity(u, sdf, p);
+  EXPECT_LT(by_data.normal_error_deg, 5.0);
+  EXPECT_GT(by_u.normal_error_deg, by_data.normal_error_deg + 5.0) << by_u.normal_error_deg;
+  EXPECT_EQ(by_data.normal_voxels, by_u.normal_voxels) << "the same voxels, other normals";
+  EXPECT_EQ(by_data.precision, by_u.precision);
+  EXPECT_EQ(by_data.f1, by_u.f1);
+  p.orientation_field = &planes;
+  EXPECT_GT(evaluate_opacity(u, sdf, p).normal_error_deg, 40.0);
+  // A field of other dims, or the gradient orientation with a field: input errors.
+  const Volume small = sphere_sdf(16, 8, 5);
+  p.orientation_field = &small;
+  EXPECT_THROW(evaluate_opacity(u, sdf, p), InputError);
+  p.orientation_field = &radial;
+  p.tensor_sigma = 0;
+  EXPECT_THROW(evaluate_opacity(u, sdf, p), InputError);
 }
 
 TEST(MetricsSphere, EmptyOpacityDrawsNothing) {
@@ -743,9 +779,11 @@ TEST(MetricsEdt, EmptyMaskIsInfiniteAndOneVoxelIsExact) {
 
 // ---- `softshell evaluate` ----------------------------------------------------
 
-// A minimal parser for a flat JSON object of numbers and arrays of numbers;
-// fails the test on anything else or on trailing text.
-std::map<std::string, std::vector<double>> parse_flat_json(const std::string& text) {
+// A minimal parser for a flat JSON object of numbers, arrays of numbers and
+// strings (these into `strings` when given); throws on anything else or on
+// trailing text.
+std::map<std::string, std::vector<double>> parse_flat_json(const std::string& text,
+                                                           std::map<std::string, std::string>* strings = nullptr) {
   std::map<std::string, std::vector<double>> out;
   std::size_t i = 0;
   const auto ws = [&] {
@@ -779,7 +817,15 @@ std::map<std::string, std::vector<double>> parse_flat_json(const std::string& te
     expect(':');
     ws();
     std::vector<double> values;
-    if (i < text.size() && text[i] == '[') {
+    bool is_string = false;
+    if (i < text.size() && text[i] == '"') {  // a string value (no escapes in softshell's): into `strings`
+      const std::size_t end = text.find('"', i + 1);
+      if (end == std::string::npos) throw std::runtime_error("unterminated string");
+      if (strings && !strings->emplace(key, text.substr(i + 1, end - i - 1)).second)
+        throw std::runtime_error("duplicate key " + key);
+      i = end + 1;
+      is_string = true;
+    } else if (i < text.size() && text[i] == '[') {
       ++i;
       for (;;) {
         values.push_back(number());
@@ -794,7 +840,7 @@ std::map<std::string, std::vector<double>> parse_flat_json(const std::string& te
     } else {
       values.push_back(number());
     }
-    if (!out.emplace(key, values).second) throw std::runtime_error("duplicate key " + key);
+    if (!is_string && !out.emplace(key, values).second) throw std::runtime_error("duplicate key " + key);
     ws();
     if (i < text.size() && text[i] == ',') {
       ++i;
@@ -947,6 +993,52 @@ TEST_F(CliEvaluate, TableNamesEveryMetric) {
                            "mass_precision", "f1_mass", "surface_peak", "shell_thickness_mm", "blobs6",
                            "blob6_voxel_share", "components6", "u > 0.050", "f1_visible", "surface_peak_visible"})
     EXPECT_NE(r.out.find(word), std::string::npos) << word << " not in:\n" << r.out;
+}
+
+TEST_F(CliEvaluate, OrientationByTheDataReadsTheBmodeVolume) {
+  // --orientation data --volume V scores the tensor of V's orientation field
+  // (host/orientation.hpp), the splats `render --orientation data` draws.
+  const Volume sdf = sphere_sdf(24, 12, 7);
+  Volume u = smooth_shell(sdf, 1.5), bmode = sdf;
+  std::mt19937_64 rng(test::seed());
+  std::uniform_real_distribution<double> amp(0.3, 1.0);
+  for (float& f : u.data) f = float(f * amp(rng));
+  for (float& f : bmode.data) f = float(std::clamp(100.0 - 30.0 * f, 0.0, 255.0));
+  write_volume(file("truth.nrrd"), sdf);
+  write_volume(file("u.nrrd"), u);
+  write_volume(file("bmode.nrrd"), bmode);
+  const test::RunResult r = run({"evaluate", file("u.nrrd"), file("truth.nrrd"), "--json", "--orientation", "data",
+                                 "--volume", file("bmode.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  std::map<std::string, std::string> strings;
+  std::map<std::string, std::vector<double>> j;
+  ASSERT_NO_THROW(j = parse_flat_json(r.out, &strings)) << r.out;
+  EXPECT_EQ(strings["orientation"], "data");
+  const Volume field = data_orientation_field(read_volume(file("bmode.nrrd")));
+  MetricsParams p;
+  p.orientation_field = &field;
+  EXPECT_NEAR(j["normal_error_deg"].at(0), evaluate_opacity(read_volume(file("u.nrrd")), sdf, p).normal_error_deg, 1e-9);
+  const test::RunResult t = run({"evaluate", file("u.nrrd"), file("truth.nrrd"), "--json"});
+  ASSERT_EQ(t.status, 0) << t.err;
+  strings.clear();
+  ASSERT_NO_THROW(j = parse_flat_json(t.out, &strings)) << t.out;
+  EXPECT_EQ(strings["orientation"], "tensor");
+  const test::RunResult g = run({"evaluate", file("u.nrrd"), file("truth.nrrd"), "--json", "--orientation", "gradient"});
+  ASSERT_EQ(g.status, 0) << g.err;
+  strings.clear();
+  ASSERT_NO_THROW(j = parse_flat_json(g.out, &strings)) << g.out;
+  EXPECT_EQ(strings["orientation"], "gradient");
+  EXPECT_EQ(j["tensor_sigma"], std::vector<double>{0.0});
+  // The B-mode volume is needed, read only for data, and must match u.
+  const std::string uu = file("u.nrrd"), tt = file("truth.nrrd");
+  expect_one_line_error(run({"evaluate", uu, tt, "--orientation", "data"}), {"--orientation data", "--volume"});
+  expect_one_line_error(run({"evaluate", uu, tt, "--volume", file("bmode.nrrd")}), {"--volume", "--orientation data"});
+  expect_one_line_error(run({"evaluate", uu, tt, "--orientation", "sideways"}), {"--orientation"});
+  expect_one_line_error(run({"evaluate", uu, tt, "--orientation", "data", "--volume", file("gone.nrrd")}),
+                        {"gone.nrrd"});
+  write_volume(file("small.nrrd"), sphere_sdf(16, 8, 5));
+  expect_one_line_error(run({"evaluate", uu, tt, "--orientation", "data", "--volume", file("small.nrrd")}),
+                        {"dims differ", "small.nrrd"});
 }
 
 TEST_F(CliEvaluate, MismatchedDimsIsAOneLineError) {

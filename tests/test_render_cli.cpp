@@ -48,6 +48,71 @@ TEST_F(RenderCli, RendersAnOpacityVolumeToPng) {
   }
 }
 
+TEST_F(RenderCli, OrientationByTheDataTurnsTheSplatsWithTheBmode) {
+  // --orientation data: the splats lie perpendicular to the B-mode volume's
+  // own orientation, not u's. A B-mode of parallel planes across x turns
+  // every splat of a spherical shell edge-on to a camera looking down z
+  // (hardly a pixel drawn) and face-on to one looking down x; a B-mode with
+  // the sphere's own boundary draws what the tensor of u draws.
+  const int n = 32;
+  const std::string in = file("u.nrrd");
+  const Volume u = shell_volume(n);
+  write_volume(in, u);
+  Volume planes = u, sphere = u;
+  for (std::size_t z = 0; z < u.dims[2]; ++z)
+    for (std::size_t y = 0; y < u.dims[1]; ++y)
+      for (std::size_t x = 0; x < u.dims[0]; ++x) {
+        planes.at(x, y, z) = float(6 * x);
+        const double r = std::sqrt(std::pow(x - 0.5 * (n - 1), 2) + std::pow(y - 0.5 * (n - 1), 2) +
+                                   std::pow(z - 0.5 * (n - 1), 2));
+        sphere.at(x, y, z) = float(200.0 / (1.0 + std::exp((r - 0.3 * n) / 1.5)));
+      }
+  write_volume(file("planes.nrrd"), planes);
+  write_volume(file("sphere.nrrd"), sphere);
+  // The picture's coverage and its light (the mean grey level over all pixels).
+  struct Drawn {
+    double cover, light;
+  };
+  const auto draw = [&](const std::string& name, const std::string& view, const std::vector<std::string>& extra) {
+    std::vector<std::string> args{"render", in, "-o", file(name), "--size", "96x96", "--view", view, "-q"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    const RunResult r = run(args);
+    EXPECT_EQ(r.status, 0) << r.err;
+    const Image img = read_png(file(name));
+    double light = 0;
+    for (int y = 0; y < img.height; ++y)
+      for (int x = 0; x < img.width; ++x) {
+        const std::uint8_t* p = img.pixel(x, y);
+        light += (double(p[0]) + p[1] + p[2]) / 3.0;
+      }
+    return Drawn{covered(img), light / (double(img.width) * img.height)};
+  };
+  const Drawn by_u = draw("u.png", "0,0", {});
+  const Drawn edge_on = draw("edge.png", "0,0", {"--orientation", "data", "--volume", file("planes.nrrd")});
+  const Drawn face_on = draw("face.png", "90,0", {"--orientation", "data", "--volume", file("planes.nrrd")});
+  const Drawn round = draw("round.png", "0,0", {"--orientation", "data", "--volume", file("sphere.nrrd")});
+  EXPECT_GT(by_u.cover, 0.15);
+  // Edge-on: slits through which little light comes (measured: a quarter of u's picture's).
+  EXPECT_LT(edge_on.light, 0.4 * by_u.light) << by_u.light;
+  // Face-on: a flat disc as wide as the sphere, all of it lit alike.
+  EXPECT_GT(face_on.cover, 0.8 * by_u.cover) << by_u.cover;
+  EXPECT_GT(face_on.light, 0.9 * by_u.light) << by_u.light;
+  EXPECT_NEAR(round.cover, by_u.cover, 0.1 * by_u.cover);
+  EXPECT_NEAR(round.light, by_u.light, 0.1 * by_u.light);
+  // The viewer takes the same: edge-on from its default camera.
+  const RunResult v = run({"view", in, "--volume", file("planes.nrrd"), "--orientation", "data", "--frames", "2",
+                           "--screenshot", file("view.png"), "--size", "160x120", "-q"});
+  ASSERT_EQ(v.status, 0) << v.err;
+  EXPECT_TRUE(fs::exists(file("view.png")));
+  // Without the B-mode volume, or with one of other dims: one line, exit 2, no picture.
+  expect_one_line_error(run({"render", in, "-o", file("x.png"), "--orientation", "data"}), {"--volume", "u.nrrd"});
+  write_volume(file("small.nrrd"), shell_volume(16));
+  expect_one_line_error(run({"render", in, "-o", file("x.png"), "--orientation", "data", "--volume", file("small.nrrd")}),
+                        {"small.nrrd", "dims"});
+  expect_one_line_error(run({"view", in, "--orientation", "data"}), {"--volume", "u.nrrd"});
+  EXPECT_FALSE(fs::exists(file("x.png")));
+}
+
 TEST_F(RenderCli, TurntableWritesFrames) {
   const std::string in = file("u.nrrd");
   write_volume(in, shell_volume(24));
@@ -232,6 +297,11 @@ TEST_F(RenderCli, RawVolumeIsClassifiedFirst) {
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_NE(r.out.find("classified"), std::string::npos) << r.out;
   EXPECT_GT(covered(read_png(file("raw.png"))), 0.05);
+  // A raw volume brings its own B-mode for --orientation data.
+  const RunResult d = run({"render", in, "-o", file("raw-data.png"), "--size", "96x96", "--orientation", "data"});
+  ASSERT_EQ(d.status, 0) << d.err;
+  EXPECT_NE(d.out.find("normals data"), std::string::npos) << d.out;
+  EXPECT_GT(covered(read_png(file("raw-data.png"))), 0.05);
 }
 
 TEST_F(RenderCli, IsoOutsideTheDataWarnsInRenderAndView) {

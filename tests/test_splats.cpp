@@ -11,6 +11,7 @@
 #include <cstring>
 #include <numeric>
 
+#include "error.hpp"
 #include "orientation.hpp"
 #include "splats.hpp"
 #include "test_support.hpp"
@@ -141,18 +142,10 @@ TEST(Splats, MatchCpuReferenceOnOddAnisotropicVolumes) {
   }
 }
 
-TEST(Splats, TensorOrientationMatchesTheReference) {
-  // The default orientation: every splat normal and the three midway normals
-  // against host/orientation.cpp's float64 structure tensor.
-  Runtime& rt = runtime();
-  Volume u = random_volume({15, 11, 9}, {0.7, 1.3, 1.0}, seed() + 11);
-  u.origin = {1.0, -2.0, 0.5};
-  SplatParams p;
-  ASSERT_EQ(p.normals, SplatNormals::Tensor) << "the tensor is the default";
-  p.centres = SplatCentres::Voxel;  // normals at the voxel centres the reference evaluates
-  p.tensor_sigma = 1.2;
-  const SplatSet set = generate_splats(rt, u, p);
-  ASSERT_GT(set.splats.size(), 100u);
+// Every splat normal and the three midway normals of `set` (made from u with
+// SplatCentres::Voxel) against host/orientation.cpp's float64 structure
+// tensor of `field` (u itself, or the data orientation field).
+void expect_tensor_normals(const SplatSet& set, const Volume& u, const Volume& field, const SplatParams& p) {
   auto check = [&](const V3& want, const float* got, double tol_deg, const char* what) {
     const double wn = norm(want);
     ASSERT_GT(wn, 0);
@@ -165,8 +158,9 @@ TEST(Splats, TensorOrientationMatchesTheReference) {
     for (std::size_t y = 0; y < u.dims[1]; ++y)
       for (std::size_t x = 0; x < u.dims[0]; ++x) {
         if (!(u.at(x, y, z) > p.threshold)) continue;
+        ASSERT_LT(k, set.splats.size());
         const Splat& s = set.splats[k++];
-        const auto t = tensor_orientation_reference(u, {double(x), double(y), double(z)}, p.tensor_sigma);
+        const auto t = tensor_orientation_reference(field, {double(x), double(y), double(z)}, p.tensor_sigma);
         const V3 tv{t[0], t[1], t[2]};
         ASSERT_NEAR(s.strength, norm(tv), 1e-3 * norm(tv));
         check(tv, s.normal, 0.5, "centre normal");
@@ -178,13 +172,56 @@ TEST(Splats, TensorOrientationMatchesTheReference) {
           const std::array<double, 3> q{x + 0.5 * (corner[c][0] * Sv[0] + corner[c][1] * Tv[0]),
                                         y + 0.5 * (corner[c][0] * Sv[1] + corner[c][1] * Tv[1]),
                                         z + 0.5 * (corner[c][0] * Sv[2] + corner[c][1] * Tv[2])};
-          const auto m = tensor_orientation_reference(u, q, p.tensor_sigma);
+          const auto m = tensor_orientation_reference(field, q, p.tensor_sigma);
           V3 mv{m[0], m[1], m[2]};
           if (dot(mv, v3(s.normal)) < 0) mv = {-m[0], -m[1], -m[2]};  // sign-aligned with the centre
           check(mv, s.vertex_normal[c], 0.5, "vertex normal");
         }
       }
   EXPECT_EQ(k, set.splats.size());
+}
+
+TEST(Splats, TensorOrientationMatchesTheReference) {
+  // The default orientation: the structure tensor of u.
+  Runtime& rt = runtime();
+  Volume u = random_volume({15, 11, 9}, {0.7, 1.3, 1.0}, seed() + 11);
+  u.origin = {1.0, -2.0, 0.5};
+  SplatParams p;
+  ASSERT_EQ(p.normals, SplatNormals::Tensor) << "the tensor is the default";
+  p.centres = SplatCentres::Voxel;  // normals at the voxel centres the reference evaluates
+  p.tensor_sigma = 1.2;
+  const SplatSet set = generate_splats(rt, u, p);
+  ASSERT_GT(set.splats.size(), 100u);
+  expect_tensor_normals(set, u, u, p);
+}
+
+TEST(Splats, DataOrientationMatchesTheReference) {
+  // --orientation data: the same tensor of the B-mode volume's orientation
+  // field (a voxel's lowpass), an unrelated random field here, while the
+  // splats themselves (which voxels, alpha, centres) still come from u.
+  Runtime& rt = runtime();
+  Volume u = random_volume({15, 11, 9}, {0.7, 1.3, 1.0}, seed() + 11);
+  u.origin = {1.0, -2.0, 0.5};
+  Volume bmode = random_volume(u.dims, u.spacing, seed() + 12);
+  for (float& f : bmode.data) f *= 255.0f;  // B-mode units: the orientation does not care
+  SplatParams p;
+  p.normals = SplatNormals::Data;
+  p.centres = SplatCentres::Voxel;
+  p.tensor_sigma = 1.2;
+  const SplatSet set = generate_splats(rt, u, p, nullptr, &bmode);
+  SplatParams by_u = p;
+  by_u.normals = SplatNormals::Tensor;
+  const SplatSet tensor = generate_splats(rt, u, by_u);
+  ASSERT_EQ(set.splats.size(), tensor.splats.size());
+  for (std::size_t i = 0; i < set.splats.size(); ++i) {
+    ASSERT_EQ(set.splats[i].alpha, tensor.splats[i].alpha);
+    for (int a = 0; a < 3; ++a) ASSERT_EQ(set.splats[i].centre[a], tensor.splats[i].centre[a]);
+  }
+  expect_tensor_normals(set, u, data_orientation_field(bmode), p);
+  // Without the B-mode volume, or with one of other dims: an input error, no splats.
+  EXPECT_THROW(generate_splats(rt, u, p), InputError);
+  const Volume other = random_volume({15, 11, 8}, u.spacing, seed() + 13);
+  EXPECT_THROW(generate_splats(rt, u, p, nullptr, &other), InputError);
 }
 
 TEST(Splats, SmoothFieldNormalsAreRadial) {

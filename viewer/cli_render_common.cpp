@@ -59,9 +59,11 @@ void SplatViewOptions::add_to(CLI::App* sub, const std::vector<std::string>& met
       ->check(one_of({"one", "three"}));
   sub->add_option("--orientation", orientation,
                   "Splat plane and normals from: tensor (principal direction of the structure tensor of u; right on "
-                  "the middle of a shell, where grad u vanishes) or gradient (grad u, the paper); docs/rendering.md")
+                  "the middle of a shell, where grad u vanishes), data (the same tensor of the B-mode data, lowpassed "
+                  "by a voxel: the surface's own orientation, however u drew it; needs the raw volume or --volume) or "
+                  "gradient (grad u, the paper); docs/rendering.md")
       ->capture_default_str()
-      ->check(one_of({"tensor", "gradient"}));
+      ->check(one_of({"tensor", "data", "gradient"}));
   sub->add_option("--centres", centres,
                   "Splat centres: shell (each moved along its normal to the centroid of u across the shell: no bands "
                   "on tilted surfaces) or voxel (the voxel's centre, the paper); docs/rendering.md, \"Banding\"")
@@ -123,7 +125,7 @@ SplatParams SplatViewOptions::params() const {
   if (gaussian != "paper" && gaussian != "rim") throw InputError("--gaussian " + gaussian + ": expected paper or rim");
   p.gaussian = gaussian == "rim" ? SplatGaussian::Rim : SplatGaussian::Paper;
   if (!parse_splat_normals(orientation, p.normals))
-    throw InputError("--orientation " + orientation + ": expected tensor or gradient");
+    throw InputError("--orientation " + orientation + ": expected tensor, data or gradient");
   if (!(tensor_sigma > 0 && tensor_sigma <= 8)) throw InputError("--tensor-sigma must be in (0, 8] voxels");
   if (!parse_splat_centres(centres, p.centres)) throw InputError("--centres " + centres + ": expected shell or voxel");
   if (occlusion != "on" && occlusion != "off") throw InputError("--occlusion " + occlusion + ": expected on or off");

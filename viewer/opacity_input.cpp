@@ -18,6 +18,7 @@
 #include "host_memory.hpp"
 #include "mask.hpp"
 #include "memory_need.hpp"
+#include "text.hpp"
 
 namespace softshell::viewer {
 
@@ -154,6 +155,19 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
          << 100.0 * double(sheet.held_lines) / double(sheet.lines) << " % of its lines)";
   in.note = note.str();
   return in;
+}
+
+void attach_bmode(OpacityInput& in, const std::string& path) {
+  std::vector<Volume> frames = read_frames(path);
+  if (frames.size() > 1 && frames.size() != in.sequence.size())
+    throw input_error(path, "--volume holds " + std::to_string(frames.size()) + " frames, the opacity " +
+                                std::to_string(std::max<std::size_t>(in.sequence.size(), 1)));
+  for (const Volume& f : frames) require_finite(f, path, "the B-mode volume must be finite");
+  Volume b = frames.size() > 1 ? frames[in.frame] : std::move(frames.front());
+  if (b.dims != in.u.dims)
+    throw input_error(path, "--volume has dims " + dims_text(b.dims) + ", the opacity " + dims_text(in.u.dims));
+  if (frames.size() > 1) in.bmode_sequence = std::move(frames);
+  in.bmode = std::move(b);
 }
 
 bool set_bone_cue(OpacityInput& in, BoneCueMode mode) {

@@ -67,6 +67,13 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
                           const VariationalParams* weights = nullptr,
                           std::optional<std::size_t> frame = std::nullopt, BoneCueMode bone_cue = BoneCueMode::Off);
 
+// The B-mode data behind an opacity volume (`view`/`render --volume V`), for
+// the slice views and the splats' orientation by the data: into in.bmode (a
+// sequence behind a sequence: frame by frame, in.bmode_sequence). Throws
+// InputError when V's dims or frame count differ from the opacity's or its
+// samples are not finite.
+void attach_bmode(OpacityInput& in, const std::string& path);
+
 // The bone cue's edge weights of a classified input for `mode` (classify's
 // --bone-cue), into in.params.edge_weight; true when the cue is on. For a
 // preset chosen in the panel: the next re-solve uses them.

@@ -229,7 +229,12 @@ class ViewerApp {
   // Splats on the device from the current u and threshold, then to GL.
   void regenerate() {
     SplatTiming t;
-    const SplatSet set = SplatGenerator(rt_, grid_, params_).generate(u_buffer_, input_.u.origin, &t);
+    const cl::Buffer* field = nullptr;
+    if (params_.normals == SplatNormals::Data) {
+      if (field_stale_) field_buffer_ = upload_orientation_field(rt_, input_.bmode, input_.u.dims), field_stale_ = false;
+      field = &field_buffer_;
+    }
+    const SplatSet set = SplatGenerator(rt_, grid_, params_).generate(u_buffer_, input_.u.origin, &t, field);
     renderer_->upload(set);
     // The depth colour map spans what is drawn (near its top light, at its bottom dark).
     if (!set.splats.empty()) {
@@ -302,7 +307,7 @@ class ViewerApp {
     if (input_.sequence.empty() || k >= input_.sequence.size() || solving_.valid()) return;
     input_.frame = k;
     input_.u.data = input_.sequence[k].data;
-    if (k < input_.bmode_sequence.size()) input_.bmode.data = input_.bmode_sequence[k].data;
+    if (k < input_.bmode_sequence.size()) input_.bmode.data = input_.bmode_sequence[k].data, field_stale_ = true;
     upload_u();
     regenerate();
     mesh_dirty_ = caster_dirty_ = slices_dirty_ = true;
@@ -1151,14 +1156,21 @@ class ViewerApp {
     if (params_.occlusion) ImGui::SliderFloat("occlusion strength", &settings_.occlusion, 0.0f, 1.0f, "%.2f");
     ImGui::SliderFloat("threshold (u)", &params_.threshold, 0.02f, 0.9f, "%.2f");
     if (ImGui::IsItemDeactivatedAfterEdit() && !solving_.valid()) regenerate(), slices_dirty_ = true;
-    // Splat orientation: the structure tensor of u (default) or grad u (the paper).
-    int orient = params_.normals == SplatNormals::Tensor ? 0 : 1;
+    // Splat orientation: the structure tensor of u, of the data (with a
+    // B-mode volume) or grad u (the paper).
+    int orient = static_cast<int>(params_.normals);
     const int before = orient;
-    ImGui::RadioButton("smooth orientation", &orient, 0);
+    ImGui::TextUnformatted("orientation");
     ImGui::SameLine();
-    ImGui::RadioButton("gradient of u", &orient, 1);
+    ImGui::RadioButton("tensor of u", &orient, static_cast<int>(SplatNormals::Tensor));
+    ImGui::SameLine();
+    if (input_.bmode.data.empty()) ImGui::BeginDisabled();
+    ImGui::RadioButton("of the data", &orient, static_cast<int>(SplatNormals::Data));
+    if (input_.bmode.data.empty()) ImGui::EndDisabled();
+    ImGui::SameLine();
+    ImGui::RadioButton("grad u", &orient, static_cast<int>(SplatNormals::Gradient));
     if (orient != before && !solving_.valid()) {
-      params_.normals = orient == 0 ? SplatNormals::Tensor : SplatNormals::Gradient;
+      params_.normals = static_cast<SplatNormals>(orient);
       regenerate();
     }
   }
@@ -1194,6 +1206,10 @@ class ViewerApp {
   SplatParams params_;
   GridDesc grid_{};
   cl::Buffer u_buffer_;
+  // The data orientation field of the B-mode frame shown (SplatNormals::Data),
+  // built when first needed and again after a frame switch.
+  cl::Buffer field_buffer_;
+  bool field_stale_ = true;
   std::optional<GlContext> gl_;
   std::optional<SplatRenderer> renderer_;
   ViewRenderer mode_;

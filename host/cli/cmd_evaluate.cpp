@@ -20,6 +20,7 @@
 #include "error.hpp"
 #include "io.hpp"
 #include "metrics.hpp"
+#include "orientation.hpp"
 #include "text.hpp"
 
 namespace softshell::cli {
@@ -28,6 +29,9 @@ namespace {
 struct EvaluateOptions {
   std::string opacity, truth, beam = "0,0,1";
   std::string shadow = "auto";  // shadow_db volume: auto (beside the truth), none, or FILE
+  std::string orientation = "tensor";  // tensor (of u), gradient (grad u), data (tensor of --volume)
+  std::string volume;                  // the B-mode volume behind u, for --orientation data
+  bool tensor_sigma_given = false;
   bool json = false;
   bool tolerance_mm_given = false;  // --tolerance-mm was on the command line
   MetricsParams params;
@@ -64,6 +68,15 @@ void check_options(const EvaluateOptions& o) {
   if (!std::isfinite(p.opaque) || p.opaque < 0) throw InputError("--opaque must be a finite number >= 0");
   if (!std::isfinite(p.u_ind) || !(p.u_ind > 0)) throw InputError("--u-ind must be a finite number > 0");
   if (!(p.blob_rel > 0 && p.blob_rel <= 1)) throw InputError("--blob-rel must be in (0, 1]");
+  if (o.orientation != "tensor" && o.orientation != "gradient" && o.orientation != "data")
+    throw InputError("--orientation " + o.orientation + ": expected tensor, gradient or data");
+  if ((o.orientation == "data") != !o.volume.empty())
+    throw InputError(o.volume.empty() ? "--orientation data needs --volume V (the B-mode volume behind the opacity)"
+                                      : "--volume is read only by --orientation data");
+  if (o.orientation == "gradient" && o.tensor_sigma_given && p.tensor_sigma > 0)
+    throw InputError("--orientation gradient takes no --tensor-sigma");
+  if (o.orientation == "data" && !(p.tensor_sigma > 0))
+    throw InputError("--orientation data needs --tensor-sigma > 0");
 }
 
 std::string fixed(double v, int digits) {
@@ -115,6 +128,7 @@ int run_evaluate(EvaluateOptions o) {
   const auto t0 = Clock::now();
   o.params.beam = parse_direction(o.beam, "--beam");
   check_options(o);
+  if (o.orientation == "gradient") o.params.tensor_sigma = 0;
   const Volume u = read_volume(o.opacity);
   const Volume sdf = read_volume(o.truth);
   require_finite(u, o.opacity, "an opacity volume must be finite");
@@ -143,6 +157,18 @@ int run_evaluate(EvaluateOptions o) {
     for (float x : shadow.data)
       if (std::isnan(x)) throw input_error(shadow_path, "--shadow has NaN samples (expected a loss in dB)");
     o.params.shadow_db = &shadow;
+  }
+  // Orientation by the data: the tensor of the B-mode volume's orientation
+  // field, as `render --orientation data` draws the splats.
+  Volume field;
+  if (o.orientation == "data") {
+    const Volume bmode = read_volume(o.volume);
+    require_finite(bmode, o.volume, "a B-mode volume must be finite");
+    if (bmode.dims != u.dims)
+      throw InputError("dims differ: " + dims_text(bmode.dims) + " (" + o.volume + ", --volume) vs " +
+                       dims_text(u.dims) + " (" + o.opacity + ")");
+    field = data_orientation_field(bmode);
+    o.params.orientation_field = &field;
   }
   const double t_read = seconds_since(t0);
   const auto t1 = Clock::now();
@@ -178,7 +204,9 @@ int run_evaluate(EvaluateOptions o) {
       {"components", std::to_string(m.components), "drawn 26-connected components in all"},
       {"normal_error_deg", fixed(m.normal_error_deg, 2),
        "opacity-weighted mean angle (0-90) between the splat normal (" +
-           (p.tensor_sigma > 0 ? "structure tensor, sigma " + fixed(p.tensor_sigma, 1) + " voxels" : std::string("grad u")) +
+           (p.tensor_sigma > 0 ? std::string(p.orientation_field ? "structure tensor of the data, " : "structure tensor of u, ") +
+                                     "sigma " + fixed(p.tensor_sigma, 1) + " voxels"
+                               : std::string("grad u")) +
            ") and the true normal, over " +
            std::to_string(m.normal_voxels) + " drawn voxels near a surface"},
       {"mass_precision", fixed(m.mass_precision, 4), "share of all opacity (sum of u, no threshold) within " + tol +
@@ -263,17 +291,23 @@ void add_evaluate_command(CLI::App& app, Action& action) {
                   "A surface faces the transducer if its outward normal n has n.(-beam) >= this")
       ->capture_default_str()
       ->check(real_range(-1, 1));
-  sub->add_option("--tensor-sigma", o->params.tensor_sigma,
-                  "Splat orientation scored by the normal error: the structure tensor of u with this sigma in voxels "
-                  "(the renderer's default), or 0 for grad u (the paper's)")
-      ->capture_default_str()
-      ->check(real_range(0, 8, "voxels"));
+  auto* sigma = sub->add_option("--tensor-sigma", o->params.tensor_sigma,
+                                "Splat orientation scored by the normal error: the structure tensor with this sigma in "
+                                "voxels (the renderer's default), or 0 for grad u (the paper's)")
+                    ->capture_default_str()
+                    ->check(real_range(0, 8, "voxels"));
+  sub->add_option("--orientation", o->orientation,
+                  "Which splat orientation the normal error scores, as render's --orientation: tensor (of u), "
+                  "gradient (grad u) or data (the tensor of --volume's orientation field)")
+      ->capture_default_str();
+  sub->add_option("--volume", o->volume, "The B-mode volume behind the opacity, for --orientation data");
   sub->add_option("--opaque", o->params.opaque,
                   "u > this counts toward percent_opaque (the paper's 'negligibly small' opacity)")
       ->capture_default_str()
       ->check(real_range(0, 1, "", Ends::OpenHigh));
-  sub->callback([&action, o, tol_mm] {
+  sub->callback([&action, o, tol_mm, sigma] {
     o->tolerance_mm_given = tol_mm->count() > 0;
+    o->tensor_sigma_given = sigma->count() > 0;
     action = [o] { return run_evaluate(*o); };
   });
 }

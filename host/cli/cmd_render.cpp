@@ -31,6 +31,7 @@ namespace {
 
 struct RenderOptions {
   std::string in, out, device, size = "400x400", view = "0,0", crop, iso = "auto", colour_map, light, legend = "on";
+  std::string volume;  // --volume: the B-mode behind an opacity input (for --orientation data)
   std::set<std::string> given;  // long option names given on the command line
   int turntable = 0, benchmark = 0;
   std::optional<std::size_t> frame;  // 3D+t: one frame; default every frame (splats)
@@ -154,11 +155,18 @@ int run_render(const RenderOptions& o) {
   const progress::Stage command("render");
   std::optional<progress::Stage> step(std::in_place, "input");
   Runtime rt(o.device);
-  const viewer::OpacityInput input =
-      viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, nullptr, o.frame, bone_cue);
+  viewer::OpacityInput input = viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, nullptr, o.frame, bone_cue);
+  if (!o.volume.empty()) viewer::attach_bmode(input, o.volume);
+  if (splat_params.normals == SplatNormals::Data && input.bmode.data.empty())
+    throw input_error(o.in, "--orientation data needs the B-mode volume behind this opacity: give it with --volume V");
+  // The B-mode frame behind opacity frame i (one B-mode volume: behind every frame).
+  const auto bmode_of = [&input](std::size_t i) -> const Volume* {
+    if (i < input.bmode_sequence.size()) return &input.bmode_sequence[i];
+    return input.bmode.data.empty() ? nullptr : &input.bmode;
+  };
   SplatTiming st;
   step.emplace("splats");
-  const SplatSet set = generate_splats(rt, input.u, splat_params, &st);
+  const SplatSet set = generate_splats(rt, input.u, splat_params, &st, bmode_of(input.frame));
   step.emplace(every_frame ? "sequence, " + std::to_string(frames) + " frames" : frames_label(o.turntable));
   if (set.splats.empty())
     throw input_error(o.in, "no voxel has opacity above the threshold " + format_number(splat_params.threshold) +
@@ -178,7 +186,8 @@ int run_render(const RenderOptions& o) {
   for (int i = 0; i < frames; ++i) {
     if (every_frame) {
       // Each frame's splats, the camera fitted on frame 0 (the scene's motion shows).
-      if (i > 0) r.upload(generate_splats(rt, input.sequence[std::size_t(i)], splat_params, nullptr));
+      if (i > 0)
+        r.upload(generate_splats(rt, input.sequence[std::size_t(i)], splat_params, nullptr, bmode_of(std::size_t(i))));
     } else {
       cam.azimuth = az + 360.0f * float(i) / float(frames);
     }
@@ -244,6 +253,10 @@ void add_render_command(CLI::App& app, Action& action) {
                   "3D+t (a 4-D NRRD): draw frame K; without it the splat renderers draw every frame of a sequence "
                   "(OUT-000.png, ... or a %d pattern), the camera fitted on frame 0")
       ->type_name("K");
+  sub->add_option("--volume", o->volume,
+                  "B-mode volume behind IN when IN is an opacity volume (same dims), for --orientation data; a raw "
+                  "IN, classified here, brings its own")
+      ->type_name("V");
   sub->add_option("--turntable", o->turntable, "Write N frames around the object (azimuth steps of 360/N)")
       ->check(int_range(0, 3600));
   sub->add_option("--crop", o->crop,

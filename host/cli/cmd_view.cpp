@@ -151,20 +151,9 @@ int run_view(const ViewOptions& given_options) {
   Runtime rt(o.device);
   viewer::OpacityInput input =
       viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, have_weights ? &weights : nullptr, o.frame, bone_cue);
-  if (!o.volume.empty()) {
-    // The B-mode data behind an opacity volume, for the slice views.
-    // A B-mode sequence behind an opacity sequence: frame by frame.
-    std::vector<Volume> frames = read_frames(o.volume);
-    if (frames.size() > 1 && frames.size() != input.sequence.size())
-      throw input_error(o.volume, "--volume holds " + std::to_string(frames.size()) + " frames, the opacity " +
-                                      std::to_string(std::max<std::size_t>(input.sequence.size(), 1)));
-    for (const Volume& f : frames) require_finite(f, o.volume, "the B-mode volume must be finite");
-    Volume b = frames.size() > 1 ? frames[input.frame] : std::move(frames.front());
-    if (frames.size() > 1) input.bmode_sequence = std::move(frames);
-    if (b.dims != input.u.dims)
-      throw input_error(o.volume, "--volume has dims " + dims_text(b.dims) + ", the opacity " + dims_text(input.u.dims));
-    input.bmode = std::move(b);
-  }
+  if (!o.volume.empty()) viewer::attach_bmode(input, o.volume);
+  if (v.params.normals == SplatNormals::Data && input.bmode.data.empty())
+    throw input_error(o.in, "--orientation data needs the B-mode volume behind this opacity: give it with --volume V");
   for (int a = 0; a < 3; ++a)
     if (v.cursor[a] >= int(input.u.dims[a]))
       throw InputError("--cursor: outside the volume (" + dims_text(input.u.dims) + ")");
@@ -219,8 +208,8 @@ void add_view_command(CLI::App& app, Action& action) {
                   "classification weights, renderer, threshold, light, colours, crop, camera; options given here win")
       ->type_name("FILE");
   sub->add_option("--volume", o->volume,
-                  "B-mode volume for the slice views when IN is an opacity volume (same dims); without it the "
-                  "slices show u")
+                  "B-mode volume for the slice views and --orientation data when IN is an opacity volume (same "
+                  "dims); without it the slices show u")
       ->type_name("V");
   sub->add_option("--cursor", o->cursor, "Initial 3-D cursor (voxel indices): the slices shown; default the centre")
       ->type_name("X,Y,Z");
