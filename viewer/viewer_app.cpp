@@ -1160,12 +1160,11 @@ class ViewerApp {
     // B-mode volume) or grad u (the paper).
     int orient = static_cast<int>(params_.normals);
     const int before = orient;
-    ImGui::TextUnformatted("orientation");
-    ImGui::SameLine();
+    ImGui::TextUnformatted("splat orientation (docs/rendering.md)");
     ImGui::RadioButton("tensor of u", &orient, static_cast<int>(SplatNormals::Tensor));
     ImGui::SameLine();
     if (input_.bmode.data.empty()) ImGui::BeginDisabled();
-    ImGui::RadioButton("of the data", &orient, static_cast<int>(SplatNormals::Data));
+    ImGui::RadioButton("data", &orient, static_cast<int>(SplatNormals::Data));
     if (input_.bmode.data.empty()) ImGui::EndDisabled();
     ImGui::SameLine();
     ImGui::RadioButton("grad u", &orient, static_cast<int>(SplatNormals::Gradient));
