@@ -238,7 +238,7 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   Volume u = classify_variational(rt, lv.data, p, SolverParams{}, rep, nullptr, mp);
   if (g_band_sheet && nf.found && mp) {
     const std::vector<std::uint8_t> window =
-        band_underside(in.dims, in.spacing[std::size_t(nf.axis)], nf.axis, before, mask, g_band_sheet_params.window_mm);
+        band_underside(in, nf, before, mask, g_band_sheet_params.window_mm);
     const BandSheetReport bs = hold_band_sheet(u, window, nf.axis, mask, g_band_sheet_params);
     std::fprintf(stderr, "  band sheet: drawn on %zu of %zu lines, largest patch %.3f%s\n", bs.drawn, bs.lines, bs.largest,
                  bs.held ? ", held" : "");

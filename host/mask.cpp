@@ -644,6 +644,13 @@ struct BeamLines {
 
 }  // namespace
 
+std::vector<std::uint8_t> band_underside(const Volume& v, const NearFieldReport& nf,
+                                         const std::vector<std::uint8_t>& before,
+                                         const std::vector<std::uint8_t>& after, double window_mm) {
+  if (!nf.found) return {};
+  return band_underside(v.dims, v.spacing[std::size_t(nf.axis)], nf.axis, before, after, window_mm);
+}
+
 std::vector<std::uint8_t> band_underside(const Dims3& dims, double spacing_mm, int axis,
                                          const std::vector<std::uint8_t>& before,
                                          const std::vector<std::uint8_t>& after, double window_mm) {

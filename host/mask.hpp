@@ -337,6 +337,12 @@ struct BandSheetParams {
 std::vector<std::uint8_t> band_underside(const Dims3& dims, double spacing_mm, int axis,
                                          const std::vector<std::uint8_t>& before,
                                          const std::vector<std::uint8_t>& after, double window_mm);
+// The same for the band `nf` found in volume `v` (along nf.axis, at its
+// spacing); empty when none was found.
+std::vector<std::uint8_t> band_underside(const Volume& v, const NearFieldReport& nf,
+                                         const std::vector<std::uint8_t>& before,
+                                         const std::vector<std::uint8_t>& after,
+                                         double window_mm = BandSheetParams().window_mm);
 struct BandSheetReport {
   std::size_t lines = 0;       // beam lines with a window
   std::size_t drawn = 0;       // ... on which u > threshold in the window

@@ -1840,6 +1840,14 @@ TEST(BandSheet, TheUndersideIsTheWindowUnderEachLinesBand) {
   for (std::size_t x = 0; x < 6; ++x) EXPECT_EQ(wx[at(x, 2, 9)], x == 2 || x == 3 ? 1 : 0) << "x " << x;
   EXPECT_THROW(band_underside(d, 0.5, 3, before, after, 2.0), std::invalid_argument);
   EXPECT_THROW(band_underside(d, 0.5, 2, std::vector<std::uint8_t>(7, 1), after, 2.0), std::invalid_argument);
+  // For a band found in a volume: its axis and that axis's spacing; none found, no window.
+  const Volume v(d, {1.0, 1.0, 0.5});
+  NearFieldReport nf;
+  nf.found = true;
+  nf.axis = 2;
+  EXPECT_EQ(band_underside(v, nf, before, after, 2.0), w);
+  nf.found = false;
+  EXPECT_TRUE(band_underside(v, nf, before, after, 2.0).empty());
 }
 
 TEST(BandSheet, OnlyAPatchOfAtLeastMinPatchOfTheBandsLinesIsHeld) {

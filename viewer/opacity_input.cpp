@@ -90,9 +90,7 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   const std::vector<std::uint8_t> before = in.mask;
   const NearFieldReport nf = remove_near_field(v, in.mask);  // the near field is an occluder (docs/real-data.md)
   // The window under the band, held when the shell draws a sheet there (as classify does; host/mask.hpp).
-  const std::vector<std::uint8_t> underside =
-      nf.found ? band_underside(v.dims, v.spacing[std::size_t(nf.axis)], nf.axis, before, in.mask, BandSheetParams().window_mm)
-               : std::vector<std::uint8_t>();
+  const std::vector<std::uint8_t> underside = band_underside(v, nf, before, in.mask);
   const std::vector<std::uint8_t>* mask = in.mask.empty() ? nullptr : &in.mask;
   // In place: the isovalue reads the scanned samples only, as classify does.
   if (mask) fill_unscanned_in_place(v, in.mask);

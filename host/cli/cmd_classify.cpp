@@ -638,8 +638,7 @@ int run_classify(const ClassifyOptions& given_options) {
     const NearFieldReport nf = remove_near_field(in, mask.scanned, np);
     beam_axis = nf.axis;
     if (nf.found && variational && o.band_sheet == "hold") {
-      mask.underside = band_underside(in.dims, in.spacing[std::size_t(nf.axis)], nf.axis, before, mask.scanned,
-                                      BandSheetParams().window_mm);
+      mask.underside = band_underside(in, nf, before, mask.scanned);
       mask.axis = nf.axis;
     }
     std::ostringstream t;
