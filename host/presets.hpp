@@ -24,6 +24,9 @@ struct Preset {
   float specular = 0.18f;
   float threshold = 0.2f;             // splat epsilon
   bool rim_gaussian = true;           // --gaussian rim (false: paper)
+  // Splat orientation (--orientation words). "data" needs the B-mode volume
+  // (a raw input, or --volume); without it the tensor of u is used.
+  std::string orientation = "tensor";
 };
 
 const std::vector<Preset>& presets();

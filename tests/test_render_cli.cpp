@@ -99,6 +99,21 @@ TEST_F(RenderCli, OrientationByTheDataTurnsTheSplatsWithTheBmode) {
   EXPECT_GT(face_on.light, 0.9 * by_u.light) << by_u.light;
   EXPECT_NEAR(round.cover, by_u.cover, 0.1 * by_u.cover);
   EXPECT_NEAR(round.light, by_u.light, 0.1 * by_u.light);
+  // The face preset orients by the data when there is a B-mode volume, by
+  // u's tensor (with a line saying so) when there is none; an explicit
+  // --orientation wins.
+  const RunResult pf = run({"render", in, "-o", file("pf.png"), "--size", "64x64", "--preset", "face", "--volume",
+                            file("planes.nrrd")});
+  ASSERT_EQ(pf.status, 0) << pf.err;
+  EXPECT_NE(pf.out.find("normals data"), std::string::npos) << pf.out;
+  const RunResult pn = run({"render", in, "-o", file("pn.png"), "--size", "64x64", "--preset", "face"});
+  ASSERT_EQ(pn.status, 0) << pn.err;
+  EXPECT_NE(pn.out.find("normals tensor"), std::string::npos) << pn.out;
+  EXPECT_NE(pn.out.find("no B-mode volume"), std::string::npos) << pn.out;
+  const RunResult pt = run({"render", in, "-o", file("pt.png"), "--size", "64x64", "--preset", "face", "--volume",
+                            file("planes.nrrd"), "--orientation", "tensor"});
+  ASSERT_EQ(pt.status, 0) << pt.err;
+  EXPECT_NE(pt.out.find("normals tensor"), std::string::npos) << pt.out;
   // The viewer takes the same: edge-on from its default camera.
   const RunResult v = run({"view", in, "--volume", file("planes.nrrd"), "--orientation", "data", "--frames", "2",
                            "--screenshot", file("view.png"), "--size", "160x120", "-q"});

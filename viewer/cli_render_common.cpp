@@ -152,6 +152,15 @@ void apply_preset(const Preset& p, viewer::RenderSettings& s, SplatParams& param
   if (!given.count("--colour-map")) s.depth_colour = p.depth_colour;
   if (!given.count("--threshold")) params.threshold = p.threshold;
   if (!given.count("--gaussian")) params.gaussian = p.rim_gaussian ? SplatGaussian::Rim : SplatGaussian::Paper;
+  if (!given.count("--orientation")) parse_splat_normals(p.orientation, params.normals);
+}
+
+std::string settle_orientation(SplatParams& params, bool have_bmode, bool given, const std::string& in) {
+  if (params.normals != SplatNormals::Data || have_bmode) return "";
+  if (given)
+    throw input_error(in, "--orientation data needs the B-mode volume behind this opacity: give it with --volume V");
+  params.normals = SplatNormals::Tensor;
+  return "the preset orients splats by the data, and there is no B-mode volume (--volume V): by the tensor of u";
 }
 
 std::pair<float, float> parse_light(const std::string& text, const std::string& what) {

@@ -53,6 +53,10 @@ struct SplatViewOptions {
 // --light) holds. Throws InputError naming --preset for an unknown name.
 const Preset& preset_or_throw(const std::string& name);
 void apply_preset(const Preset& p, viewer::RenderSettings& s, SplatParams& params, const std::set<std::string>& given);
+// Orientation by the data without a B-mode volume behind the opacity `in`:
+// an InputError when --orientation data was `given`, else (a preset's)
+// the tensor of u, and a line for the user saying so; "" when nothing changed.
+std::string settle_orientation(SplatParams& params, bool have_bmode, bool given, const std::string& in);
 // "AZ,EL" light direction in degrees, each in [-90, 90].
 std::pair<float, float> parse_light(const std::string& text, const std::string& what);
 

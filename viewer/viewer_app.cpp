@@ -1121,8 +1121,11 @@ class ViewerApp {
     preset_ = p.name;
     const SplatGaussian gaussian = params_.gaussian;
     const float threshold = params_.threshold;
+    const SplatNormals normals = params_.normals;
     cli::apply_preset(p, settings_, params_, {});
-    if (params_.gaussian != gaussian || params_.threshold != threshold) regenerate(), slices_dirty_ = true;
+    cli::settle_orientation(params_, !input_.bmode.data.empty(), false, "");
+    if (params_.gaussian != gaussian || params_.threshold != threshold || params_.normals != normals)
+      regenerate(), slices_dirty_ = true;
     BoneCueMode mode = BoneCueMode::Off;
     parse_bone_cue_mode(p.bone_cue, mode);
     if (input_.classified && mode != input_.bone_cue) {

@@ -157,8 +157,9 @@ int run_render(const RenderOptions& o) {
   Runtime rt(o.device);
   viewer::OpacityInput input = viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, nullptr, o.frame, bone_cue);
   if (!o.volume.empty()) viewer::attach_bmode(input, o.volume);
-  if (splat_params.normals == SplatNormals::Data && input.bmode.data.empty())
-    throw input_error(o.in, "--orientation data needs the B-mode volume behind this opacity: give it with --volume V");
+  const std::string settled =
+      settle_orientation(splat_params, !input.bmode.data.empty(), o.given.count("--orientation") > 0, o.in);
+  if (!settled.empty() && !o.quiet) std::cout << "render: " << settled << '\n';
   // The B-mode frame behind opacity frame i (one B-mode volume: behind every frame).
   const auto bmode_of = [&input](std::size_t i) -> const Volume* {
     if (i < input.bmode_sequence.size()) return &input.bmode_sequence[i];

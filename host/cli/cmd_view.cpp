@@ -152,8 +152,9 @@ int run_view(const ViewOptions& given_options) {
   viewer::OpacityInput input =
       viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, have_weights ? &weights : nullptr, o.frame, bone_cue);
   if (!o.volume.empty()) viewer::attach_bmode(input, o.volume);
-  if (v.params.normals == SplatNormals::Data && input.bmode.data.empty())
-    throw input_error(o.in, "--orientation data needs the B-mode volume behind this opacity: give it with --volume V");
+  const std::string settled =
+      settle_orientation(v.params, !input.bmode.data.empty(), o.given.count("--orientation") > 0, o.in);
+  if (!settled.empty() && !o.quiet) std::cout << "view: " << settled << '\n';
   for (int a = 0; a < 3; ++a)
     if (v.cursor[a] >= int(input.u.dims[a]))
       throw InputError("--cursor: outside the volume (" + dims_text(input.u.dims) + ")");
