@@ -78,6 +78,10 @@ if "$ss" render --help >/dev/null 2>&1; then
     --method isosplat -o "$out/render-face-isotropic.png"
   "${gl[@]}" "$ss" render "$out/face-variational.nrrd" --view 0,0 --size 400x400 --benchmark 20 \
     -o "$out/render-face-front.png"
+  # The face preset: colour by depth, splats oriented by the B-mode data
+  # (docs/rendering.md, "Orientation by the data").
+  "${gl[@]}" "$ss" render "$out/face-variational.nrrd" --volume "$out/face/volume.nrrd" --preset face \
+    --view -30,10 --crop "$crop" --size 600x600 -o "$out/render-face-preset.png"
   mkdir -p "$out/turntable"
   "${gl[@]}" "$ss" render "$out/face-variational.nrrd" --view 0,10 --crop "$crop" --size 200x200 --turntable 12 \
     -q -o "$out/turntable/face-%03d.png"
@@ -137,6 +141,7 @@ describe() {
     spine-slices.png) echo "mid-slices of the spine, raw and lowpassed" ;;
     render-*-oriented.png) echo "oriented splats (the paper's renderer)" ;;
     render-*-isotropic.png) echo "isotropic splats, for comparison" ;;
+    render-face-preset.png) echo "oriented splats, the face preset (depth colour, oriented by the data)" ;;
     render-*.png) echo "oriented splats" ;;
     turntable/*) echo "turntable frame (oriented splats)" ;;
     *.ply) echo "Marching Cubes mesh of the opacity at 0.2 (binary PLY)" ;;
