@@ -299,8 +299,10 @@ void add_evaluate_command(CLI::App& app, Action& action) {
   sub->add_option("--orientation", o->orientation,
                   "Which splat orientation the normal error scores, as render's --orientation: tensor (of u), "
                   "gradient (grad u) or data (the tensor of --volume's orientation field)")
-      ->capture_default_str();
-  sub->add_option("--volume", o->volume, "The B-mode volume behind the opacity, for --orientation data");
+      ->capture_default_str()
+      ->check(one_of({"tensor", "gradient", "data"}));
+  sub->add_option("--volume", o->volume, "The B-mode volume behind the opacity, for --orientation data")
+      ->type_name("V");
   sub->add_option("--opaque", o->params.opaque,
                   "u > this counts toward percent_opaque (the paper's 'negligibly small' opacity)")
       ->capture_default_str()
