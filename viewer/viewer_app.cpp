@@ -1123,7 +1123,9 @@ class ViewerApp {
     const float threshold = params_.threshold;
     const SplatNormals normals = params_.normals;
     cli::apply_preset(p, settings_, params_, {});
-    cli::settle_orientation(params_, !input_.bmode.data.empty(), false, "");
+    if (const std::string note = cli::settle_orientation(params_, !input_.bmode.data.empty(), false, "");
+        !note.empty())
+      status_ = "preset " + p.name + ": " + note;
     if (params_.gaussian != gaussian || params_.threshold != threshold || params_.normals != normals)
       regenerate(), slices_dirty_ = true;
     BoneCueMode mode = BoneCueMode::Off;
