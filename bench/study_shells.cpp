@@ -64,6 +64,7 @@ std::vector<std::string> split(const std::string& s, char sep) {
 struct Case {
   std::string name;
   Phantom ph;
+  Volume field;  // with --set data_normals=1: data_orientation_field(ph.volume), made once; else empty
 };
 
 // 3x3x3 median (clamped at the border): the denoiser baseline.
@@ -252,11 +253,7 @@ Metrics score(const Volume& u, const Case& c, double tol_mm) {
   mp.beam = c.ph.beam;
   if (!c.ph.shadow_db.data.empty()) mp.shadow_db = &c.ph.shadow_db;
   if (tol_mm > 0) mp.tolerance_mm = tol_mm;
-  Volume field;
-  if (g_data_normals) {
-    field = data_orientation_field(c.ph.volume);
-    mp.orientation_field = &field;
-  }
+  if (!c.field.data.empty()) mp.orientation_field = &c.field;
   return evaluate_opacity(u, c.ph.truth_sdf, mp);
 }
 
@@ -409,6 +406,15 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "softshell_study_shells: seed %s is in both the training and the test set\n", s.c_str());
       return 2;
     }
+  {
+    // The keys that set this file's switches take effect before any case is
+    // made or scored (the check above passed 0 to each; classify_default
+    // applies every key again, the same values).
+    VariationalParams vp;
+    AutoIsoParams ap;
+    NearFieldParams np;
+    for (const auto& [k, x] : g_overrides) apply_override(k, x, vp, ap, np);
+  }
   try {
     Runtime rt("");
     auto make_cases = [&](const std::vector<std::string>& seeds) {
@@ -421,7 +427,8 @@ int main(int argc, char** argv) {
           pp.seed = std::stoull(sd);
           pp.physics_name = physics;
           pp.physics = phantom_physics(physics, pp.shape, pp.seed);
-          out.push_back({sh + "-" + sd, make_phantom(rt, pp)});
+          out.push_back({sh + "-" + sd, make_phantom(rt, pp), Volume()});
+          if (g_data_normals) out.back().field = data_orientation_field(out.back().ph.volume);
           std::fprintf(stderr, "phantom %s\n", out.back().name.c_str());
         }
       return out;

@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <numeric>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
@@ -386,25 +387,25 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     // log compression; its true crest is higher, and the boundary lies
     // nearer the crest than local_fraction of the visible contrast.
     if (want_top) {
-      float top = kNone;
-      std::size_t at_top = 0, scanned = 0;
-      for (std::size_t z = 0; z < d[2]; ++z) {
-        scanned += plane_scanned[z];
-        if (plane_top[z] > top) top = plane_top[z], at_top = 0;
-        if (plane_top[z] == top) at_top += plane_at_top[z];
-      }
-      const double share = scanned ? double(at_top) / double(scanned) : 0.0;
-      clipped_share = share;
-      if (scanned && share >= params.clip_share) clip_level = float(double(top) - params.clip_margin * (hi - lo));
+      const std::size_t scanned = std::accumulate(plane_scanned.begin(), plane_scanned.end(), std::size_t(0));
+      // The largest (or, `lowest`, the smallest) of the planes' extremes and
+      // the share of the scanned samples at it.
+      const auto extreme = [&](const std::vector<float>& level, const std::vector<std::size_t>& count, bool lowest) {
+        float e = lowest ? -kNone : kNone;
+        std::size_t at = 0;
+        for (std::size_t z = 0; z < d[2]; ++z) {
+          if (lowest ? level[z] < e : level[z] > e) e = level[z], at = 0;
+          if (level[z] == e) at += count[z];
+        }
+        return std::pair<float, double>{e, scanned ? double(at) / double(scanned) : 0.0};
+      };
+      const auto [top, top_share] = extreme(plane_top, plane_at_top, false);
+      clipped_share = top_share;
+      if (scanned && top_share >= params.clip_share) clip_level = float(double(top) - params.clip_margin * (hi - lo));
       // The same at the floor (the smallest scanned sample): fluid below the
       // display's floor.
-      float bottom = -kNone;
-      std::size_t at_bottom = 0;
-      for (std::size_t z = 0; z < d[2]; ++z) {
-        if (plane_bottom[z] < bottom) bottom = plane_bottom[z], at_bottom = 0;
-        if (plane_bottom[z] == bottom) at_bottom += plane_at_bottom[z];
-      }
-      floor_share = scanned ? double(at_bottom) / double(scanned) : 0.0;
+      const auto [bottom, bottom_share] = extreme(plane_bottom, plane_at_bottom, true);
+      floor_share = bottom_share;
       if (scanned && floor_share >= params.floor_share)
         floor_level = float(double(bottom) + params.clip_margin * (hi - lo));
     }

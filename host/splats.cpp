@@ -15,6 +15,9 @@
 #include "text.hpp"
 
 namespace softshell {
+namespace {
+const char* const kNoBmode = "splat orientation 'data' needs the B-mode volume behind the opacity";
+}  // namespace
 
 const char* splat_normals_name(SplatNormals n) {
   switch (n) {
@@ -90,7 +93,7 @@ SplatGenerator::SplatGenerator(Runtime& rt, const GridDesc& grid, const SplatPar
 SplatSet SplatGenerator::generate(const cl::Buffer& u, const Vec3d& origin, SplatTiming* timing,
                                   const cl::Buffer* field) const {
   if (params_.normals == SplatNormals::Data && !field)
-    throw InputError("splat orientation 'data' needs the B-mode volume behind the opacity");
+    throw InputError(kNoBmode);
   const auto t0 = std::chrono::steady_clock::now();
   const std::size_t rows = std::size_t(grid_.ny) * std::size_t(grid_.nz);
   cl::Buffer counts = rt_.buffer(rows * sizeof(cl_uint));
@@ -140,7 +143,7 @@ SplatSet SplatGenerator::generate(const cl::Buffer& u, const Vec3d& origin, Spla
 
 cl::Buffer upload_orientation_field(Runtime& rt, const Volume& bmode, const Dims3& u_dims) {
   if (bmode.voxels() == 0)
-    throw InputError("splat orientation 'data' needs the B-mode volume behind the opacity");
+    throw InputError(kNoBmode);
   if (bmode.dims != u_dims)
     throw InputError("splat orientation 'data': the B-mode volume has dims " + dims_text(bmode.dims) + ", the opacity " +
                      dims_text(u_dims));
@@ -159,7 +162,7 @@ SplatSet generate_splats(Runtime& rt, const Volume& u, const SplatParams& params
   cl::Buffer ub = rt.buffer(bytes, CL_MEM_READ_ONLY);
   rt.queue().enqueueWriteBuffer(ub, CL_TRUE, 0, bytes, u.data.data());
   if (params.normals != SplatNormals::Data) return gen.generate(ub, u.origin, timing);
-  if (!bmode) throw InputError("splat orientation 'data' needs the B-mode volume behind the opacity");
+  if (!bmode) throw InputError(kNoBmode);
   const cl::Buffer fb = upload_orientation_field(rt, *bmode, u.dims);
   return gen.generate(ub, u.origin, timing, &fb);
 }

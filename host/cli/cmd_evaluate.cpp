@@ -68,8 +68,6 @@ void check_options(const EvaluateOptions& o) {
   if (!std::isfinite(p.opaque) || p.opaque < 0) throw InputError("--opaque must be a finite number >= 0");
   if (!std::isfinite(p.u_ind) || !(p.u_ind > 0)) throw InputError("--u-ind must be a finite number > 0");
   if (!(p.blob_rel > 0 && p.blob_rel <= 1)) throw InputError("--blob-rel must be in (0, 1]");
-  if (o.orientation != "tensor" && o.orientation != "gradient" && o.orientation != "data")
-    throw InputError("--orientation " + o.orientation + ": expected tensor, gradient or data");
   if ((o.orientation == "data") != !o.volume.empty())
     throw InputError(o.volume.empty() ? "--orientation data needs --volume V (the B-mode volume behind the opacity)"
                                       : "--volume is read only by --orientation data");
