@@ -1130,6 +1130,10 @@ void echo_layer(const HostVector<float>& lp, const std::vector<long>& skin,
     while (lo > gap && !taken[lo - 1] && !std::isnan(E[lo - 1]) && E[lo - 1] >= half) --lo;
     while (hi + 1 < steps && !taken[hi + 1] && !std::isnan(E[hi + 1]) && E[hi + 1] >= half) ++hi;
     if (k > 0 && (lo == gap || hi + 1 >= steps || std::isnan(E[hi + 1]) || taken[hi + 1] || taken[lo - 1])) continue;
+    // The first layer, too, must end inside the window: E that stays above
+    // halfway to echo_to is the gain rising with depth (a time-gain
+    // compensation stronger than the attenuation), not a copy of the band.
+    if (k == 0 && params.echo_bounded && (hi + 1 >= steps || std::isnan(E[hi + 1]))) return;
     for (std::size_t s = lo; s <= hi; ++s) taken[s] = 1;
     const double from_t = 1.0 + double(lo) * dt, to_t = 1.0 + double(hi) * dt;
     if (k == 0) {
@@ -1143,6 +1147,60 @@ void echo_layer(const HostVector<float>& lp, const std::vector<long>& skin,
     ++rep.echo.layers, ++k;
     rep.echo.voxels += join(from_t, to_t);
   }
+}
+
+// The skin-line rule (NearFieldParams::skin_step) on P, the lines' median
+// profile in 0.5 mm bins below the skin line: the depth (mm) where a thin
+// bright layer at the top ends in a sharp step, or 0. Fills rep.step and
+// rep.roughness for the step it looked at.
+double skin_step(const std::vector<double>& P, const NearFieldParams& params, NearFieldReport& rep) {
+  const std::size_t bins = P.size();
+  const auto top_bins = std::size_t(std::ceil(params.top_mm / 0.5));
+  const auto stay_bins = std::max<std::size_t>(1, std::size_t(std::ceil(params.stay_mm / 0.5)));
+  constexpr std::size_t kSharp = 3;  // bins after the layer the fall must be done in (1.5 mm)
+  // The step: the bin s (the first under the layer) where P falls most both
+  // ways: from the layer's brightest bin (P[0, s)) to the brightest of the
+  // stay_mm under it (P(s, s + stay]) -- the fall -- and, within kSharp bins,
+  // from the layer's last bin -- the drop. (Bins without a sample, where the
+  // voxels are coarser than 0.5 mm, are NaN and skipped.)
+  const auto extreme = [&](std::size_t b0, std::size_t b1, bool high) {  // of P[b0, b1); NaN if none
+    double x = std::nan("");
+    for (std::size_t b = b0; b < std::min(b1, bins); ++b)
+      if (!std::isnan(P[b]) && (std::isnan(x) || (high ? P[b] > x : P[b] < x))) x = P[b];
+    return x;
+  };
+  std::size_t best = 0;
+  double fall = 0, drop = 0, level = 0, after = 0;
+  for (std::size_t s = 1; s <= top_bins && s + stay_bins < bins; ++s) {
+    if (std::isnan(P[s - 1])) continue;
+    const double l = extreme(0, s, true), a = extreme(s + 1, s + stay_bins + 1, true);
+    const double dr = P[s - 1] - extreme(s, s + kSharp, false);
+    if (std::isnan(a) || std::isnan(dr)) continue;
+    if (std::min(l - a, dr) > std::min(fall, drop)) best = s, fall = l - a, drop = dr, level = l, after = a;
+  }
+  if (best == 0 || !(fall > 0)) return 0;
+  // P's roughness under the step: the robust spread of its bin-to-bin changes.
+  std::vector<double> dP;
+  double last = std::nan("");
+  for (std::size_t b = best + kSharp; b < bins; ++b)
+    if (!std::isnan(P[b])) {
+      if (!std::isnan(last)) dP.push_back(std::fabs(P[b] - last));
+      last = P[b];
+    }
+  if (dP.size() < 8) return 0;
+  std::nth_element(dP.begin(), dP.begin() + long(dP.size() / 2), dP.end());
+  const double roughness = 1.4826 * dP[dP.size() / 2];
+  rep.step = fall, rep.roughness = roughness;
+  const bool sharp = drop >= 0.75 * fall;  // most of the fall is the drop
+  bool brightest = true;  // nothing deeper within the search is as bright as the layer
+  for (std::size_t b = best; b < bins; ++b) brightest &= std::isnan(P[b]) || P[b] < level;
+  const bool found = sharp && brightest && fall >= params.faint_ratio * std::fabs(level) &&
+                     fall >= params.step_sds * roughness;
+  if (!found) return 0.0;
+  // The band ends where the fall is three quarters done.
+  std::size_t end = best;
+  while (end < bins && !(P[end] <= after + 0.25 * fall)) ++end;
+  return 0.5 * double(end);
 }
 
 }  // namespace
@@ -1399,26 +1457,26 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
         if (!std::isnan(x[k]) && x[k] > ltop[l]) ltop[l] = x[k], ltop_at[l] = long(k);
     }
   });
+  // The lines under the probe: where the skin line runs across the beam (it
+  // deepens by at most 1 mm per mm across it), not down the side of a
+  // sector, whose lines enter the scan below the band (a volume probe's fan
+  // cut by the top face: two thirds of the lines).
+  const double h_u = v.spacing[u_ax], h_w = v.spacing[w_ax];
+  const auto under_probe = [&](std::size_t l) {
+    const std::size_t a = l % d[u_ax], b = l / d[u_ax];
+    const auto slope = [&](std::size_t l0, std::size_t l1, double h) {
+      if (skin[l0] < 0 || skin[l1] < 0) return 0.0;
+      return std::fabs(double(skin[l1] - skin[l0])) * hz / h;
+    };
+    double s = 0;
+    if (a > 0) s = std::max(s, slope(l - 1, l, h_u));
+    if (a + 1 < d[u_ax]) s = std::max(s, slope(l, l + 1, h_u));
+    if (b > 0) s = std::max(s, slope(l - d[u_ax], l, h_w));
+    if (b + 1 < d[w_ax]) s = std::max(s, slope(l, l + d[u_ax], h_w));
+    return s <= 1.0;
+  };
   if (params.faint_ratio < params.min_ratio) {
     faint = true;  // count the lines that pass with the faint rule in force, then keep it only if enough do
-    // Of the lines under the probe: where the skin line runs across the
-    // beam (it deepens by at most 1 mm per mm across it), not down the
-    // side of a sector, whose lines enter the scan below the band (a volume
-    // probe's fan cut by the top face: two thirds of the lines).
-    const double h_u = v.spacing[u_ax], h_w = v.spacing[w_ax];
-    const auto under_probe = [&](std::size_t l) {
-      const std::size_t a = l % d[u_ax], b = l / d[u_ax];
-      const auto slope = [&](std::size_t l0, std::size_t l1, double h) {
-        if (skin[l0] < 0 || skin[l1] < 0) return 0.0;
-        return std::fabs(double(skin[l1] - skin[l0])) * hz / h;
-      };
-      double s = 0;
-      if (a > 0) s = std::max(s, slope(l - 1, l, h_u));
-      if (a + 1 < d[u_ax]) s = std::max(s, slope(l, l + 1, h_u));
-      if (b > 0) s = std::max(s, slope(l - d[u_ax], l, h_w));
-      if (b + 1 < d[w_ax]) s = std::max(s, slope(l, l + d[u_ax], h_w));
-      return s <= 1.0;
-    };
     std::size_t faint_lines = 0, probe_lines = 0;
     for (std::size_t l = 0; l < lines; ++l)
       if (skin[l] >= 0 && under_probe(l)) ++probe_lines, faint_lines += candidate(l);
@@ -1571,6 +1629,28 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
         }
       }
     if (params.echo_layer) echo_layer(lp, skin, bottom_mm, rep, band, voxel, scanned, d[u_ax], d[w_ax], d[ax], hz, params, threads);
+  } else if (params.skin_step) {
+    // The skin line (NearFieldParams::skin_step): a thin layer at the skin
+    // line ended by a sharp step in P.
+    const double step_mm = skin_step(P, params, rep);
+    if (step_mm > 0) {
+      rep.found = rep.skin = true;
+      rep.depth_mm = step_mm + params.margin_mm;
+      for (std::size_t bb = 0; bb < d[w_ax]; ++bb)
+        for (std::size_t a = 0; a < d[u_ax]; ++a) {
+          const std::size_t l = a + bb * d[u_ax];
+          const long s0 = skin[l];
+          if (s0 < 0 || !under_probe(l)) continue;
+          ++rep.lines;
+          for (std::size_t z = std::size_t(s0); z < d[ax] && double(long(z) - s0) * hz < rep.depth_mm; ++z) {
+            band[voxel(a, bb, z)] = 1;
+            ++rep.voxels;
+          }
+        }
+      if (rep.lines == 0) rep.found = rep.skin = false;
+    }
+  }
+  if (rep.found) {
     // On a small or shallow volume the "band" may be most of it: that is
     // the object (removing it would leave nothing to classify), not an
     // occluder above it.
@@ -1720,6 +1800,17 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
   const std::size_t t2 = argext(s1 + 1, s2 - 1, false);
   rep.copy2 = Q[s2];
   if (Q[s2] > Q[s1] || Q[s2] - Q[t2] < params.min_second * (Q[0] - Q[t2])) return done();
+  // The second copy is a bump, as the first is: within 2 x tolerance x s1
+  // after it Q falls back by half its rise. A profile still rising there is
+  // the gain rising with depth (a time-gain compensation stronger than the
+  // attenuation), and skin, fat and fascia over it make a train of an echo,
+  // a gap and a "copy" (found on an independent simulator's spine scans:
+  // the whole volume under the skin was removed, bones and all).
+  if (params.second_peak) {
+    const auto after = std::max<std::size_t>(2, std::size_t(std::lround(2.0 * params.tolerance * double(s1))));
+    const std::size_t reach = std::min(Q.size() - 1, s2 + after);
+    if (reach <= s2 || Q[argext(s2 + 1, reach, false)] > Q[s2] - 0.5 * (Q[s2] - Q[t2])) return done();
+  }
   // Found: the region starts where the echo's lower flank falls halfway to
   // the trough.
   std::size_t cut = 1;

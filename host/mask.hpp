@@ -161,6 +161,9 @@ struct ReverbParams {
   // The echo's depth on neighbouring lines (along the first lateral axis):
   // its 75th percentile jump at most this, or two lateral voxels.
   double max_jump_mm = 1.0;
+  // The second copy must be a bump: Q falls back by half its rise within
+  // 2 x tolerance x its spacing after it (false: any maximum in its window).
+  bool second_peak = true;
 };
 struct ReverbReport {
   bool found = false;
@@ -222,6 +225,12 @@ struct NearFieldParams {
   bool echo_layer = true;
   double echo_from = 1.2, echo_to = 2.4, echo_rise = 0.1;
   int echo_layers = 3;
+  // The first layer must end before echo_to as the further ones must (E
+  // falls below its halfway mark again); false: it may run to echo_to.
+  // Found on an independent simulator's spine scans whose gain rises with
+  // depth: the rise was taken for the band's copy and the laminae under it
+  // removed (docs/real-data.md, "A gain that rises with depth").
+  bool echo_bounded = true;
   // The band's tail (echo_tail): copies overlapping into a dimmer plateau
   // under the band, with no gap, down to the floor (the median of the
   // profile over the deeper half of 1 ... echo_to): joins the band to where
@@ -231,6 +240,22 @@ struct NearFieldParams {
   // tail: tried, not kept"): on the PLUS spine sweeps it took structures 2-3
   // mm under their bands and made one band too deep to remove.
   bool echo_tail = false;
+  // The skin line (skin_step): when none of the rules above finds a band, a
+  // thin layer at the skin line that the lines' median profile P ends with a
+  // sharp step still is one -- the skin (and the probe's ring-down) over
+  // tissue nearly as bright, too faint for the speckle test above but
+  // plain in P, a median over every line. It counts when P falls, within
+  // top_mm of the skin line, from the layer's brightest bin to the
+  // brightest of the stay_mm under it by at least faint_ratio of the
+  // layer's level and by step_sds times P's own roughness below it
+  // (1.4826 x the median absolute change between its 0.5 mm bins), three
+  // quarters of that within 1.5 mm, and nothing in search_mm is as bright
+  // as the layer. The band then ends where the fall is three quarters done
+  // (plus margin_mm), on every line under the probe. Found on an
+  // independent simulator's scans of lesions in parenchyma under a 1-3 mm
+  // skin (docs/real-data.md, "A thin skin line").
+  bool skin_step = true;
+  double step_sds = 8.0;
   ReverbParams reverb_params;
 };
 struct NearFieldReport {
@@ -243,6 +268,8 @@ struct NearFieldReport {
   bool faint = false;           // found by the faint rule (faint_ratio, speckle_sds, faint_lines): its median top is not min_ratio brighter
   bool clipped = false;         // ... and by the clipped tops of its lines, not by the speckle test
   bool layered = false;         // a layered band: its lines ended where they stayed below halfway for layer_gap_mm
+  bool skin = false;            // found by the skin-line rule (params.skin_step): a thin layer ended by a sharp step in P
+  double step = 0, roughness = 0;  // that rule's fall of P at the step and P's roughness below it (file units)
   std::size_t voxels = 0;       // voxels in the band
   bool too_deep = false;        // a band was found but held more than max_share of the scanned voxels: kept
   ReverbReport reverb;          // remove_near_field with params.reverb

@@ -306,6 +306,41 @@ TEST(NearField, DarkTopOrAFaintLayerIsNoBand) {
   EXPECT_FALSE(r.found);
 }
 
+TEST(NearField, AThinSkinLineOverTissueNearlyAsBrightIsABand) {
+  // Skin 2 mm thick, 20 % brighter than the tissue under it: too faint for
+  // the ratio and speckle tests (as the 5 mm layer above), but the lines'
+  // median profile falls at 2 mm by far more than it varies below: the
+  // skin-line rule takes the layer and the step's shoulder, not the tissue.
+  // (96 x 96 lines: the profile is a median over about a thousand speckle
+  // cells, as on a scan's tens of thousands of lines.)
+  const Volume v = layered_scan({96, 96, 48}, {0.5, 0.5, 0.5}, 2, {{2.0, 120}}, 100, test::seed() + 11);
+  NearFieldReport r;
+  const auto band = near_field_band(v, nullptr, NearFieldParams{}, &r);
+  ASSERT_TRUE(r.found);
+  EXPECT_TRUE(r.skin);
+  EXPECT_NEAR(r.depth_mm, 2.0 + NearFieldParams{}.margin_mm, 0.75);
+  EXPECT_GT(r.step, NearFieldParams{}.step_sds * r.roughness);
+  EXPECT_EQ(band[v.index(40, 40, 3)], 1);
+  EXPECT_EQ(band[v.index(40, 40, 12)], 0);
+  // Off: the earlier rules alone find no band.
+  NearFieldParams off;
+  off.skin_step = false;
+  near_field_band(v, nullptr, off, &r);
+  EXPECT_FALSE(r.found);
+}
+
+TEST(NearField, GainFallingWithDepthIsNoSkinLine) {
+  // Brightness falling 2 grey levels per 0.5 mm from 130 to 100 and then
+  // level: brighter at the top by as much as the skin above, but no step.
+  std::vector<std::pair<double, double>> ramp;
+  for (int k = 0; k < 15; ++k) ramp.push_back({0.5, 130.0 - 2.0 * k});
+  const Volume v = layered_scan({96, 96, 48}, {0.5, 0.5, 0.5}, 2, ramp, 100, test::seed() + 12);
+  NearFieldReport r;
+  near_field_band(v, nullptr, NearFieldParams{}, &r);
+  EXPECT_FALSE(r.found);
+  EXPECT_FALSE(r.skin);
+}
+
 TEST(NearField, ABandThatIsMostOfTheVolumeIsKept) {
   // The same layered band as above over a volume only 14 mm deep: the band
   // (9 mm with its margin) would be 64 % of the voxels, so it is the object
@@ -699,6 +734,32 @@ TEST(NearField, TheBandsEchoAtTwiceItsDepthJoinsTheBand) {
   EXPECT_EQ(r.voxels - r.echo.voxels, r_off.voxels);
 }
 
+TEST(NearField, GainRisingUnderTheBandIsNoEchoOfIt) {
+  // The band of the test above over tissue whose brightness rises with depth
+  // (30 at the band's bottom, 6 grey levels more per mm: a time-gain
+  // compensation stronger than the attenuation) and no copy: the median
+  // profile under the band rises through the echo window and never falls
+  // back. Taken for the band's echo when the first layer may run to the
+  // window's end (echo_bounded false); no echo by default.
+  const Volume v = speckled({48, 32, 90}, 0.5,
+                            [](double x, double, double z) {
+                              const double b = 7.0 + 1.5 * std::sin(2 * M_PI * x / 24.0);
+                              if (z < b) return z < 2.0 ? 220.0 : z < 4.0 ? 150.0 : 210.0;
+                              return std::min(250.0, 30.0 + 6.0 * (z - b));
+                            },
+                            test::seed() + 31);
+  NearFieldParams unbounded;
+  unbounded.echo_bounded = false;
+  NearFieldReport r;
+  near_field_band(v, nullptr, unbounded, &r);
+  ASSERT_TRUE(r.found);
+  EXPECT_TRUE(r.echo.found);  // the rule without the bound: the rise is taken
+  near_field_band(v, nullptr, NearFieldParams{}, &r);
+  ASSERT_TRUE(r.found);
+  EXPECT_FALSE(r.echo.found) << "from " << r.echo.from << " to " << r.echo.to;
+  EXPECT_EQ(r.echo.voxels, 0u);
+}
+
 TEST(NearField, EveryEchoLayerUnderTheBandJoinsIt) {
   // Two copies under the band: the brightest (90) at twice its depth, a
   // fainter one (70) at 1.35 x, between the band and the first, each over
@@ -1020,6 +1081,28 @@ TEST(Reverb, ALoneEchoABoneShadowOrANearFieldIsNoReverberation) {
   const NearFieldReport nf = remove_near_field(band, m);
   EXPECT_TRUE(nf.found);
   EXPECT_FALSE(nf.reverb.found);
+}
+
+TEST(Reverb, SkinFatAndFasciaOverGainRisingWithDepthAreNoTrain) {
+  // Skin (220), fat (60), fascia (210) and then muscle whose brightness
+  // rises with depth (100, 6 more per mm): an echo, a dark gap and a "copy"
+  // 4 mm under it, and at twice that the muscle already brighter than the
+  // trough after the fascia -- a second "copy" that never falls back. No
+  // reverberation (with any maximum in the second copy's window, as before,
+  // the whole volume under the skin was removed).
+  const Volume v = speckled({40, 40, 80}, 0.5,
+                            [](double, double, double z) {
+                              return z < 2.0 ? 220.0 : z < 5.0 ? 60.0 : z < 6.5 ? 210.0 : std::min(200.0, 100.0 + 6.0 * (z - 6.5));
+                            },
+                            test::seed() + 32);
+  ReverbParams any_max;
+  any_max.second_peak = false;
+  ReverbReport r;
+  reverberation_region(v, nullptr, 2, any_max, &r);
+  EXPECT_TRUE(r.found) << "spacing " << r.spacing_mm << " copy " << r.copy1 << " second " << r.copy2;
+  const auto region = reverberation_region(v, nullptr, 2, ReverbParams{}, &r);
+  EXPECT_FALSE(r.found) << "spacing " << r.spacing_mm << " copy " << r.copy1 << " second " << r.copy2;
+  EXPECT_EQ(std::count(region.begin(), region.end(), std::uint8_t{1}), 0);
 }
 
 TEST(Reverb, RealFlatReflectorScanHasItsGhostsFoundTheSpineSweepNone) {

@@ -649,6 +649,9 @@ int run_classify(const ClassifyOptions& given_options) {
       t << " (" << nf.voxels << " voxels, median " << std::setprecision(0) << nf.top << " over " << nf.below << " below";
       if (nf.clipped) t << ", a faint band clipped at the data's maximum";
       else if (nf.faint) t << ", a faint band: speckle spread " << std::setprecision(1) << nf.speckle_sd;
+      else if (nf.skin)
+        t << ", a skin line: the lines' median falls " << std::setprecision(1) << nf.step << " at its bottom, "
+          << std::setprecision(1) << nf.step / std::max(nf.roughness, 1e-30) << " x its roughness below";
       t << "; --near-field keep to draw it)";
       if (nf.echo.tail_to > 0)
         t << ", with its tail to " << std::setprecision(2) << nf.echo.tail_to << " x the band's depth ("
