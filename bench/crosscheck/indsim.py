@@ -299,7 +299,7 @@ if rng.uniform() < 0.4:
     ang = np.arctan2(X, Z - apex)
     outside = np.abs(ang) > half
     g[outside] = 0
-    shadow_db[outside] = 0
+    shadow_db[outside] = 1000.0  # never scanned: not visible (recall_visible leaves it out)
     params['fan'] = [apex, half]
 
 otype = rng.choice(['uint8', 'uint8', 'uint16', 'float'])
