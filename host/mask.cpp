@@ -1490,6 +1490,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   // stay_mm): the fat's dip is no bottom. A median over the lines decides:
   // an object close under the band on some of them (a bone) is no layer.
   double stay_mm = params.stay_mm;
+  std::size_t layers_end_k = 0;  // a layered band: where its layers end in Pc (samples below the skin line)
   if (params.layer_gap_mm > params.stay_mm) {
     std::vector<std::size_t> cand;
     std::vector<float> x;
@@ -1537,9 +1538,11 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
       while (gap && k < Pc.size() && Pc[k] >= half) ++k;  // to the end of the next layer
     }
     if (gap) {
+      std::size_t end = k;  // the end of the next layer in Pc
+      while (end < Pc.size() && Pc[end] >= half) ++end;
       std::size_t run = 0;                                    // the next layer, then a fall that stays
       for (; k < Pc.size() && run < stay_k; ++k) run = Pc[k] < half ? run + 1 : 0;
-      if (run >= stay_k) stay_mm = params.layer_gap_mm, rep.layered = true;
+      if (run >= stay_k) stay_mm = params.layer_gap_mm, rep.layered = true, layers_end_k = end;
     }
   }
   parallel_ranges(lines, threads, [&](std::size_t l0, std::size_t l1) {
@@ -1573,6 +1576,30 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   std::vector<double> bottom_mm(lines, -1.0);
   for (std::size_t l = 0; l < lines; ++l)
     if (skin[l] >= 0) bottom_mm[l] = double(lbottom[l]) * hz;
+  // In a layered band, a candidate line that never stays below halfway under
+  // its layers has no bottom of its own. Where the tissue under the band
+  // lies about at the halfway mark (which comes from `below`, the fat's dark
+  // dip), it crosses the mark back and forth: such a line ends where the
+  // layers end in Pc, at most at the found lines' median bottom
+  // (NearFieldParams::fill_layered). A line over an object right under the
+  // band stays above the mark: it keeps no band.
+  if (params.fill_layered && rep.layered && layers_end_k > 0) {
+    std::vector<double> found;
+    for (std::size_t l = 0; l < lines; ++l)
+      if (bottom_mm[l] > 0) found.push_back(bottom_mm[l]);
+    double fill = double(layers_end_k) * hz;
+    if (!found.empty()) fill = std::min(fill, median(found));
+    const auto reach = std::min(K_search, layers_end_k + std::size_t(std::ceil(params.fill_reach_mm / hz)));
+    for (std::size_t l = 0; l < lines; ++l) {
+      if (skin[l] < 0 || !candidate(l) || lbottom[l] != 0 || run[l] >= 0) continue;
+      const float* x = &A[l * K];
+      const double half = 0.5 * (double(ltop[l]) + below);
+      std::size_t n = 0, under = 0;
+      for (std::size_t k = layers_end_k; k < reach; ++k)
+        if (!std::isnan(x[k])) ++n, under += double(x[k]) < half;
+      if (n > 0 && double(under) >= params.fill_crossing * double(n)) bottom_mm[l] = fill;
+    }
+  }
   const auto median_along = [&](int axis_lat, std::size_t n_along, std::size_t n_other, double h_lat) {
     const long r = std::max(1L, long(std::lround(params.smooth_mm / h_lat)));
     std::vector<double> out(bottom_mm);

@@ -192,6 +192,14 @@ struct NearFieldParams {
   // (a fat layer that only some lines' skin is bright enough to fall below
   // halfway over; 0: the test above alone).
   double layer_dip = 0.2;
+  // In a layered band, a line that never stays below halfway under its
+  // layers but has at least fill_crossing of its samples in the
+  // fill_reach_mm under them below the mark (tissue near the mark, not an
+  // object under the band) ends where the layers end in the lines' median
+  // profile (at most at the found lines' median bottom) instead of having no
+  // band (false: no band there).
+  bool fill_layered = true;
+  double fill_reach_mm = 10.0, fill_crossing = 0.2;
   double min_ratio = 0.3;  // the top brighter than below it by this share of the top
   // ... or by this smaller share when that is also speckle_sds of the
   // speckle's spread below the top (NearFieldReport::speckle_sd), on at

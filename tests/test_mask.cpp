@@ -760,6 +760,40 @@ TEST(NearField, GainRisingUnderTheBandIsNoEchoOfIt) {
   EXPECT_EQ(r.echo.voxels, 0u);
 }
 
+TEST(NearField, ALayeredBandOverTissueNearItsHalfwayMarkEndsWhereItsLayersEnd) {
+  // Skin (220), fat (60), fascia (210) to 6.5 mm, then muscle brightening
+  // with depth from 125 by 3 grey levels per mm: the halfway mark (from the
+  // fat's dip) is about 140, which the muscle crosses 5 mm under the
+  // fascia and never falls back under. The lines' median shows the layers;
+  // no line stays under halfway for the layered band's 6 mm, so without
+  // fill_layered no line had a band; with it each ends where the layers
+  // end. Where a bright object (a head, 200) lies right under the band
+  // (x < 6 mm, a quarter of the lines), the lines stay above the mark and
+  // keep no band.
+  const Volume v = speckled({48, 32, 90}, 0.5,
+                            [](double x, double, double z) {
+                              if (z < 6.5) return z < 2.0 ? 220.0 : z < 5.0 ? 60.0 : 210.0;
+                              if (x < 6.0 && z < 30.0) return 200.0;
+                              return std::min(250.0, 125.0 + 3.0 * (z - 6.5));
+                            },
+                            test::seed() + 33);
+  NearFieldParams no_fill;
+  no_fill.fill_layered = false;
+  NearFieldReport r;
+  const auto before = near_field_band(v, nullptr, no_fill, &r);
+  EXPECT_EQ(before[v.index(36, 16, 12)], 0);  // the fascia (6 mm) kept on this line
+  const auto band = near_field_band(v, nullptr, NearFieldParams{}, &r);
+  ASSERT_TRUE(r.found);
+  EXPECT_TRUE(r.layered);
+  std::size_t lines = 0;
+  for (std::size_t y = 0; y < 32; ++y)
+    for (std::size_t x = 30; x < 48; ++x) lines += band[v.index(x, y, 12)];
+  EXPECT_GT(lines, 16u * 32u);                 // the fascia, on nearly every line over the muscle
+  EXPECT_EQ(band[v.index(36, 16, 30)], 0);     // the muscle at 15 mm stays
+  EXPECT_EQ(band[v.index(8, 16, 12)], 0);      // over the object: no band added
+  EXPECT_EQ(band[v.index(8, 16, 20)], 0);
+}
+
 TEST(NearField, EveryEchoLayerUnderTheBandJoinsIt) {
   // Two copies under the band: the brightest (90) at twice its depth, a
   // fainter one (70) at 1.35 x, between the band and the first, each over
