@@ -8,7 +8,8 @@ other scattering statistics (sparse scatterers: partly developed, K-like speckle
 echoes from the impedance gradient along the beam (|n.b|, not |n.b|^3), an asymmetric axial
 pulse, lateral side lobes, a depth-varying lateral PSF (focus), a TGC that does not match the
 attenuation, a scanner's S-shaped grey map, auto gain on a percentile, and uint8, uint16 or
-float output.
+float output. A fan (40 %) is formed along its beams (a curvilinear probe: the image in beam
+space, then scan-converted), so its shadows and near-field layers follow the beams.
 
 Needs python3-numpy and python3-scipy (Debian). Not used by the tests.
 
@@ -39,6 +40,21 @@ y = ((np.arange(ny) + 0.5) - ny / 2)[None, :, None] * hy
 x = ((np.arange(nx) + 0.5) - nx / 2)[None, None, :] * hx
 Z, Y, X = np.broadcast_arrays(z, y, x)
 P = np.stack([X, Y, Z], -1).astype(np.float64)   # [z,y,x,3] mm
+
+# fan (sector) geometry, from its own random stream (a linear case draws everything else as
+# before): a curvilinear probe of radius R whose beams run from the apex (x 0, z -R); the image
+# is formed along those beams (attenuation, shadows, specular echoes, the pulse and the lateral
+# PSF in beam space, then scan-converted), and is zero outside the sector and above the probe's
+# arc. D: depth under the probe (along the beam in a fan), for the layers under it.
+frng = np.random.default_rng([seed, {'head': 1, 'bone': 2, 'cyst': 3}[shape], 17])
+fan = frng.uniform() < 0.4
+if fan:
+    R_probe = frng.uniform(5, 30)
+    half = frng.uniform(0.35, 0.6)
+    Rr = np.hypot(X, Z + R_probe)
+    D = Rr - R_probe
+else:
+    D = Z
 
 
 def rot(yaw, pitch, roll):
@@ -176,10 +192,10 @@ elif shape == 'bone':
     fat = skin + U(2, 8)
     tex = texture(U(2, 4), U(0.3, 0.6), aniso=(3, 1, 1))   # fibres
     scatter[:] = tex * U(0.6, 1.2)
-    scatter[Z < skin] = U(2, 5)
-    fatz = (Z >= skin) & (Z < fat)
+    scatter[D < skin] = U(2, 5)
+    fatz = (D >= skin) & (D < fat)
     scatter[fatz] = U(0.15, 0.5) * texture(1.5, 0.6)[fatz]
-    fascia = np.abs(Z - fat) < 0.6
+    fascia = np.abs(D - fat) < 0.6
     scatter[fascia] = U(3, 8)
     scatter[inside] = U(2, 6)
     atten[:] = U(0.06, 0.12)
@@ -210,12 +226,12 @@ else:  # cyst: anechoic lesions in parenchyma, posterior enhancement
 
 if shape != 'bone' and near:                 # skin and fat under the probe
     skin = U(1, 3); fat = skin + U(1, 6)
-    sel = Z < skin
+    sel = D < skin
     scatter[sel] = U(2, 6); atten[sel] = 0.1; imped[sel] = 1.7
     if shape == 'head':                  # the abdominal wall, over fluid
-        sel = (Z >= skin) & (Z < fat)
+        sel = (D >= skin) & (D < fat)
         scatter[sel] = U(0.2, 0.6); atten[sel] = 0.06; imped[sel] = 1.4
-        m = (Z >= fat) & (Z < fat + U(3, 8))
+        m = (D >= fat) & (D < fat + U(3, 8))
         scatter[m] = U(0.8, 1.5) * texture(2, 0.4)[m]; atten[m] = 0.1; imped[m] = 1.66
         params['near_field_mm'] = float(fat)
 truth_vox = truth / hmin
@@ -231,57 +247,91 @@ density = np.exp(U(np.log(0.3), np.log(8)))   # scatterers per voxel
 params.update(f_mhz=f_mhz, ax_sigma_mm=ax_sigma, lat_sigma_mm=lat_focus_sigma, focus_mm=focus_depth,
               side_lobe_db=float(20 * np.log10(side_lobe)), scatterers_per_voxel=density)
 
-# sparse scatterers: a Poisson count per voxel, each with a random phase and unit amplitude
-cnt = rng.poisson(density, size=(nz, ny, nx))
-ph_r = rng.standard_normal((nz, ny, nx)) * np.sqrt(cnt / 2)
-ph_i = rng.standard_normal((nz, ny, nx)) * np.sqrt(cnt / 2)
-amp = np.sqrt(scatter / density) * (ph_r + 1j * ph_i)
+def form(scatter, atten, imped, bone_mask, Zb, hz, hy, hx):
+    """The image along the beams (axis 0), lateral across axes 1 and 2: the envelope and the
+    two-way loss from interfaces and bone (dB). Zb: depth under the probe (mm)."""
+    nz, ny, nx = scatter.shape
+    Z = Zb
+    # sparse scatterers: a Poisson count per voxel, each with a random phase and unit amplitude
+    cnt = rng.poisson(density, size=(nz, ny, nx))
+    ph_r = rng.standard_normal((nz, ny, nx)) * np.sqrt(cnt / 2)
+    ph_i = rng.standard_normal((nz, ny, nx)) * np.sqrt(cnt / 2)
+    amp = np.sqrt(scatter / density) * (ph_r + 1j * ph_i)
 
-# specular echoes: the impedance's change along the beam (signed, coherent)
-Zs = ndimage.gaussian_filter(imped, [0.3 / hz * 1, 0.5 / hy, 0.5 / hx])
-dZ = np.gradient(Zs, hz, axis=0) * hz
-refl = dZ / (2 * Zs)
-spec_gain = U(3, 12)
-amp = amp + spec_gain * refl * np.exp(1j * U(0, 6.28))
+    # specular echoes: the impedance's change along the beam (signed, coherent)
+    Zs = ndimage.gaussian_filter(imped, [0.3 / hz * 1, 0.5 / hy, 0.5 / hx])
+    dZ = np.gradient(Zs, hz, axis=0) * hz
+    refl = dZ / (2 * Zs)
+    spec_gain = U(3, 12)
+    amp = amp + spec_gain * refl * np.exp(1j * U(0, 6.28))
 
-# attenuation and transmission along +z (two way), shadow_db for the evaluation
-loss_att = 2 * np.cumsum(atten * hz, axis=0) - atten * hz
-T = np.clip(1 - refl**2 * 1.0, 1e-6, 1)
-loss_tr = -2 * 10 * np.log10(np.cumprod(T, axis=0))
-extra_bone = 2 * np.cumsum(np.where(bone_mask, atten, 0) * hz, axis=0)
-shadow_db = (loss_tr + extra_bone).astype(np.float32)
-loss = loss_att + loss_tr
-amp = amp * 10 ** (-loss / 20)
+    # attenuation and transmission along +z (two way), shadow_db for the evaluation
+    loss_att = 2 * np.cumsum(atten * hz, axis=0) - atten * hz
+    T = np.clip(1 - refl**2 * 1.0, 1e-6, 1)
+    loss_tr = -2 * 10 * np.log10(np.cumprod(T, axis=0))
+    extra_bone = 2 * np.cumsum(np.where(bone_mask, atten, 0) * hz, axis=0)
+    shadow_db = (loss_tr + extra_bone).astype(np.float32)
+    loss = loss_att + loss_tr
+    amp = amp * 10 ** (-loss / 20)
 
-# PSF: asymmetric axial pulse (fast rise, slow ring-down), lateral Gaussian whose width grows away
-# from the focus, plus side lobes (a wider, weaker Gaussian)
-kz = np.arange(-int(4 * ax_sigma / hz) - 1, int(6 * ax_sigma / hz) + 2) * hz
-pulse = np.where(kz < 0, np.exp(-kz**2 / (2 * (0.6 * ax_sigma)**2)), np.exp(-kz**2 / (2 * (1.5 * ax_sigma)**2)))
-pulse = pulse * np.exp(1j * 2 * np.pi * kz / lam * 0.15)   # residual phase across the pulse
-amp = ndimage.convolve1d(amp.real, pulse.real, axis=0, mode='nearest') - ndimage.convolve1d(amp.imag, pulse.imag, axis=0, mode='nearest') \
-    + 1j * (ndimage.convolve1d(amp.real, pulse.imag, axis=0, mode='nearest') + ndimage.convolve1d(amp.imag, pulse.real, axis=0, mode='nearest'))
-out_a = np.zeros_like(amp)
-depth_levels = [0.0, 0.5, 1.0]
-for lv in depth_levels:
-    zc = focus_depth + (lv * 2 - 1) * depth * 0.5 if lv != 0.5 else focus_depth
-    dz = np.abs(zc - focus_depth)
-    sig = lat_focus_sigma * (1 + (dz / (0.35 * depth))**2) ** 0.5
-    main = ndimage.gaussian_filter(amp.real, [0, sig / hy, sig / hx]) + 1j * ndimage.gaussian_filter(amp.imag, [0, sig / hy, sig / hx])
-    sl = ndimage.gaussian_filter(amp.real, [0, 4 * sig / hy, 4 * sig / hx]) + 1j * ndimage.gaussian_filter(amp.imag, [0, 4 * sig / hy, 4 * sig / hx])
-    img = main + side_lobe * 16 * sl
-    # blend weights: hat functions over depth
-    w = np.clip(1 - np.abs(Z[:, :1, :1] - zc) / (0.5 * depth), 0, 1)
-    out_a += w * img
-wsum = sum(np.clip(1 - np.abs(Z[:, :1, :1] - (focus_depth + (lv * 2 - 1) * depth * 0.5 if lv != 0.5 else focus_depth)) / (0.5 * depth), 0, 1) for lv in depth_levels)
-amp = out_a / np.maximum(wsum, 1e-6)
+    # PSF: asymmetric axial pulse (fast rise, slow ring-down), lateral Gaussian whose width grows away
+    # from the focus, plus side lobes (a wider, weaker Gaussian)
+    kz = np.arange(-int(4 * ax_sigma / hz) - 1, int(6 * ax_sigma / hz) + 2) * hz
+    pulse = np.where(kz < 0, np.exp(-kz**2 / (2 * (0.6 * ax_sigma)**2)), np.exp(-kz**2 / (2 * (1.5 * ax_sigma)**2)))
+    pulse = pulse * np.exp(1j * 2 * np.pi * kz / lam * 0.15)   # residual phase across the pulse
+    amp = ndimage.convolve1d(amp.real, pulse.real, axis=0, mode='nearest') - ndimage.convolve1d(amp.imag, pulse.imag, axis=0, mode='nearest') \
+        + 1j * (ndimage.convolve1d(amp.real, pulse.imag, axis=0, mode='nearest') + ndimage.convolve1d(amp.imag, pulse.real, axis=0, mode='nearest'))
+    out_a = np.zeros_like(amp)
+    depth_levels = [0.0, 0.5, 1.0]
+    for lv in depth_levels:
+        zc = focus_depth + (lv * 2 - 1) * depth * 0.5 if lv != 0.5 else focus_depth
+        dz = np.abs(zc - focus_depth)
+        sig = lat_focus_sigma * (1 + (dz / (0.35 * depth))**2) ** 0.5
+        main = ndimage.gaussian_filter(amp.real, [0, sig / hy, sig / hx]) + 1j * ndimage.gaussian_filter(amp.imag, [0, sig / hy, sig / hx])
+        sl = ndimage.gaussian_filter(amp.real, [0, 4 * sig / hy, 4 * sig / hx]) + 1j * ndimage.gaussian_filter(amp.imag, [0, 4 * sig / hy, 4 * sig / hx])
+        img = main + side_lobe * 16 * sl
+        # blend weights: hat functions over depth
+        w = np.clip(1 - np.abs(Z[:, :1, :1] - zc) / (0.5 * depth), 0, 1)
+        out_a += w * img
+    wsum = sum(np.clip(1 - np.abs(Z[:, :1, :1] - (focus_depth + (lv * 2 - 1) * depth * 0.5 if lv != 0.5 else focus_depth)) / (0.5 * depth), 0, 1) for lv in depth_levels)
+    amp = out_a / np.maximum(wsum, 1e-6)
 
-# TGC that does not match the attenuation, then noise, envelope, log compression, grey map
-tgc_slope = 2 * float(np.median(atten)) * U(0.5, 1.3)
-tgc = tgc_slope * Z + U(-3, 3) * np.sin(Z / depth * U(2, 6))
-amp = amp * 10 ** (tgc / 20) * 10 ** (U(-10, 10) / 20)
-noise = 10 ** (-U(35, 55) / 20)
-amp = amp + noise * (rng.standard_normal(amp.shape) + 1j * rng.standard_normal(amp.shape)) / np.sqrt(2)
-env = np.abs(amp)
+    # TGC that does not match the attenuation, then noise, envelope, log compression, grey map
+    tgc_slope = 2 * float(np.median(atten)) * U(0.5, 1.3)
+    tgc = tgc_slope * Z + U(-3, 3) * np.sin(Z / depth * U(2, 6))
+    amp = amp * 10 ** (tgc / 20) * 10 ** (U(-10, 10) / 20)
+    noise = 10 ** (-U(35, 55) / 20)
+    amp = amp + noise * (rng.standard_normal(amp.shape) + 1j * rng.standard_normal(amp.shape)) / np.sqrt(2)
+    env = np.abs(amp)
+    return env, shadow_db, tgc_slope
+
+
+if fan:
+    # beam space: r from the probe's arc to the volume's deepest corner, angle across the sector
+    r_max = float(np.hypot(np.abs(x).max() + hx, z.max() + hz + R_probe))
+    nr = int(np.ceil((r_max - R_probe) / hz)) + 1
+    dth = hx / (R_probe + 0.5 * (r_max - R_probe))
+    nth = int(np.ceil(2 * half / dth)) + 1
+    rb = R_probe + np.arange(nr)[:, None, None] * hz
+    thb = (-half + np.arange(nth) * dth)[None, None, :]
+    xb = rb * np.sin(thb); zb = rb * np.cos(thb) - R_probe
+    cz = np.broadcast_to(zb / hz - 0.5, (nr, ny, nth)); cx = np.broadcast_to(xb / hx + nx / 2 - 0.5, (nr, ny, nth))
+    cy = np.broadcast_to(np.arange(ny)[None, :, None].astype(float), (nr, ny, nth))
+    coords = np.stack([cz, cy, cx])
+    to_beams = lambda a, o: ndimage.map_coordinates(a.astype(np.float64), coords, order=o, mode='nearest')
+    env_b, shadow_b, tgc_slope = form(to_beams(scatter, 1), to_beams(atten, 1), to_beams(imped, 1),
+                                      to_beams(bone_mask.astype(float), 0) > 0.5,
+                                      np.broadcast_to(rb - R_probe, (nr, ny, nth)), hz, hy, hx)
+    # scan conversion: each voxel from its beam (linear in r and angle)
+    ang = np.arctan2(X, Z + R_probe)
+    back = np.stack([(Rr - R_probe) / hz, np.broadcast_to(np.arange(ny)[None, :, None].astype(float), X.shape),
+                     (ang + half) / dth])
+    env = ndimage.map_coordinates(env_b, back, order=1, mode='nearest')
+    shadow_db = ndimage.map_coordinates(shadow_b, back, order=1, mode='nearest').astype(np.float32)
+    outside = (np.abs(ang) > half) | (Rr < R_probe)
+else:
+    env, shadow_db, tgc_slope = form(scatter, atten, imped, bone_mask, Z, hz, hy, hx)
+    outside = np.zeros(Z.shape, bool)
 db = 20 * np.log10(env + 1e-12)
 dr = U(30, 60)
 top = np.percentile(db, U(99.0, 99.9))
@@ -291,16 +341,14 @@ g = g + k * 0.08 * np.sin(2 * np.pi * g) * -1
 g = np.clip(g, 0, 1) ** U(0.8, 1.3)
 params.update(dynamic_range_db=dr, tgc_db_per_mm=tgc_slope, grey_map_k=k)
 
-# fan (sector) geometry: zeros outside the sector, as a scan converter leaves them
-outside = np.zeros(g.shape, bool)
+# fan: zeros outside the sector, as a scan converter leaves them (the draws that once chose the
+# fan here are kept, so that a linear case draws its output type as before)
 if rng.uniform() < 0.4:
-    apex = -U(5, 30)
-    half = U(0.35, 0.6)
-    ang = np.arctan2(X, Z - apex)
-    outside = np.abs(ang) > half
+    U(5, 30), U(0.35, 0.6)
+if fan:
     g[outside] = 0
     shadow_db[outside] = 1000.0  # never scanned: not visible (recall_visible leaves it out)
-    params['fan'] = [apex, half]
+    params['fan'] = [-R_probe, half]
 
 otype = rng.choice(['uint8', 'uint8', 'uint16', 'float'])
 if otype == 'uint8':
