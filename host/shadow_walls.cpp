@@ -11,6 +11,100 @@
 
 namespace softshell {
 
+FanBeams fan_beams(const std::vector<std::uint8_t>& scanned, const Dims3& dims, const Vec3d& spacing, int axis) {
+  FanBeams fan;
+  if (axis < 0 || axis > 2) throw std::invalid_argument("fan_beams: beam axis must be 0, 1 or 2");
+  const std::size_t n = dims[0] * dims[1] * dims[2];
+  if (scanned.size() != n || n == 0) return fan;
+  const std::size_t ax = std::size_t(axis), planes = dims[ax];
+  // Per plane along the beam: each axis's first and last scanned coordinate.
+  std::vector<long> lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) lo[a].assign(planes, -1), hi[a].assign(planes, -1);
+  std::size_t i = 0;
+  for (std::size_t z = 0; z < dims[2]; ++z)
+    for (std::size_t y = 0; y < dims[1]; ++y)
+      for (std::size_t x = 0; x < dims[0]; ++x, ++i) {
+        if (!scanned[i]) continue;
+        const long c[3] = {long(x), long(y), long(z)};
+        const std::size_t d = std::size_t(c[ax]);
+        for (int a = 0; a < 3; ++a) {
+          if (lo[a][d] < 0 || c[a] < lo[a][d]) lo[a][d] = c[a];
+          hi[a][d] = std::max(hi[a][d], c[a]);
+        }
+      }
+  std::size_t first = planes, used = 0;
+  for (std::size_t d = 0; d < planes; ++d)
+    if (lo[ax][d] >= 0) first = std::min(first, d), ++used;
+  if (used == 0) return fan;
+  // A side's line c = a + b d through its planes off the volume's faces:
+  // Theil-Sen (the median of the pairwise slopes, then the median offset),
+  // so a shadow or a gap reaching the side on some planes does not tilt it;
+  // then least squares over the planes within 2 voxels of that line. Returns
+  // false when fewer than kFanMinPlanes, or fewer than half the side's
+  // planes, lie on it.
+  struct Line {
+    double a = 0, b = 0, rms = 0;
+  };
+  const auto fit = [&](const std::vector<long>& side, long face, Line& out) {
+    std::vector<std::size_t> ds;
+    for (std::size_t d = 0; d < planes; ++d)
+      if (side[d] >= 0 && side[d] != face) ds.push_back(d);
+    if (ds.size() < std::size_t(kFanMinPlanes)) return false;
+    std::vector<double> slopes;
+    slopes.reserve(ds.size() * (ds.size() - 1) / 2);
+    for (std::size_t j = 0; j < ds.size(); ++j)
+      for (std::size_t k = j + 1; k < ds.size(); ++k)
+        slopes.push_back(double(side[ds[k]] - side[ds[j]]) / double(ds[k] - ds[j]));
+    const auto median = [](std::vector<double>& x) {
+      std::nth_element(x.begin(), x.begin() + std::ptrdiff_t(x.size() / 2), x.end());
+      return x[x.size() / 2];
+    };
+    const double b0 = median(slopes);
+    std::vector<double> offsets;
+    for (std::size_t d : ds) offsets.push_back(double(side[d]) - b0 * double(d));
+    const double a0 = median(offsets);
+    std::vector<std::size_t> on;
+    for (std::size_t d : ds)
+      if (std::fabs(double(side[d]) - (a0 + b0 * double(d))) <= 2.0) on.push_back(d);
+    if (on.size() < std::size_t(kFanMinPlanes) || 2 * on.size() < ds.size()) return false;
+    double sd = 0, sc = 0, sdd = 0, sdc = 0;
+    for (std::size_t d : on) sd += double(d), sc += double(side[d]), sdd += double(d) * double(d), sdc += double(d) * double(side[d]);
+    const double m = double(on.size()), den = m * sdd - sd * sd;
+    if (!(den > 0)) return false;
+    out.b = (m * sdc - sd * sc) / den, out.a = (sc - out.b * sd) / m;
+    double ss = 0;
+    for (std::size_t d : on) {
+      const double r = double(side[d]) - (out.a + out.b * double(d));
+      ss += r * r;
+    }
+    out.rms = std::sqrt(ss / m);
+    return true;
+  };
+  double apex_depth = 0;
+  int spreading = 0;
+  for (std::size_t a = 0; a < 3; ++a) {
+    if (a == ax) continue;
+    Line left, right;
+    if (!fit(lo[a], 0, left) || !fit(hi[a], long(dims[a]) - 1, right)) continue;
+    const double k = spacing[a] / spacing[ax];  // index slope -> mm per mm
+    if (!(-left.b * k >= kFanMinSlope && right.b * k >= kFanMinSlope)) continue;
+    // A probe's sector is symmetric about its middle beam: sides that
+    // spread at very different rates are a sweep's edges, not a sector's.
+    if (!(-left.b <= kFanMaxSkew * right.b && right.b <= kFanMaxSkew * -left.b)) continue;
+    if (!(left.rms <= kFanMaxRms && right.rms <= kFanMaxRms)) continue;
+    const double d_apex = (left.a - right.a) / (right.b - left.b);  // where the sides meet
+    if (!(d_apex < double(first))) continue;
+    fan.spreads[a] = true;
+    fan.apex[a] = left.a + left.b * d_apex;
+    fan.rms_voxels = std::max({fan.rms_voxels, left.rms, right.rms});
+    apex_depth += d_apex, ++spreading;
+  }
+  if (spreading == 0) return FanBeams{};
+  fan.found = true;
+  fan.apex[ax] = apex_depth / spreading;  // a volume probe's two sectors share one apex
+  return fan;
+}
+
 std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::vector<std::uint8_t>* scanned,
                                       double iso, const ShadowWallParams& params, ShadowWallReport* report) {
   const Dims3& d = v.dims;
@@ -29,7 +123,74 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
   std::vector<float> shadow(n, 0.0f);
   const float level = float(iso);
   const double h_ax = v.spacing[std::size_t(ax)];
-  {
+  const FanBeams fan = params.fan && scanned ? fan_beams(*scanned, d, v.spacing, ax) : FanBeams{};
+  // The beam through voxel c (unit, in mm): from the fan's apex, else along
+  // the axis.
+  const auto beam_at = [&](const std::size_t c[3], double b[3]) {
+    double len = 0;
+    for (int k = 0; k < 3; ++k) {
+      b[k] = k == ax ? (double(c[k]) - (fan.found ? fan.apex[k] : -1.0)) * v.spacing[std::size_t(k)]
+             : fan.spreads[k] ? (double(c[k]) - fan.apex[k]) * v.spacing[std::size_t(k)]
+                              : 0.0;
+      len += b[k] * b[k];
+    }
+    len = std::sqrt(len);
+    for (int k = 0; k < 3; ++k) b[k] /= len;
+  };
+  if (fan.found) {
+    // Down each beam from the apex, plane by plane along the axis: a voxel's
+    // predecessor is the nearest voxel of the plane above on its beam, and a
+    // beam's state (the depth of its deepest bright voxel, and of its first
+    // scanned one) passes down the beams; unscanned voxels pass it on. The
+    // gap is measured along the beam. A bright voxel within fan_skip_mm of
+    // its beam's first scanned voxel occludes nothing: a fan's beams all
+    // meet under the probe, and what is left bright there (the near field's
+    // remnants, skin) would shade the whole sector.
+    const std::size_t planes = d[std::size_t(ax)], per_plane = n / planes;
+    const std::size_t la = ax == 0 ? 1 : 0, lb = ax == 2 ? 1 : 2;  // the plane's axes
+    std::vector<long> prev(per_plane, -1), cur(per_plane, -1), prev_top(per_plane, -1), cur_top(per_plane, -1);
+    for (std::size_t depth = 0; depth < planes; ++depth) {
+      const double dd = double(depth) - fan.apex[ax];
+      parallel_ranges(d[lb], per_plane >= 65536 ? threads : 1, [&](std::size_t q0, std::size_t q1) {
+        for (std::size_t q = q0; q < q1; ++q)
+          for (std::size_t p = 0; p < d[la]; ++p) {
+            std::size_t c[3];
+            c[ax] = depth, c[la] = p, c[lb] = q;
+            const std::size_t i = c[0] * stride[0] + c[1] * stride[1] + c[2] * stride[2];
+            const std::size_t cell = p + d[la] * q;
+            long up = -1, top = -1;
+            if (depth > 0 && dd > 1.0) {
+              // The plane above, where this voxel's beam crosses it.
+              long pc[3] = {long(c[0]), long(c[1]), long(c[2])};
+              bool inside = true;
+              for (int k = 0; k < 3; ++k) {
+                if (k == ax || !fan.spreads[k]) continue;
+                pc[k] = std::lround(fan.apex[k] + (double(c[k]) - fan.apex[k]) * (dd - 1.0) / dd);
+                inside = inside && pc[k] >= 0 && pc[k] < long(d[std::size_t(k)]);
+              }
+              if (inside) {
+                const std::size_t pcell = std::size_t(pc[la]) + d[la] * std::size_t(pc[lb]);
+                up = prev[pcell], top = prev_top[pcell];
+              }
+            }
+            cur[cell] = up;
+            cur_top[cell] = top;
+            if (!is_scanned(i)) continue;
+            if (top < 0) cur_top[cell] = top = long(depth);
+            double b[3];
+            beam_at(c, b);
+            const double along = h_ax / std::fabs(b[ax]);  // mm along the beam per plane
+            if (vs.data[i] > level) {
+              if (double(long(depth) - top) * along >= params.fan_skip_mm) cur[cell] = long(depth);
+            } else if (up >= 0 && vs.data[i] < level) {
+              if (double(long(depth) - up) * along >= params.gap_mm) shadow[i] = 1.0f;
+            }
+          }
+      });
+      prev.swap(cur);
+      prev_top.swap(cur_top);
+    }
+  } else {
     // A line is indexed by its voxels' coordinates across the beam; the
     // outer loops' rows are split over threads so that each owns its lines.
     const std::size_t nx = d[0], ny = d[1], nz = d[2];
@@ -102,7 +263,13 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
             g[k] = span > 0 ? (double(vg.data[hi]) - double(vg.data[lo])) / span : 0.0;
           }
           const double m = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
-          if (!(m > 0) || !std::isfinite(m) || std::fabs(g[ax]) >= params.beam_cos * m) continue;
+          double along = g[ax];
+          if (fan.found) {
+            double b[3];
+            beam_at(c, b);
+            along = g[0] * b[0] + g[1] * b[1] + g[2] * b[2];
+          }
+          if (!(m > 0) || !std::isfinite(m) || std::fabs(along) >= params.beam_cos * m) continue;
           // The dark side (down the gradient) in shadow, the bright side (up
           // it) not: an edge between a shadow and what is beside it (in
           // voxels per axis).
@@ -130,6 +297,7 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
     walls += weight[i] < 0.5f;
   }
   if (report) {
+    report->fan = fan;
     report->shadow_share = scanned_count ? double(in_shadow) / double(scanned_count) : 0.0;
     report->wall_share = scanned_count ? double(walls) / double(scanned_count) : 0.0;
   }
@@ -141,7 +309,7 @@ ShadowWallParams shadow_wall_params(const VariationalParams& p, int axis) {
   const double f = p.sigma_mm / VariationalParams{}.sigma_mm;
   w.axis = axis;
   w.sigma_mm = w.grad_sigma_mm = p.grad_sigma_mm > 0 ? p.grad_sigma_mm : p.sigma_mm;
-  w.reach_mm *= f, w.smooth_mm *= f, w.gap_mm *= f;
+  w.reach_mm *= f, w.smooth_mm *= f, w.gap_mm *= f, w.fan_skip_mm *= f;
   return w;
 }
 

@@ -39,7 +39,44 @@ struct ShadowWallParams {
   // isovalue. Half the shell (1 mm) was tried and not kept
   // (docs/parameters.md, "Shadow walls beside tissue under the isovalue").
   double bright_mm = 0.0;
+  // Follow a fan's beams (fan_beams below: the scanned region's sides
+  // spread out with depth, as a curvilinear or phased array's sector does):
+  // the shadow is walked down each beam from the apex, and "across the beam"
+  // is across the local beam. Without a fan (or with false) the beams run
+  // along `axis`, as before.
+  bool fan = true;
+  // In a fan, a bright voxel occludes only from this far (mm, along its
+  // beam) below the beam's first scanned voxel: the beams meet under the
+  // probe, and the near field's bright remnants there lie on every one of
+  // them (they shaded two thirds of some phantoms' sectors).
+  double fan_skip_mm = 6.0;
 };
+
+// The beams of a fan: the apex (voxel coordinates, usually above the volume)
+// and the axes across the beam along which the sector spreads. A beam runs
+// from the apex through each voxel (the spreading axes' components; the
+// others as along the beam axis).
+struct FanBeams {
+  bool found = false;
+  double apex[3] = {0.0, 0.0, 0.0};
+  bool spreads[3] = {false, false, false};
+  double rms_voxels = 0.0;  // the sides' fit, the worse of the two on the axes that spread
+};
+
+// A fan from the scanned region (1 = scanned): per plane across the beam
+// axis `axis`, the scanned voxels' first and last coordinate along each other
+// axis; on the planes where a side lies inside the volume (off its faces),
+// each side's coordinate is fitted by a line in depth (robustly: a shadow
+// or a gap reaching the side on some planes is left out). An axis spreads
+// when on both sides at least kFanMinPlanes planes, and half of the side's,
+// lie on its line, within kFanMaxRms voxels of it; both sides widen with
+// depth by at least kFanMinSlope (mm per mm), neither more than kFanMaxSkew
+// times the other (a probe's sector is symmetric about its middle beam);
+// and they meet (the apex) above the first scanned plane. A sweep's ragged
+// edge fits no line; a linear array's sides run straight down.
+FanBeams fan_beams(const std::vector<std::uint8_t>& scanned, const Dims3& dims, const Vec3d& spacing, int axis);
+constexpr int kFanMinPlanes = 6;
+constexpr double kFanMinSlope = 0.05, kFanMaxRms = 1.5, kFanMaxSkew = 2.0;
 
 // The constants for a classification with `p`: both lowpasses are p's
 // gradient lowpass (grad_sigma_mm; sigma_mm when that is 0), and the lengths
@@ -50,6 +87,7 @@ ShadowWallParams shadow_wall_params(const VariationalParams& p, int axis);
 struct ShadowWallReport {
   double shadow_share = 0;  // of the scanned voxels, in shadow
   double wall_share = 0;    // of the scanned voxels, weight below 1/2
+  FanBeams fan;             // the fan followed (found false: beams along the axis)
 };
 
 // The weights (one per voxel, in [0, 1]) for the data the classifier sees

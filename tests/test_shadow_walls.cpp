@@ -9,6 +9,7 @@
 #include <random>
 #include <vector>
 
+#include "mask.hpp"
 #include "shadow_walls.hpp"
 #include "test_support.hpp"
 #include "variational.hpp"
@@ -151,6 +152,149 @@ TEST(ShadowWalls, TheBeamAxisIsHonoured) {
   EXPECT_LT(r.wall_share, 0.002);
 }
 
+// A sector of a fan in x-z, the same for every y: beams from the apex
+// (x 24 mm, z -10 mm), half-angle 0.7 rad (40 degrees).
+constexpr double kApexX = 24.0, kApexZ = -10.0, kHalf = 0.7;
+double beam_angle(double x, double z) { return std::atan2(x - kApexX, z - kApexZ); }
+double beam_radius(double x, double z) { return std::hypot(x - kApexX, z - kApexZ); }
+std::vector<std::uint8_t> sector_mask(const Dims3& dims) {
+  std::vector<std::uint8_t> m(dims[0] * dims[1] * dims[2]);
+  for (std::size_t z = 0; z < dims[2]; ++z)
+    for (std::size_t y = 0; y < dims[1]; ++y)
+      for (std::size_t x = 0; x < dims[0]; ++x)
+        m[x + dims[0] * (y + dims[1] * z)] = std::fabs(beam_angle(double(x) * kH, double(z) * kH)) < kHalf;
+  return m;
+}
+
+TEST(FanBeams, ASectorsApexIsFoundAndALinearScanOrARaggedSweepHasNone) {
+  const Dims3 dims{96, 12, 64};
+  const FanBeams f = fan_beams(sector_mask(dims), dims, {kH, kH, kH}, 2);
+  ASSERT_TRUE(f.found);
+  EXPECT_TRUE(f.spreads[0]);
+  EXPECT_FALSE(f.spreads[1]);
+  EXPECT_FALSE(f.spreads[2]);
+  EXPECT_NEAR(f.apex[0] * kH, kApexX, 0.5);
+  EXPECT_NEAR(f.apex[2] * kH, kApexZ, 2.0);
+  EXPECT_LE(f.rms_voxels, kFanMaxRms);
+  // The same sector with the beam along y: found on y's planes, not on z's.
+  std::vector<std::uint8_t> turned(dims[0] * dims[1] * dims[2]);
+  const Dims3 td{dims[0], dims[2], dims[1]};
+  const std::vector<std::uint8_t> m = sector_mask(dims);
+  for (std::size_t z = 0; z < dims[2]; ++z)
+    for (std::size_t y = 0; y < dims[1]; ++y)
+      for (std::size_t x = 0; x < dims[0]; ++x) turned[x + td[0] * (z + td[1] * y)] = m[x + dims[0] * (y + dims[1] * z)];
+  EXPECT_TRUE(fan_beams(turned, td, {kH, kH, kH}, 1).found);
+  EXPECT_FALSE(fan_beams(turned, td, {kH, kH, kH}, 2).found);
+  // A linear array: every voxel scanned, or a band of constant width.
+  EXPECT_FALSE(fan_beams(std::vector<std::uint8_t>(m.size(), 1), dims, {kH, kH, kH}, 2).found);
+  std::vector<std::uint8_t> band(m.size(), 0);
+  for (std::size_t i = 0; i < band.size(); ++i) band[i] = (i % dims[0]) >= 10 && (i % dims[0]) < 50;
+  EXPECT_FALSE(fan_beams(band, dims, {kH, kH, kH}, 2).found);
+  // A freehand sweep's ragged sides (each plane's extent drawn at random)
+  // fit no line.
+  std::mt19937_64 rng(test::seed());
+  std::uniform_int_distribution<int> side(4, 36);
+  std::vector<std::uint8_t> ragged(m.size(), 0);
+  for (std::size_t z = 0; z < dims[2]; ++z) {
+    const std::size_t a = std::size_t(side(rng)), b = dims[0] - std::size_t(side(rng));
+    for (std::size_t y = 0; y < dims[1]; ++y)
+      for (std::size_t x = a; x < b; ++x) ragged[x + dims[0] * (y + dims[1] * z)] = 1;
+  }
+  EXPECT_FALSE(fan_beams(ragged, dims, {kH, kH, kH}, 2).found);
+  // A sector that narrows with depth is no fan.
+  std::vector<std::uint8_t> flipped(m.size());
+  for (std::size_t z = 0; z < dims[2]; ++z)
+    for (std::size_t i = 0; i < dims[0] * dims[1]; ++i)
+      flipped[i + dims[0] * dims[1] * z] = m[i + dims[0] * dims[1] * (dims[2] - 1 - z)];
+  EXPECT_FALSE(fan_beams(flipped, dims, {kH, kH, kH}, 2).found);
+  EXPECT_THROW(fan_beams(m, dims, {kH, kH, kH}, 3), std::invalid_argument);
+}
+
+TEST(ShadowWalls, InAFanTheShadowFollowsTheBeamsAndBothItsSidesAreWalls) {
+  // In the sector: tissue (150), a bright arc (240) 20-22 mm from the apex
+  // between beam angles 0.45 and 0.6 rad, and its shadow (20) beyond it
+  // along the same beams; outside the sector 0, unscanned. The shadow leans
+  // 26-34 degrees off z: its outer wall's gradient lies more than 30 degrees
+  // off the across-z plane, so down z it is no edge across the beam.
+  const Dims3 dims{96, 8, 64};
+  const std::vector<std::uint8_t> scanned = sector_mask(dims);
+  const Volume v = scene(dims,
+                         [](double x, double, double z) {
+                           const double a = beam_angle(x, z), r = beam_radius(x, z);
+                           if (std::fabs(a) >= kHalf) return 0.0;
+                           if (a < 0.45 || a > 0.6 || r < 20.0) return 150.0;
+                           return r < 22.0 ? 240.0 : 20.0;
+                         },
+                         test::seed() + 5);
+  // What the classifier sees: the unscanned samples continue the scanned
+  // ones (host/mask.hpp).
+  const Volume masked = fill_unscanned(v, scanned);
+  ShadowWallReport r;
+  const std::vector<float> w = shadow_wall_weight(test::runtime(), masked, &scanned, 85.0, ShadowWallParams{}, &r);
+  ASSERT_TRUE(r.fan.found);
+  ShadowWallParams straight;
+  straight.fan = false;
+  ShadowWallReport r0;
+  const std::vector<float> w0 = shadow_wall_weight(test::runtime(), masked, &scanned, 85.0, straight, &r0);
+  EXPECT_FALSE(r0.fan.found);
+  // The lowest weight within 1.5 mm across the beam of the point on the
+  // beam at `angle`, `radius` from the apex.
+  const auto lowest = [&](const std::vector<float>& m, double angle, double radius) {
+    float lo = 1.0f;
+    for (double da = -0.06; da <= 0.06 + 1e-9; da += 0.01) {
+      const double x = kApexX + radius * std::sin(angle + da), z = kApexZ + radius * std::cos(angle + da);
+      if (std::fabs((angle + da) - angle) * radius > 1.5) continue;
+      lo = std::min(lo, at_mm(m, v, x, 2.0, z));
+    }
+    return lo;
+  };
+  for (double radius : {32.0, 35.0, 38.0}) {
+    EXPECT_LT(lowest(w, 0.45, radius), 0.5f) << "the wall nearer the axis at " << radius << " mm";
+    EXPECT_LT(lowest(w, 0.6, radius), 0.5f) << "the outer wall at " << radius << " mm";
+    EXPECT_GT(lowest(w0, 0.6, radius), 0.5f) << "the outer wall, down z, at " << radius << " mm";
+    EXPECT_FLOAT_EQ(lowest(w, -0.3, radius), 1.0f) << "tissue away from the shadow";
+  }
+  // The shadow is where it is: beyond the gap, between the bar's beams.
+  EXPECT_GT(r.shadow_share, 0.02);
+}
+
+TEST(ShadowWalls, InAFanTheBrightLayerUnderTheProbeShadesNothing) {
+  // A bright skin layer (240) in the first 2 mm of every beam, then dark
+  // fluid (40) with a block of tissue (150) in it, 24-30 mm from the apex
+  // between beam angles -0.1 and 0.1. The fan's beams all pass the layer:
+  // if it occluded, the fluid beside the block would be "shadow" and the
+  // block's sides walls. It lies within fan_skip_mm of each beam's first
+  // scanned voxel, so it does not.
+  const Dims3 dims{96, 8, 64};
+  const std::vector<std::uint8_t> scanned = sector_mask(dims);
+  const Volume v = scene(dims,
+                         [](double x, double, double z) {
+                           const double a = beam_angle(x, z), r = beam_radius(x, z);
+                           if (std::fabs(a) >= kHalf) return 0.0;
+                           if (r < -kApexZ / std::cos(a) + 2.0) return 240.0;
+                           return std::fabs(a) < 0.1 && r >= 24.0 && r < 30.0 ? 150.0 : 40.0;
+                         },
+                         test::seed() + 6);
+  const Volume filled = fill_unscanned(v, scanned);
+  ShadowWallReport r;
+  const std::vector<float> w = shadow_wall_weight(test::runtime(), filled, &scanned, 95.0, ShadowWallParams{}, &r);
+  ASSERT_TRUE(r.fan.found);
+  ShadowWallParams shaded;
+  shaded.fan_skip_mm = 0.0;
+  ShadowWallReport r0;
+  const std::vector<float> w0 = shadow_wall_weight(test::runtime(), filled, &scanned, 95.0, shaded, &r0);
+  // The block's sides, 25-29 mm from the apex.
+  float lo = 1.0f, lo0 = 1.0f;
+  for (double radius = 25.0; radius <= 29.0; radius += 0.5)
+    for (double a : {-0.12, -0.1, -0.08, 0.08, 0.1, 0.12}) {
+      const double x = kApexX + radius * std::sin(a), z = kApexZ + radius * std::cos(a);
+      lo = std::min(lo, at_mm(w, v, x, 2.0, z)), lo0 = std::min(lo0, at_mm(w0, v, x, 2.0, z));
+    }
+  EXPECT_GT(lo, 0.99f) << "the block's sides in fluid are no walls";
+  EXPECT_LT(lo0, 0.5f) << "with the layer occluding, they would be";
+  EXPECT_LT(r.shadow_share, 0.2 * r0.shadow_share);
+}
+
 TEST(ShadowWalls, ParametersFollowTheClassifiersLowpass) {
   VariationalParams p;
   const ShadowWallParams d = shadow_wall_params(p, 1);
@@ -164,6 +308,7 @@ TEST(ShadowWalls, ParametersFollowTheClassifiersLowpass) {
   EXPECT_DOUBLE_EQ(s.gap_mm, 0.5 * ShadowWallParams{}.gap_mm);
   EXPECT_DOUBLE_EQ(s.reach_mm, 0.5 * ShadowWallParams{}.reach_mm);
   EXPECT_DOUBLE_EQ(s.smooth_mm, 0.5 * ShadowWallParams{}.smooth_mm);
+  EXPECT_DOUBLE_EQ(s.fan_skip_mm, 0.5 * ShadowWallParams{}.fan_skip_mm);
 }
 
 TEST(ShadowWalls, CombinedWeightsAreTheProduct) {

@@ -796,6 +796,13 @@ int run_classify(const ClassifyOptions& given_options) {
     std::ostringstream t;
     t << std::fixed << std::setprecision(1) << "; shadow walls: " << 100 * wr.shadow_share
       << " % of the scanned voxels in shadow, edges weighted down on " << 100 * wr.wall_share << " %";
+    if (wr.fan.found) {
+      // The apex in mm on the grid (voxel coordinates x spacing).
+      t << " (along the beams of a fan, apex at";
+      for (int k = 0; k < 3; ++k)
+        if (wr.fan.spreads[k] || k == wp.axis) t << " " << "xyz"[k] << " " << wr.fan.apex[k] * in.spacing[std::size_t(k)];
+      t << " mm)";
+    }
     cue_text += t.str();
   }
   step.reset();
