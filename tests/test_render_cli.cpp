@@ -342,6 +342,25 @@ TEST_F(RenderCli, IsoOutsideTheDataWarnsInRenderAndView) {
   EXPECT_NE(v.err.find("softshell: warning: --iso -5 is outside the data's value range [0, 255]"), std::string::npos) << v.err;
 }
 
+TEST_F(RenderCli, TheViewersClassificationTakesTheGivenBeamAxis) {
+  // render's and view's --beam-axis reach the classification of a raw
+  // volume (viewer::load_opacity): the near field, mask and walls follow it.
+  const std::string in = file("raw.nrrd");
+  ASSERT_EQ(run({"synthetic", "--size", "32", "-o", in, "-q"}).status, 0);
+  for (int axis : {0, 1, 2}) {
+    const viewer::OpacityInput input =
+        viewer::load_opacity(runtime(), in, viewer::InputKind::Auto, "auto", nullptr, std::nullopt, BoneCueMode::Off, axis);
+    ASSERT_TRUE(input.classified);
+    EXPECT_EQ(input.beam_axis, axis);
+  }
+  const test::RunResult r = run({"render", in, "--beam-axis", "y", "-o", file("y.png"), "-q"});
+  EXPECT_EQ(r.status, 0) << r.err;
+  const test::RunResult bad = run({"render", in, "--beam-axis", "up", "-o", file("u.png"), "-q"});
+  EXPECT_EQ(bad.status, 2);
+  EXPECT_NE(bad.err.find("--beam-axis"), std::string::npos) << bad.err;
+  EXPECT_FALSE(fs::exists(file("u.png")));
+}
+
 TEST_F(RenderCli, ViewerReSolveUpdatesTheClassifierInPlaceForAnIsoChange) {
   // The viewer's "re-solve" (viewer::reclassify): a new v_iso re-uses the
   // classifier (same object, no new setup) and starts from its last linear

@@ -28,7 +28,8 @@ bool looks_like_opacity(const Volume& v) {
 }
 
 OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, const std::string& iso_text,
-                          const VariationalParams* weights, std::optional<std::size_t> frame, BoneCueMode bone_cue) {
+                          const VariationalParams* weights, std::optional<std::size_t> frame, BoneCueMode bone_cue,
+                          int beam_axis) {
   OpacityInput in;
   Volume v;
   if (const std::size_t frames = read_any_header(path).frames; frames > 1) {
@@ -85,10 +86,14 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   std::optional<KeepFreedMemory> keep_freed(std::in_place);
   in.bmode = v;  // before the near field is removed: the slices show the data as read
   MaskReport mr;
-  in.mask = scanned_mask(v, MaskParams{}, &mr);
+  MaskParams mp;
+  if (beam_axis >= 0) mp.beam_axis = beam_axis;  // else z, as classify's
+  in.mask = scanned_mask(v, mp, &mr);
   if (mr.unscanned == 0) in.mask.clear();
   const std::vector<std::uint8_t> before = in.mask;
-  const NearFieldReport nf = remove_near_field(v, in.mask);  // the near field is an occluder (docs/real-data.md)
+  NearFieldParams np;
+  np.axis = beam_axis;  // the near field is an occluder (docs/real-data.md)
+  const NearFieldReport nf = remove_near_field(v, in.mask, np);
   // The window under the band, held when the shell draws a sheet there (as classify does; host/mask.hpp).
   const std::vector<std::uint8_t> underside = band_underside(v, nf, before, in.mask);
   const std::vector<std::uint8_t>* mask = in.mask.empty() ? nullptr : &in.mask;

@@ -63,9 +63,11 @@ struct OpacityInput {
 // A 3D+t file (a 4-D NRRD): an opacity sequence is read whole (`sequence`),
 // starting on `frame` (default 0); a sequence of raw frames needs `frame`,
 // which is then classified alone.
+// `beam_axis` (0 x, 1 y, 2 z; -1: the data's own) is classify's --beam-axis.
 OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, const std::string& iso = "auto",
                           const VariationalParams* weights = nullptr,
-                          std::optional<std::size_t> frame = std::nullopt, BoneCueMode bone_cue = BoneCueMode::Off);
+                          std::optional<std::size_t> frame = std::nullopt, BoneCueMode bone_cue = BoneCueMode::Off,
+                          int beam_axis = -1);
 
 // The B-mode data behind an opacity volume (`view`/`render --volume V`), for
 // the slice views and the splats' orientation by the data: into in.bmode (a

@@ -37,6 +37,12 @@ CLI::Validator one_of(const std::vector<std::string>& choices);
 // "a, b or c".
 std::string choice_list(const std::vector<std::string>& choices);
 
+// --beam-axis (classify, render, view): "x", "y", "z" -> 0, 1, 2; "auto" -> -1
+// (the data's own axis). The option's one_of() has checked the word.
+inline int beam_axis_option(const std::string& word) {
+  return word == "x" ? 0 : word == "y" ? 1 : word == "z" ? 2 : -1;
+}
+
 // Safety net, after all commands are added: every option whose type is a
 // floating-point number and has no range validator still refuses NaN and
 // infinities.

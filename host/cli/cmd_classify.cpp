@@ -44,6 +44,7 @@ struct ClassifyOptions {
   std::string per_frame;            // --per-frame-files PATTERN
   std::string bone_cue = "off";  // docs/parameters.md: off by default (it lost bone on a real sweep)
   std::string shadow_walls = "remove";  // host/shadow_walls.hpp: weighted down by default
+  std::string beam_axis = "auto";       // --beam-axis: auto (the data's own, beam_axis_of) or x, y, z
   double thickness = 1.0;
   double iso_fraction = AutoIsoParams().local_fraction, iso_field_sigma = AutoIsoParams().field_sigma_mm;
   double iso_field_depth_sigma = AutoIsoParams().field_depth_sigma_mm;
@@ -115,7 +116,7 @@ void warn_if_elsewhere(const std::string& option, const std::string& path, const
               << differs << "); its voxels are used index by index\n";
 }
 
-DataMask make_mask(const std::string& option, const Volume& in) {
+DataMask make_mask(const std::string& option, const Volume& in, int beam_axis) {
   DataMask m;
   const auto percent = [&](std::size_t k) {
     std::ostringstream s;
@@ -127,7 +128,8 @@ DataMask make_mask(const std::string& option, const Volume& in) {
     m.text = "none (every voxel scanned)";
   } else if (option == "auto") {
     MaskReport r;
-    const MaskParams params;
+    MaskParams params;
+    if (beam_axis >= 0) params.beam_axis = beam_axis;  // else z, as always (step 2b)
     m.scanned = scanned_mask(in, params, &r);
     m.text = "auto: " + percent(r.unscanned) + " (zero fill " + std::to_string(r.zero_fill) + " + " +
              std::to_string(params.grow) + "-voxel rim)";
@@ -614,14 +616,18 @@ int run_classify(const ClassifyOptions& given_options) {
   o.non_finite.apply(in, o.in);
   const std::string iso_warning = given_iso ? iso_outside_data(in, *given_iso) : "";
   step.emplace("mask");
-  DataMask mask = make_mask(o.mask, in);
+  // --beam-axis: the user's beam axis for every step that follows the beam
+  // (the mask's dark-fluid test, the near field, the depth clip, the
+  // isovalue field, the bone cue, the shadow walls); auto: the data's own.
+  const int given_axis = beam_axis_option(o.beam_axis);
+  DataMask mask = make_mask(o.mask, in, given_axis);
   std::vector<std::uint8_t> clip;  // --depth-clip: the scanned region with the clip applied
   std::size_t unscanned_before_clip = 0;
-  int axis = -1;
+  int axis = given_axis;
   if (depth_clip) {
     clip = mask.scanned.empty() ? std::vector<std::uint8_t>(in.voxels(), 1) : mask.scanned;
     unscanned_before_clip = count_unscanned(clip);
-    axis = beam_axis_of(in, &clip);
+    if (axis < 0) axis = beam_axis_of(in, &clip);
     clip_depth(in, clip, axis, depth_clip->first, depth_clip->second);
     if (mask.scanned.empty()) mask.scanned.assign(in.voxels(), 1);
   }
@@ -631,6 +637,7 @@ int run_classify(const ClassifyOptions& given_options) {
     // (docs/real-data.md, "The near field"); the equally spaced copies of a
     // flat reflector below it are ghosts ("Reverberations").
     NearFieldParams np;
+    np.axis = given_axis;
     np.reverb = o.reverb == "remove";
     np.band = o.near_field == "remove";
     const std::vector<std::uint8_t> before = variational && np.band && o.band_sheet == "hold" ? mask.scanned
@@ -878,6 +885,14 @@ void add_classify_command(CLI::App& app, Action& action) {
                   "(docs/parameters.md)")
       ->capture_default_str()
       ->type_name("auto|on|off");
+  sub->add_option("--beam-axis", o->beam_axis,
+                  "The axis the beam runs along, depth growing with the index (the transducer on that axis's first "
+                  "face): auto takes the data's own (speckle finest along the beam, brightness changing with depth; "
+                  "docs/real-data.md, \"The beam axis\"); the near field, the mask's dark-fluid test, the depth "
+                  "clip, the isovalue field and the shadow walls follow it")
+      ->capture_default_str()
+      ->type_name("auto|x|y|z")
+      ->check(one_of({"auto", "x", "y", "z"}));
   sub->add_option("--shadow-walls", o->shadow_walls,
                   "remove: the edges of acoustic shadows' sides (across the beam, a shadow on their dark side: dark, "
                   "under something bright further up the beam) are weighted down like the bone cue's; keep: drawn "

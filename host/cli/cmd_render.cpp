@@ -31,6 +31,7 @@ namespace {
 
 struct RenderOptions {
   std::string in, out, device, size = "400x400", view = "0,0", crop, iso = "auto", colour_map, light, legend = "on";
+  std::string beam_axis = "auto";  // --beam-axis, as classify's
   std::string volume;  // --volume: the B-mode behind an opacity input (for --orientation data)
   std::set<std::string> given;  // long option names given on the command line
   int turntable = 0, benchmark = 0;
@@ -155,7 +156,8 @@ int run_render(const RenderOptions& o) {
   const progress::Stage command("render");
   std::optional<progress::Stage> step(std::in_place, "input");
   Runtime rt(o.device);
-  viewer::OpacityInput input = viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, nullptr, o.frame, bone_cue);
+  viewer::OpacityInput input = viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, nullptr, o.frame, bone_cue,
+                                                          beam_axis_option(o.beam_axis));
   if (!o.volume.empty()) viewer::attach_bmode(input, o.volume);
   const std::string settled =
       settle_orientation(splat_params, !input.bmode.data.empty(), o.given.count("--orientation") > 0, o.in);
@@ -264,6 +266,10 @@ void add_render_command(CLI::App& app, Action& action) {
                   "Keep splats inside this box, fractions of the volume's extent per axis (e.g. 0,1,0,1,0,0.6)")
       ->type_name("X0,X1,Y0,Y1,Z0,Z1");
   sub->add_option("--iso", o->iso, "Isovalue for classifying a raw volume (its units, or auto)")->capture_default_str();
+  sub->add_option("--beam-axis", o->beam_axis, "Classifying a raw volume: the axis its beam runs along (as classify's)")
+      ->capture_default_str()
+      ->type_name("auto|x|y|z")
+      ->check(one_of({"auto", "x", "y", "z"}));
   sub->add_option("--colour-map", o->colour_map,
                   "solid: one colour (the default); depth: colour by depth along the beam, light near the transducer "
                   "to dark red-brown deep (splats)")

@@ -25,6 +25,7 @@ namespace {
 
 struct ViewOptions {
   std::string in, device, size = "1200x800", view = "0,0", crop, iso = "auto", screenshot, renderer;
+  std::string beam_axis = "auto";  // --beam-axis, as classify's
   std::string colour_map;  // solid | depth; empty: the preset's (default solid)
   std::string light;       // AZ,EL; empty: the preset's
   std::string params, volume, save_params, save_u, save_mesh, cursor;
@@ -150,7 +151,8 @@ int run_view(const ViewOptions& given_options) {
   std::optional<progress::Stage> stage(std::in_place, "view: load");
   Runtime rt(o.device);
   viewer::OpacityInput input =
-      viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, have_weights ? &weights : nullptr, o.frame, bone_cue);
+      viewer::load_opacity(rt, o.in, o.splat.input_kind(), o.iso, have_weights ? &weights : nullptr, o.frame, bone_cue,
+                           beam_axis_option(o.beam_axis));
   if (!o.volume.empty()) viewer::attach_bmode(input, o.volume);
   const std::string settled =
       settle_orientation(v.params, !input.bmode.data.empty(), o.given.count("--orientation") > 0, o.in);
@@ -183,6 +185,10 @@ void add_view_command(CLI::App& app, Action& action) {
       ->type_name("AZ,EL");
   sub->add_option("--crop", o->crop, "Initial crop box, fractions per axis")->type_name("X0,X1,Y0,Y1,Z0,Z1");
   sub->add_option("--iso", o->iso, "Isovalue for classifying a raw volume (its units, or auto)")->capture_default_str();
+  sub->add_option("--beam-axis", o->beam_axis, "Classifying a raw volume: the axis its beam runs along (as classify's)")
+      ->capture_default_str()
+      ->type_name("auto|x|y|z")
+      ->check(one_of({"auto", "x", "y", "z"}));
   sub->add_option("--renderer", o->renderer,
                   "Initial renderer (the panel switches): splat (oriented splats), isosplat (isotropic splats), mc "
                   "(Marching Cubes mesh at level 0.2) or raycast (the OpenCL ray caster); overrides --method")
