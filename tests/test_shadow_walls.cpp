@@ -166,6 +166,36 @@ std::vector<std::uint8_t> sector_mask(const Dims3& dims) {
   return m;
 }
 
+// A scene of the sector on {96, 8, 64} voxels: `inside(angle, radius)`
+// within it, 0 outside (unscanned); `seen` is what the classifier sees, the
+// unscanned samples continuing the scanned ones (host/mask.hpp).
+struct SectorScene {
+  std::vector<std::uint8_t> scanned;
+  Volume v, seen;
+};
+template <class Inside>
+SectorScene sector_scene(Inside inside, std::uint64_t seed) {
+  const Dims3 dims{96, 8, 64};
+  SectorScene s;
+  s.scanned = sector_mask(dims);
+  s.v = scene(dims,
+              [&](double x, double, double z) {
+                const double a = beam_angle(x, z);
+                return std::fabs(a) >= kHalf ? 0.0 : inside(a, beam_radius(x, z));
+              },
+              seed);
+  s.seen = fill_unscanned(s.v, s.scanned);
+  return s;
+}
+// The shadow walls' weights of a sector scene at `iso`.
+std::vector<float> sector_walls(const SectorScene& s, double iso, const ShadowWallParams& p, ShadowWallReport* r) {
+  return shadow_wall_weight(test::runtime(), s.seen, &s.scanned, iso, p, r);
+}
+// A weight at `radius` mm from the apex on the beam at `angle` (y 2 mm).
+float at_beam(const std::vector<float>& w, const Volume& v, double angle, double radius) {
+  return at_mm(w, v, kApexX + radius * std::sin(angle), 2.0, kApexZ + radius * std::cos(angle));
+}
+
 TEST(FanBeams, ASectorsApexIsFoundAndALinearScanOrARaggedSweepHasNone) {
   const Dims3 dims{96, 12, 64};
   const FanBeams f = fan_beams(sector_mask(dims), dims, {kH, kH, kH}, 2);
@@ -213,39 +243,25 @@ TEST(FanBeams, ASectorsApexIsFoundAndALinearScanOrARaggedSweepHasNone) {
 TEST(ShadowWalls, InAFanTheShadowFollowsTheBeamsAndBothItsSidesAreWalls) {
   // In the sector: tissue (150), a bright arc (240) 20-22 mm from the apex
   // between beam angles 0.45 and 0.6 rad, and its shadow (20) beyond it
-  // along the same beams; outside the sector 0, unscanned. The shadow leans
-  // 26-34 degrees off z: its outer wall's gradient lies more than 30 degrees
-  // off the across-z plane, so down z it is no edge across the beam.
-  const Dims3 dims{96, 8, 64};
-  const std::vector<std::uint8_t> scanned = sector_mask(dims);
-  const Volume v = scene(dims,
-                         [](double x, double, double z) {
-                           const double a = beam_angle(x, z), r = beam_radius(x, z);
-                           if (std::fabs(a) >= kHalf) return 0.0;
-                           if (a < 0.45 || a > 0.6 || r < 20.0) return 150.0;
-                           return r < 22.0 ? 240.0 : 20.0;
-                         },
-                         test::seed() + 5);
-  // What the classifier sees: the unscanned samples continue the scanned
-  // ones (host/mask.hpp).
-  const Volume masked = fill_unscanned(v, scanned);
-  ShadowWallReport r;
-  const std::vector<float> w = shadow_wall_weight(test::runtime(), masked, &scanned, 85.0, ShadowWallParams{}, &r);
+  // along the same beams. The shadow leans 26-34 degrees off z: its outer
+  // wall's gradient lies more than 30 degrees off the across-z plane, so
+  // down z it is no edge across the beam.
+  const SectorScene s = sector_scene(
+      [](double a, double r) { return a < 0.45 || a > 0.6 || r < 20.0 ? 150.0 : r < 22.0 ? 240.0 : 20.0; },
+      test::seed() + 5);
+  ShadowWallReport r, r0;
+  const std::vector<float> w = sector_walls(s, 85.0, ShadowWallParams{}, &r);
   ASSERT_TRUE(r.fan.found);
   ShadowWallParams straight;
   straight.fan = false;
-  ShadowWallReport r0;
-  const std::vector<float> w0 = shadow_wall_weight(test::runtime(), masked, &scanned, 85.0, straight, &r0);
+  const std::vector<float> w0 = sector_walls(s, 85.0, straight, &r0);
   EXPECT_FALSE(r0.fan.found);
   // The lowest weight within 1.5 mm across the beam of the point on the
   // beam at `angle`, `radius` from the apex.
   const auto lowest = [&](const std::vector<float>& m, double angle, double radius) {
     float lo = 1.0f;
-    for (double da = -0.06; da <= 0.06 + 1e-9; da += 0.01) {
-      const double x = kApexX + radius * std::sin(angle + da), z = kApexZ + radius * std::cos(angle + da);
-      if (std::fabs((angle + da) - angle) * radius > 1.5) continue;
-      lo = std::min(lo, at_mm(m, v, x, 2.0, z));
-    }
+    for (double da = -0.06; da <= 0.06 + 1e-9; da += 0.01)
+      if (std::fabs(da) * radius <= 1.5) lo = std::min(lo, at_beam(m, s.v, angle + da, radius));
     return lo;
   };
   for (double radius : {32.0, 35.0, 38.0}) {
@@ -265,31 +281,23 @@ TEST(ShadowWalls, InAFanTheBrightLayerUnderTheProbeShadesNothing) {
   // if it occluded, the fluid beside the block would be "shadow" and the
   // block's sides walls. It lies within fan_skip_mm of each beam's first
   // scanned voxel, so it does not.
-  const Dims3 dims{96, 8, 64};
-  const std::vector<std::uint8_t> scanned = sector_mask(dims);
-  const Volume v = scene(dims,
-                         [](double x, double, double z) {
-                           const double a = beam_angle(x, z), r = beam_radius(x, z);
-                           if (std::fabs(a) >= kHalf) return 0.0;
-                           if (r < -kApexZ / std::cos(a) + 2.0) return 240.0;
-                           return std::fabs(a) < 0.1 && r >= 24.0 && r < 30.0 ? 150.0 : 40.0;
-                         },
-                         test::seed() + 6);
-  const Volume filled = fill_unscanned(v, scanned);
-  ShadowWallReport r;
-  const std::vector<float> w = shadow_wall_weight(test::runtime(), filled, &scanned, 95.0, ShadowWallParams{}, &r);
+  const SectorScene s = sector_scene(
+      [](double a, double r) {
+        if (r < -kApexZ / std::cos(a) + 2.0) return 240.0;
+        return std::fabs(a) < 0.1 && r >= 24.0 && r < 30.0 ? 150.0 : 40.0;
+      },
+      test::seed() + 6);
+  ShadowWallReport r, r0;
+  const std::vector<float> w = sector_walls(s, 95.0, ShadowWallParams{}, &r);
   ASSERT_TRUE(r.fan.found);
   ShadowWallParams shaded;
   shaded.fan_skip_mm = 0.0;
-  ShadowWallReport r0;
-  const std::vector<float> w0 = shadow_wall_weight(test::runtime(), filled, &scanned, 95.0, shaded, &r0);
+  const std::vector<float> w0 = sector_walls(s, 95.0, shaded, &r0);
   // The block's sides, 25-29 mm from the apex.
   float lo = 1.0f, lo0 = 1.0f;
   for (double radius = 25.0; radius <= 29.0; radius += 0.5)
-    for (double a : {-0.12, -0.1, -0.08, 0.08, 0.1, 0.12}) {
-      const double x = kApexX + radius * std::sin(a), z = kApexZ + radius * std::cos(a);
-      lo = std::min(lo, at_mm(w, v, x, 2.0, z)), lo0 = std::min(lo0, at_mm(w0, v, x, 2.0, z));
-    }
+    for (double a : {-0.12, -0.1, -0.08, 0.08, 0.1, 0.12})
+      lo = std::min(lo, at_beam(w, s.v, a, radius)), lo0 = std::min(lo0, at_beam(w0, s.v, a, radius));
   EXPECT_GT(lo, 0.99f) << "the block's sides in fluid are no walls";
   EXPECT_LT(lo0, 0.5f) << "with the layer occluding, they would be";
   EXPECT_LT(r.shadow_share, 0.2 * r0.shadow_share);
