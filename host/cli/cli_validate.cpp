@@ -136,6 +136,13 @@ CLI::Validator one_of(const std::vector<std::string>& choices) {
       "one of: " + list, kChecked);
 }
 
+CLI::Option* add_beam_axis_option(CLI::App* sub, std::string& word, const std::string& help) {
+  return sub->add_option("--beam-axis", word, help)
+      ->capture_default_str()
+      ->type_name("auto|x|y|z")
+      ->check(one_of({"auto", "x", "y", "z"}));
+}
+
 void require_checked_numbers(CLI::App& app) { add_finite_checks(app); }
 
 std::vector<std::string> unranged_number_options(const CLI::App& sub) {

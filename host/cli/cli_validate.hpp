@@ -37,8 +37,11 @@ CLI::Validator one_of(const std::vector<std::string>& choices);
 // "a, b or c".
 std::string choice_list(const std::vector<std::string>& choices);
 
-// --beam-axis (classify, render, view): "x", "y", "z" -> 0, 1, 2; "auto" -> -1
-// (the data's own axis). The option's one_of() has checked the word.
+// --beam-axis auto|x|y|z (classify, render, view), into `word` (default
+// "auto"): the one registration the three commands share.
+CLI::Option* add_beam_axis_option(CLI::App* sub, std::string& word, const std::string& help);
+// Its word as an axis: "x", "y", "z" -> 0, 1, 2; "auto" -> -1 (the data's
+// own axis). The option's one_of() has checked the word.
 inline int beam_axis_option(const std::string& word) {
   return word == "x" ? 0 : word == "y" ? 1 : word == "z" ? 2 : -1;
 }

@@ -885,14 +885,11 @@ void add_classify_command(CLI::App& app, Action& action) {
                   "(docs/parameters.md)")
       ->capture_default_str()
       ->type_name("auto|on|off");
-  sub->add_option("--beam-axis", o->beam_axis,
-                  "The axis the beam runs along, depth growing with the index (the transducer on that axis's first "
-                  "face): auto takes the data's own (speckle finest along the beam, brightness changing with depth; "
-                  "docs/real-data.md, \"The beam axis\"); the near field, the mask's dark-fluid test, the depth "
-                  "clip, the isovalue field and the shadow walls follow it")
-      ->capture_default_str()
-      ->type_name("auto|x|y|z")
-      ->check(one_of({"auto", "x", "y", "z"}));
+  add_beam_axis_option(sub, o->beam_axis,
+                       "The axis the beam runs along, depth growing with the index (the transducer on that axis's "
+                       "first face): auto takes the data's own (speckle finest along the beam, brightness changing "
+                       "with depth; docs/real-data.md, \"The beam axis\"); the near field, the mask's dark-fluid test, "
+                       "the depth clip, the isovalue field and the shadow walls follow it");
   sub->add_option("--shadow-walls", o->shadow_walls,
                   "remove: the edges of acoustic shadows' sides (across the beam, a shadow on their dark side: dark, "
                   "under something bright further up the beam) are weighted down like the bone cue's; keep: drawn "

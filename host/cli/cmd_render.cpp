@@ -266,10 +266,7 @@ void add_render_command(CLI::App& app, Action& action) {
                   "Keep splats inside this box, fractions of the volume's extent per axis (e.g. 0,1,0,1,0,0.6)")
       ->type_name("X0,X1,Y0,Y1,Z0,Z1");
   sub->add_option("--iso", o->iso, "Isovalue for classifying a raw volume (its units, or auto)")->capture_default_str();
-  sub->add_option("--beam-axis", o->beam_axis, "Classifying a raw volume: the axis its beam runs along (as classify's)")
-      ->capture_default_str()
-      ->type_name("auto|x|y|z")
-      ->check(one_of({"auto", "x", "y", "z"}));
+  add_beam_axis_option(sub, o->beam_axis, "Classifying a raw volume: the axis its beam runs along (as classify's)");
   sub->add_option("--colour-map", o->colour_map,
                   "solid: one colour (the default); depth: colour by depth along the beam, light near the transducer "
                   "to dark red-brown deep (splats)")

@@ -185,10 +185,7 @@ void add_view_command(CLI::App& app, Action& action) {
       ->type_name("AZ,EL");
   sub->add_option("--crop", o->crop, "Initial crop box, fractions per axis")->type_name("X0,X1,Y0,Y1,Z0,Z1");
   sub->add_option("--iso", o->iso, "Isovalue for classifying a raw volume (its units, or auto)")->capture_default_str();
-  sub->add_option("--beam-axis", o->beam_axis, "Classifying a raw volume: the axis its beam runs along (as classify's)")
-      ->capture_default_str()
-      ->type_name("auto|x|y|z")
-      ->check(one_of({"auto", "x", "y", "z"}));
+  add_beam_axis_option(sub, o->beam_axis, "Classifying a raw volume: the axis its beam runs along (as classify's)");
   sub->add_option("--renderer", o->renderer,
                   "Initial renderer (the panel switches): splat (oriented splats), isosplat (isotropic splats), mc "
                   "(Marching Cubes mesh at level 0.2) or raycast (the OpenCL ray caster); overrides --method")
