@@ -39,6 +39,7 @@
 #include "auto_iso.hpp"
 #include "bone_cue.hpp"
 #include "shadow_walls.hpp"
+#include "speckle.hpp"
 #include "error.hpp"
 #include "levoy.hpp"
 #include "mask.hpp"
@@ -176,6 +177,7 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "band_sheet_mm") g_band_sheet_params.window_mm = x;
   else if (k == "band_sheet_patch") g_band_sheet_params.min_patch = x;
   else if (k == "iso_offset") {}  // added to the classifier's v_iso after the levelling (classify_default)
+  else if (k == "grad_sigma_auto") {}  // 0: the fixed VariationalParams default instead of the speckle's (classify_default)
   else return set_variational_param(p, k, x);
   return true;
 }
@@ -228,6 +230,17 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   for (const auto& [k, x] : g_overrides)
     if (k == "iso_offset") iso_offset += x;
   p.v_iso += iso_offset;
+  // --grad-sigma's default from the speckle, as classify's (host/speckle.hpp),
+  // unless grad_sigma=X is set or grad_sigma_auto=0.
+  bool grad_sigma_auto = true;
+  for (const auto& [k, x] : g_overrides)
+    if (k == "grad_sigma" || (k == "grad_sigma_auto" && x == 0)) grad_sigma_auto = false;
+  if (grad_sigma_auto) {
+    const GradSigmaChoice gc = auto_grad_sigma(lv.data, mp, nf.axis, scale);
+    p.grad_sigma_mm = gc.sigma_mm;
+    std::fprintf(stderr, "  grad sigma %.3f mm (falling %.3f rising %.3f, speckle %.3f mm)\n", p.grad_sigma_mm,
+                 gc.falling, gc.rising, gc.speckle.sigma_mm);
+  }
   cue.axis = nf.axis;
   p.edge_weight = bone_cue_weights(lv.data, mp, mode, cue, cue_report);
   if (g_shadow_walls) {

@@ -29,6 +29,7 @@
 #include "levoy.hpp"
 #include "mask.hpp"
 #include "shadow_walls.hpp"
+#include "speckle.hpp"
 #include "variational.hpp"
 
 namespace softshell::fuzz {
@@ -442,6 +443,12 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
       p.v_iso = map.to_unit(iso);
       check_normalised_iso(p.v_iso, std::to_string(iso), map.describe());
       if (near_field && !p.literal()) {
+        // classify's default gradient lowpass, from the speckle (host/speckle.hpp);
+        // the fuzzed --grad-sigma stays the one solved with.
+        const GradSigmaChoice gc = auto_grad_sigma(v, m, 2);
+        const SpeckleReport& sr = gc.speckle;
+        if (sr.measured && !(sr.sigma_mm > 0 && std::isfinite(sr.sigma_mm))) fail("speckle size not positive and finite");
+        if (!(gc.sigma_mm >= kGradSigmaMinMm && gc.sigma_mm <= kGradSigmaMaxMm)) fail("grad sigma outside its bounds");
         // classify's default: the walls of acoustic shadows weighted down
         // (with the near field's removal, the other default occluder step).
         auto w = std::make_shared<const std::vector<float>>(

@@ -12,6 +12,7 @@
 #include "auto_iso.hpp"
 #include "bone_cue.hpp"
 #include "shadow_walls.hpp"
+#include "speckle.hpp"
 #include "error.hpp"
 #include "io.hpp"
 #include "filter.hpp"
@@ -120,6 +121,11 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
     in.data = std::move(v);
   }
   in.params = defaults;
+  // --grad-sigma's default from the data's speckle, as classify's (host/speckle.hpp);
+  // also with given weights (a parameters file holds none, and classify
+  // --params FILE takes the default too), not with the paper's functional.
+  if (!(weights && weights->literal()))
+    in.params.grad_sigma_mm = auto_grad_sigma(in.data, mask, nf.axis, scale).sigma_mm;
   in.params.v_iso = in.data.intensity_map().to_unit(in.iso);
   // The bone cue: classify's default is off (docs/parameters.md says why); a preset may set it.
   in.beam_axis = nf.axis;

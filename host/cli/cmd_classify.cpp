@@ -25,6 +25,7 @@
 #include "memory_need.hpp"
 #include "bone_cue.hpp"
 #include "shadow_walls.hpp"
+#include "speckle.hpp"
 #include "filter.hpp"
 #include "variational.hpp"
 #include "text.hpp"
@@ -58,6 +59,8 @@ struct ClassifyOptions {
   double small_volume_mm = kSmallVolumeMm;  // small_volume_scale's reference extent (0: off)
   double auto_iso_sigma = AutoIsoParams().sigma_mm;
   std::string scale_text;          // for the report, when the length scales shrank
+  double length_scale = 1.0;       // small_volume_scale, 1 unless the volume is small
+  std::string grad_sigma_text;     // for the report: how --grad-sigma's default was chosen
   RawOptions raw;
   NonFiniteOption non_finite;
   std::string warm_start = "on";  // 3D+t: each frame's linear solve starts from the previous frame's
@@ -329,7 +332,7 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
               << (o.scale_text.empty() ? "" : "  scale    " + o.scale_text + "\n")
               << "  params   alpha " << p.alpha << " beta " << p.beta << " gamma " << p.gamma << " omega " << p.omega
               << " delta " << p.delta << " epsilon " << p.epsilon << " u_ind " << p.u_ind << " sigma " << p.sigma_mm
-              << " mm, kappa " << p.kappa << " grad-sigma " << p.grad_sigma_mm << " mm"
+              << " mm, kappa " << p.kappa << " grad-sigma " << p.grad_sigma_mm << " mm" << o.grad_sigma_text
               << (p.literal() ? " (the paper's functional)" : "") << "\n"
               << "  bone cue " << bone_cue_text << "\n";
     if (!p.literal())
@@ -592,6 +595,7 @@ int run_classify(const ClassifyOptions& given_options) {
       << " mm < --small-volume " << o.small_volume_mm << " mm): default length scales x" << std::setprecision(2)
       << scale;
     o.scale_text = t.str();
+    o.length_scale = scale;
   }
   if (variational) {
     const VariationalParams vp = variational_params(o);
@@ -793,6 +797,25 @@ int run_classify(const ClassifyOptions& given_options) {
   // glibc keeping freed blocks their allocations spread over the kept heap
   // (the device part's peak rose by 40-95 MB at 256^3; host/host_memory.hpp).
   keep_freed.reset();
+  // --grad-sigma's default from the data's speckle (host/speckle.hpp), on
+  // the data the classifier sees; given, it stays the user's.
+  if (variational && !o.literal && !o.given.count("--grad-sigma")) {
+    step.emplace("speckle");
+    const GradSigmaChoice gc = auto_grad_sigma(in, sc, beam_axis_now(), o.length_scale);
+    const SpeckleReport& sr = gc.speckle;
+    o.vp.grad_sigma_mm = gc.sigma_mm;
+    std::ostringstream t;
+    t << std::fixed << std::setprecision(2);
+    if (!gc.echoes)
+      t << std::setprecision(0) << " (auto: the strong edges are no echoes over darker data, " << 100 * gc.falling
+        << " % fall and " << 100 * gc.rising << " % rise along the beam)";
+    else if (sr.measured)
+      t << " (auto: " << kGradSigmaPerSpeckle << " x the speckle's " << sr.sigma_mm << " mm along " << "xyz"[sr.axis]
+        << ", within " << kGradSigmaMinMm * o.length_scale << "-" << kGradSigmaMaxMm * o.length_scale << " mm)";
+    else
+      t << " (auto: the speckle could not be measured)";
+    o.grad_sigma_text = t.str();
+  }
   // The walls of acoustic shadows (host/shadow_walls.hpp): their edges
   // weighted down, like the bone cue's.
   if (variational && !o.literal && o.shadow_walls == "remove") {
@@ -1004,8 +1027,10 @@ void add_classify_command(CLI::App& app, Action& action) {
       ->capture_default_str()
       ->check(real_range(0, 8));
   g->add_option("--grad-sigma", o->vp.grad_sigma_mm,
-                "Take |grad v| (F_iso, F_ind) from v lowpassed by this sigma in mm; 0: the paper's literal terms")
-      ->capture_default_str()
+                "Take |grad v| (F_iso, F_ind) from v lowpassed by this sigma in mm; 0: the paper's literal terms. "
+                "Default: 1.5 mm, or where the strong edges are mostly echoes over darker data (bone), 3 x the "
+                "speckle's size across the beam within 1.25-1.5 mm "
+                "(docs/numerics.md, \"The gradient's lowpass from the speckle\")")
       ->check(real_range(0, INFINITY, "mm"));
   g->add_option("--tol", o->sp.tol, "Stop at this relative residual")->capture_default_str()
       ->check(real_range(0, 1, "", Ends::Open));
