@@ -6,6 +6,7 @@
 #include <array>
 #include <cmath>
 #include <cstdlib>
+#include <random>
 
 #include "cli_fixture.hpp"
 #include "image.hpp"
@@ -359,6 +360,40 @@ TEST_F(RenderCli, TheViewersClassificationTakesTheGivenBeamAxis) {
   EXPECT_EQ(bad.status, 2);
   EXPECT_NE(bad.err.find("--beam-axis"), std::string::npos) << bad.err;
   EXPECT_FALSE(fs::exists(file("u.png")));
+}
+
+TEST_F(RenderCli, TheViewersClassificationTakesClassifysGradientLowpass) {
+  // viewer::load_opacity (render and view of a raw volume) takes --grad-sigma's
+  // default as classify does (host/speckle.hpp) and says so: uncorrelated
+  // speckle over a boundary 20 mm across, bright above dark (an echo over
+  // darker data: the lower bound, 1.25 mm) or dark above bright (a step:
+  // 1.5 mm); the paper's functional takes none.
+  const auto write = [&](const std::string& name, bool bright_above) {
+    Volume v({40, 40, 40}, {0.5, 0.5, 0.5}, ScalarType::UInt8);
+    std::mt19937_64 rng(seed());
+    std::normal_distribution<double> noise(0.0, 12.0);
+    for (std::size_t z = 0; z < 40; ++z)
+      for (std::size_t y = 0; y < 40; ++y)
+        for (std::size_t x = 0; x < 40; ++x)
+          v.at(x, y, z) = float(std::clamp(std::round(((z < 20) == bright_above ? 170.0 : 60.0) + noise(rng)), 1.0, 255.0));
+    write_volume(file(name), v);
+    return file(name);
+  };
+  const std::string echo = write("echo.nrrd", true), step = write("step.nrrd", false);
+  const viewer::OpacityInput e = viewer::load_opacity(runtime(), echo, viewer::InputKind::Auto, "auto");
+  ASSERT_TRUE(e.classified);
+  EXPECT_DOUBLE_EQ(e.params.grad_sigma_mm, 1.25);
+  EXPECT_NE(e.note.find(", gradient lowpass 1.25 mm (from the speckle)"), std::string::npos) << e.note;
+  const test::RunResult c = run({"classify", echo, "--iso", "auto", "-o", file("u.nrrd")});
+  ASSERT_EQ(c.status, 0) << c.err;
+  EXPECT_NE(c.out.find("grad-sigma 1.250 mm (auto:"), std::string::npos) << c.out;
+  const viewer::OpacityInput st = viewer::load_opacity(runtime(), step, viewer::InputKind::Auto, "auto");
+  EXPECT_DOUBLE_EQ(st.params.grad_sigma_mm, 1.5);
+  EXPECT_NE(st.note.find(", gradient lowpass 1.50 mm (the strong edges are no echoes)"), std::string::npos) << st.note;
+  const VariationalParams literal = VariationalParams::literal_defaults();
+  const viewer::OpacityInput l = viewer::load_opacity(runtime(), echo, viewer::InputKind::Auto, "auto", &literal);
+  EXPECT_EQ(l.params.grad_sigma_mm, 0.0);
+  EXPECT_EQ(l.note.find("gradient lowpass"), std::string::npos) << l.note;
 }
 
 TEST_F(RenderCli, ViewerReSolveUpdatesTheClassifierInPlaceForAnIsoChange) {

@@ -124,8 +124,11 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   // --grad-sigma's default from the data's speckle, as classify's (host/speckle.hpp);
   // also with given weights (a parameters file holds none, and classify
   // --params FILE takes the default too), not with the paper's functional.
-  if (!(weights && weights->literal()))
-    in.params.grad_sigma_mm = auto_grad_sigma(in.data, mask, nf.axis, scale).sigma_mm;
+  std::optional<GradSigmaChoice> grad_choice;
+  if (!(weights && weights->literal())) {
+    grad_choice = auto_grad_sigma(in.data, mask, nf.axis, scale);
+    in.params.grad_sigma_mm = grad_choice->sigma_mm;
+  }
   in.params.v_iso = in.data.intensity_map().to_unit(in.iso);
   // The bone cue: classify's default is off (docs/parameters.md says why); a preset may set it.
   in.beam_axis = nf.axis;
@@ -159,6 +162,9 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
        << (in.report.residuals.empty() ? 0.0 : in.report.residuals.back())
        << (in.report.converged ? "" : " (NOT converged)") << ", bone cue " << (br.on ? "on" : "off")
        << ", shadow walls " << (in.walls ? "weighted down" : "kept");
+  if (grad_choice)
+    note << ", gradient lowpass " << std::fixed << std::setprecision(2) << grad_choice->sigma_mm << " mm ("
+         << (grad_choice->echoes ? "from the speckle" : "the strong edges are no echoes") << ")";
   if (sheet.held)
     note << ", the band's underside held (a sheet on " << std::fixed << std::setprecision(0)
          << 100.0 * double(sheet.held_lines) / double(sheet.lines) << " % of its lines)";
