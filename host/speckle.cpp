@@ -13,8 +13,9 @@ namespace softshell {
 
 namespace {
 
-// Per z-plane sums: sum r^2 over scanned voxels, and for x and y, sum of
-// r(p) r(p + e) and the count over scanned pairs (z pairs join planes z, z+1).
+// Per z-plane sums: sum r^2 over the scanned voxels, and along each of x, y
+// and z the sum of r(p) r(p + e) and the count over scanned pairs (z pairs
+// join planes z, z+1); the beam axis's are summed too and left unused.
 struct PlaneSums {
   double r2 = 0;
   double prod[3] = {0, 0, 0};
