@@ -5,7 +5,9 @@
 // classification, in one run, as shares of the whole (docs/benchmarks.md,
 // "Host stages").
 //
-//   softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep]
+//   softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep] [--bulk-spread X]
+//
+// --bulk-spread 0 times the automatic isovalue without its bulk rule (host/auto_iso.hpp).
 //
 // T (0: every core) is passed to the multi-threaded host stages; 1 gives
 // the single-threaded baseline. Each stage's time is the minimum of R runs,
@@ -43,20 +45,22 @@ int main(int argc, char** argv) {
   std::string in, device;
   int reps = 3, threads = 0;
   bool reverb = true;
+  double bulk_spread = AutoIsoParams().bulk_spread;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--reps" && i + 1 < argc) reps = std::atoi(argv[++i]);
     else if (a == "--threads" && i + 1 < argc) threads = std::atoi(argv[++i]);
     else if (a == "--device" && i + 1 < argc) device = argv[++i];
     else if (a == "--reverb" && i + 1 < argc) reverb = std::string(argv[++i]) != "keep";
+    else if (a == "--bulk-spread" && i + 1 < argc) bulk_spread = std::atof(argv[++i]);
     else if (in.empty() && a[0] != '-') in = a;
     else {
-      std::cerr << "usage: softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep]\n";
+      std::cerr << "usage: softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep] [--bulk-spread X]\n";
       return 2;
     }
   }
   if (in.empty() || reps < 1 || threads < 0) {
-    std::cerr << "usage: softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep]\n";
+    std::cerr << "usage: softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep] [--bulk-spread X]\n";
     return 2;
   }
   try {
@@ -92,6 +96,7 @@ int main(int argc, char** argv) {
       ap.rule = AutoIsoRule::Local;
       ap.want_field = true;
       ap.threads = threads;
+      ap.bulk_spread = bulk_spread;  // 0: without the isovalue above the bulk
       AutoIsoReport rep;
       const double iso = auto_iso(v, mask.empty() ? nullptr : &mask, ap, &rep, &v);  // as classify: levels v
       t[3] = since(t0);

@@ -171,6 +171,9 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "iso_floor_drop") ap.floor_drop = x;
   else if (k == "iso_clip_margin") ap.clip_margin = x;
   else if (k == "iso_cut_crest_votes") ap.cut_crest_votes = x != 0;
+  else if (k == "iso_bulk_spread") ap.bulk_spread = x;
+  else if (k == "iso_bulk_max_step") ap.bulk_max_step = x;
+  else if (k == "iso_bulk_max_width") ap.bulk_max_width = x;
   else if (k == "cut_hold") g_no_cut_hold = x == 0;
   else if (k == "band_sheet") g_band_sheet = x != 0;
   else if (k == "data_normals") g_data_normals = x != 0;
@@ -216,6 +219,9 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   ap.beam_axis = nf.axis;
   AutoIsoReport iso_report;
   const LevelledVolume lv = auto_iso_levelled(in, mp, mp ? &filled : nullptr, ap, &iso_report);
+  std::fprintf(stderr, "  bulk: mode %.1f half-width %.1f reach %.1f crest %.1f local %.1f iso %.1f%s\n",
+               iso_report.bulk_mode, iso_report.bulk_half_width, iso_report.bulk_reach, iso_report.ridge_iso,
+               iso_report.local_iso, lv.iso, iso_report.bulk_raised ? " (raised)" : "");
   // Crests cut off up the beam (--set iso_cut_crest_votes=0; none are listed
   // by default): their lines up to the cut held at u = 0 (host/mask.hpp,
   // hold_cut_remnants). Only the study takes this switch.
@@ -248,7 +254,9 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
     for (const auto& [k, x] : g_wall_overrides) set_wall_param(wp, k, x);
     ShadowWallReport wr;
     // At the classifier's isovalue (iso_offset moves both).
-    const double wall_iso = iso_offset != 0 ? lv.data.intensity_map().from_unit(p.v_iso) : lv.iso;
+    // The shadow test takes the edges' isovalue, not the one raised above the bulk (host/auto_iso.hpp).
+    const double wall_iso = iso_offset != 0 ? lv.data.intensity_map().from_unit(p.v_iso)
+                            : iso_report.bulk_raised ? iso_report.local_iso : lv.iso;
     auto walls = std::make_shared<const std::vector<float>>(shadow_wall_weight(rt, lv.data, mp, wall_iso, wp, &wr));
     std::fprintf(stderr, "  shadow walls: %.3f of the scanned voxels in shadow, %.3f weighted below 1/2\n", wr.shadow_share,
                  wr.wall_share);

@@ -417,6 +417,15 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
       if (!field.empty() && field.size() != v.voxels()) fail("isovalue field of the wrong size");
       for (float f : field)
         if (!std::isfinite(f)) fail("isovalue field not finite");
+      if (rule == AutoIsoRule::Local && want_field) {
+        // Levelled as classify levels (the isovalue above the bulk runs only then).
+        AutoIsoReport lr;
+        const LevelledVolume lv = auto_iso_levelled(v, m, nullptr, ap, &lr);
+        if (!std::isfinite(lv.iso)) fail("levelled automatic isovalue not finite");
+        if (lr.bulk_raised && !(lv.iso > lr.local_iso && lv.iso < lr.ridge_iso && lv.iso > lr.bulk_mode))
+          fail("isovalue raised above the bulk outside (mode, crest)");
+        if (!lr.bulk_raised && lv.iso != lr.local_iso) fail("levelled isovalue is not the edges' median");
+      }
     } else {
       const IntensityMap map = v.intensity_map();
       iso = map.from_unit(param(b[9], -0.2, 1.2));

@@ -595,8 +595,17 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
       });
     }
   }
+  // The isovalue above the bulk (AutoIsoParams::bulk_spread), on the data
+  // as levelled: every level then sits at the one isovalue.
+  Bulk bulk;
+  double guarded_iso = local_iso;
+  if (params.rule == AutoIsoRule::Local && params.want_field && level && params.bulk_spread > 0 && !locals.empty()) {
+    bulk = bulk_of(*level, mask, params.bulk_sigma_mm, threads);
+    guarded_iso = bulk_raised_iso(local_iso, ridge_iso, bulk, params.bulk_spread, params.bulk_max_step,
+                                  params.bulk_max_width);
+  }
   const double iso = params.rule == AutoIsoRule::EchoRidge ? ridge_iso
-                     : params.rule == AutoIsoRule::Local   ? local_iso
+                     : params.rule == AutoIsoRule::Local   ? guarded_iso
                                                            : edge_iso;
   if (report) {
     report->iso = iso;
@@ -618,12 +627,89 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     report->floor_drop = floor_drop;
     report->cut_edges = std::move(cut_edges);
     report->field = std::move(field);
+    report->bulk_measured = bulk.measured;
+    report->bulk_mode = bulk.mode, report->bulk_half_width = bulk.half_width;
+    report->bulk_reach = bulk.mode + params.bulk_spread * bulk.half_width;
+    report->bulk_raised = guarded_iso != local_iso;
   }
   return iso;
 }
 
+Bulk bulk_of(const Volume& v, const std::vector<std::uint8_t>* mask, double sigma_mm, int threads) {
+  const Dims3& d = v.dims;
+  const std::size_t n = v.voxels();
+  if (mask && mask->size() != n) throw std::invalid_argument("bulk_of: mask size differs from the volume");
+  if (!(sigma_mm > 0)) throw std::invalid_argument("bulk_of: the lowpass must be positive");
+  threads = host_threads(threads);
+  Bulk b;
+  std::vector<float> low(v.data.begin(), v.data.end());
+  blur_3d(low.data(), nullptr, d, gaussian_weights(sigma_mm / v.spacing[0], 3.0),
+          gaussian_weights(sigma_mm / v.spacing[1], 3.0), gaussian_weights(sigma_mm / v.spacing[2], 3.0), threads,
+          [](std::size_t) {});
+  const auto in = [&](std::size_t i) { return !mask || (*mask)[i] != 0; };
+  // Histograms per range of voxels, added up (counts: the same for any split).
+  const auto histogram = [&](double lo, double hi, int bins) {
+    const int parts = range_count(n, threads);
+    std::vector<std::vector<std::size_t>> part(std::size_t(parts), std::vector<std::size_t>(std::size_t(bins), 0));
+    const double scale = double(bins) / (hi - lo);
+    parallel_ranges_indexed(n, parts, [&](int k, std::size_t i0, std::size_t i1) {
+      std::vector<std::size_t>& h = part[std::size_t(k)];
+      for (std::size_t i = i0; i < i1; ++i)
+        if (in(i)) h[std::size_t(std::clamp(long(std::floor((double(low[i]) - lo) * scale)), 0L, long(bins) - 1))] += 1;
+    });
+    std::vector<std::size_t> h(std::size_t(bins), 0);
+    for (const auto& p : part)
+      for (int k = 0; k < bins; ++k) h[std::size_t(k)] += p[std::size_t(k)];
+    return h;
+  };
+  double mn = INFINITY, mx = -INFINITY;
+  std::size_t count = 0;
+  for (std::size_t i = 0; i < n; ++i)
+    if (in(i)) mn = std::min(mn, double(low[i])), mx = std::max(mx, double(low[i])), ++count;
+  if (count < 1000 || !(mx > mn) || !std::isfinite(mx - mn)) return b;
+  // The 0.5th and 99.5th percentiles from a fine histogram (to 1/4096 of the range).
+  constexpr int kFine = 4096;
+  const std::vector<std::size_t> fine = histogram(mn, mx, kFine);
+  const auto quantile_edge = [&](double q, bool upper) {
+    const std::size_t target = std::size_t(q * double(count));
+    std::size_t sum = 0;
+    for (int k = 0; k < kFine; ++k) {
+      sum += fine[std::size_t(k)];
+      if (sum > target) return mn + (mx - mn) * double(k + (upper ? 1 : 0)) / kFine;
+    }
+    return mx;
+  };
+  const double lo = quantile_edge(0.005, false), hi = quantile_edge(0.995, true);
+  if (!(hi > lo)) return b;
+  constexpr int kBins = 128;
+  const std::vector<std::size_t> h = histogram(lo, hi, kBins);
+  std::vector<double> hs(kBins, 0.0);
+  for (int k = 0; k < kBins; ++k) {
+    double sum = 0, w = 0;
+    for (int j = std::max(0, k - 2); j <= std::min(kBins - 1, k + 2); ++j) sum += double(h[std::size_t(j)]), w += 1;
+    hs[std::size_t(k)] = sum / w;
+  }
+  const int mode = int(std::max_element(hs.begin(), hs.end()) - hs.begin());
+  int r = mode;
+  while (r + 1 < kBins && hs[std::size_t(r)] > 0.5 * hs[std::size_t(mode)]) ++r;
+  const double width = (hi - lo) / kBins;
+  b.measured = true;
+  b.mode = lo + (mode + 0.5) * width;
+  b.half_width = (r - mode) * width;
+  return b;
+}
+
+double bulk_raised_iso(double iso, double crest, const Bulk& bulk, double spread, double max_step, double max_width) {
+  if (!bulk.measured || !(spread > 0)) return iso;
+  const double reach = bulk.mode + spread * bulk.half_width;
+  if (iso > bulk.mode && iso < reach && crest > reach && reach - iso <= max_step * (crest - iso) &&
+      bulk.half_width <= max_width * (crest - bulk.mode))
+    return reach;
+  return iso;
+}
+
 void scale_length_scales(AutoIsoParams& p, double f) {
-  p.sigma_mm *= f, p.field_sigma_mm *= f, p.field_depth_sigma_mm *= f;
+  p.sigma_mm *= f, p.field_sigma_mm *= f, p.field_depth_sigma_mm *= f, p.bulk_sigma_mm *= f;
 }
 
 Volume level_isovalue(const Volume& v, const float* field, std::size_t field_size, double iso) {

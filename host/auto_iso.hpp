@@ -90,6 +90,23 @@ struct AutoIsoParams {
   // sweep's edge (docs/parameters.md, "Crests cut off up the beam"). true
   // (the default): every edge votes, as before.
   bool cut_crest_votes = true;
+  // Local, levelling `level` (docs/parameters.md, "The isovalue above the
+  // bulk"): the bulk, the most common brightness of the levelled data (the
+  // mode of its bulk_sigma_mm lowpass over the scanned voxels), reaches up
+  // to its mode plus bulk_spread times its upper half-width at half
+  // maximum. Where the isovalue lies in that upper tail (above the mode,
+  // below the bulk's reach) and the edges' median crest (ridge_iso) above
+  // it, the isovalue is raised to the bulk's reach: the bulk is then the
+  // background the object's echoes stand out of, and an isovalue inside it
+  // draws its speckle. Not when the reach lies more than bulk_max_step of
+  // the way from the isovalue to the crest (the crests are then the bulk's
+  // own highs), nor when the half-width is more than bulk_max_width of the
+  // way from the mode to the crest (no distinct bulk: two classes merged in
+  // one wide hump, as fluid and tissue in some faces). 0: off.
+  double bulk_spread = 1.5;
+  double bulk_max_step = 0.8;
+  double bulk_max_width = 0.6;
+  double bulk_sigma_mm = 1.0;
   bool want_field = false;      // Local: fill AutoIsoReport::field (or level auto_iso's `level`)
   int threads = 0;              // host threads (0: every core); the results are the same for any count
 };
@@ -112,6 +129,11 @@ struct AutoIsoReport {
   double floor_drop = 0;              // Local: their median drop past the crest (share of their contrast)
   std::vector<std::size_t> cut_edges; // Local: edges whose crest was cut off up the beam (voxel indices, z order)
   HostVector<float> field;            // Local, want_field: the isovalue per voxel, file units
+  // Local, levelled (AutoIsoParams::bulk_spread): the bulk's mode and
+  // upper half-width (file units, levelled data), its reach, and whether the
+  // isovalue was raised to it from local_iso.
+  double bulk_mode = 0, bulk_half_width = 0, bulk_reach = 0;
+  bool bulk_measured = false, bulk_raised = false;
 };
 
 // The volume with its local isovalue field levelled out: v - field + iso
@@ -127,8 +149,8 @@ inline Volume level_isovalue(const Volume& v, const std::vector<float>& field, d
 }
 
 // p's length scales times f (a small volume's, host/variational.hpp's
-// small_volume_scale): the lowpass of v~ and the field's spread along and
-// across the beam. The classify CLI does the same to the ones not given on
+// small_volume_scale): the lowpass of v~, the field's spread along and
+// across the beam, and the bulk's lowpass. The classify CLI does the same to the ones not given on
 // its command line.
 void scale_length_scales(AutoIsoParams& p, double f);
 
@@ -163,6 +185,24 @@ double auto_iso_level_in_place(Volume& v, const std::vector<std::uint8_t>* mask,
 // or any volume on v's grid.
 double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const AutoIsoParams& params = {},
                 AutoIsoReport* report = nullptr, Volume* level = nullptr);
+
+// The bulk of `v` (AutoIsoParams::bulk_spread): the mode of its Gaussian
+// lowpass of sigma_mm over the scanned voxels (`mask`, optional; 1 =
+// scanned) and the upper half-width at half maximum of that histogram (128
+// bins between the 0.5th and 99.5th percentiles, smoothed over five bins).
+// measured false when fewer than 1000 voxels are scanned or their range is
+// empty. The same for any thread count.
+struct Bulk {
+  bool measured = false;
+  double mode = 0, half_width = 0;
+};
+Bulk bulk_of(const Volume& v, const std::vector<std::uint8_t>* mask, double sigma_mm, int threads = 0);
+// The isovalue with the bulk's rule applied (AutoIsoParams::bulk_spread):
+// raised to mode + spread x half_width where the isovalue lies between the
+// mode and that reach, the crest above the reach, the reach at most
+// max_step of the way from the isovalue to the crest, and the half-width at
+// most max_width of the way from the mode to the crest; else `iso`.
+double bulk_raised_iso(double iso, double crest, const Bulk& bulk, double spread, double max_step, double max_width);
 
 // The k-th smallest (k from 0) of the values >= 0 among g[0, n),
 // the others ignored: what std::nth_element over them gives. k must be below

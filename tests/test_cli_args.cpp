@@ -102,7 +102,7 @@ TEST_F(CliArgs, EveryFloatOptionOfEveryCommandRefusesNanAndInfinityNamingItsRang
     }
   }
 #ifdef SOFTSHELL_HAVE_VIEWER
-  EXPECT_EQ(checked, 61);  // classify alone has 30 (--small-volume the 26th, --shell-shift the 27th, --iso-clip-fraction the 28th, --iso-field-depth-sigma the 29th, --iso-floor-fraction the 30th); view --overlay; evaluate --visible-db; phantom --turn, --drift
+  EXPECT_EQ(checked, 62);  // classify alone has 31 (--small-volume the 26th, --shell-shift the 27th, --iso-clip-fraction the 28th, --iso-field-depth-sigma the 29th, --iso-floor-fraction the 30th, --iso-bulk-spread the 31st); view --overlay; evaluate --visible-db; phantom --turn, --drift
 #else
   EXPECT_EQ(checked, 47);  // without render, view, figure5, figure6
 #endif

@@ -362,6 +362,30 @@ TEST_F(RenderCli, TheViewersClassificationTakesTheGivenBeamAxis) {
   EXPECT_FALSE(fs::exists(file("u.png")));
 }
 
+TEST_F(RenderCli, TheViewersIsovalueIsRaisedAboveTheBulkAsClassifysIs) {
+  // viewer::load_opacity takes classify's automatic isovalue, raised above
+  // the bulk where classify raises it (host/auto_iso.hpp), with the shadow
+  // walls at the edges' isovalue: the same opacity.
+  ASSERT_EQ(run({"phantom", "--shape", "spine", "--physics", "random", "--seed", "119", "--size", "64", "-o",
+                 file("spine"), "-q"})
+                .status,
+            0);
+  const test::RunResult c = run({"classify", file("spine/volume.nrrd"), "--iso", "auto", "-o", file("u.nrrd")});
+  ASSERT_EQ(c.status, 0) << c.err;
+  ASSERT_NE(c.out.find("above the bulk"), std::string::npos) << c.out;
+  const viewer::OpacityInput v =
+      viewer::load_opacity(runtime(), file("spine/volume.nrrd"), viewer::InputKind::Auto, "auto");
+  ASSERT_TRUE(v.classified);
+  const std::size_t at = c.out.find(" iso ");
+  ASSERT_NE(at, std::string::npos);
+  EXPECT_NEAR(v.iso, std::stod(c.out.substr(at + 5)), 1e-3) << c.out;
+  const Volume u = read_volume(file("u.nrrd"));
+  ASSERT_EQ(u.data.size(), v.u.data.size());
+  double worst = 0;
+  for (std::size_t i = 0; i < u.data.size(); ++i) worst = std::max(worst, double(std::fabs(u.data[i] - v.u.data[i])));
+  EXPECT_LT(worst, 2e-3) << "classify writes u as stored; the viewer keeps floats";
+}
+
 TEST_F(RenderCli, TheViewersClassificationTakesClassifysGradientLowpass) {
   // viewer::load_opacity (render and view of a raw volume) takes --grad-sigma's
   // default as classify does (host/speckle.hpp) and says so: uncorrelated

@@ -105,12 +105,17 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   // Given weights are the user's and stay as they are.
   const double scale = small_volume_scale(v.dims, v.spacing, kSmallVolumeMm);
   if (!weights) scale_length_scales(defaults, scale);
+  // The shadow walls' isovalue: the edges' where the classifier's was
+  // raised above the bulk, as classify does (host/auto_iso.hpp).
+  std::optional<double> wall_iso;
   if (iso_text == "auto") {
     // The local rule's field levelled out, as classify does (host/auto_iso.hpp).
     AutoIsoParams ap;
     scale_length_scales(ap, scale);
     ap.beam_axis = nf.axis;
-    in.iso = auto_iso_level_in_place(v, mask, ap);
+    AutoIsoReport rep;
+    in.iso = auto_iso_level_in_place(v, mask, ap, &rep);
+    if (rep.bulk_raised) wall_iso = rep.local_iso;
     in.data = std::move(v);
   } else {
     char* end = nullptr;
@@ -142,7 +147,8 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   keep_freed.reset();  // before the device work, as classify does
   if (!(weights && weights->literal())) {
     const ShadowWallParams wp = shadow_wall_params(in.params, nf.axis);
-    in.walls = std::make_shared<const std::vector<float>>(shadow_wall_weight(rt, in.data, mask, in.iso, wp, &wr));
+    in.walls = std::make_shared<const std::vector<float>>(
+        shadow_wall_weight(rt, in.data, mask, wall_iso.value_or(in.iso), wp, &wr));
   }
   set_edge_weights(in.params, bone_cue_weights(in.data, mask, bone_cue, bp, &br), in.walls);
   in.u = reclassify(rt, in, in.params, nullptr, &in.report);  // keeps in.classifier

@@ -51,6 +51,7 @@ struct ClassifyOptions {
   double iso_field_depth_sigma = AutoIsoParams().field_depth_sigma_mm;
   double iso_clip_fraction = AutoIsoParams().clip_fraction;
   double iso_floor_fraction = AutoIsoParams().floor_fraction;
+  double iso_bulk_spread = AutoIsoParams().bulk_spread;
   std::optional<double> sigma;  // unset: 1 mm for variational, 0 (raw) for levoy
   VariationalParams vp;
   SolverParams sp;
@@ -706,6 +707,9 @@ int run_classify(const ClassifyOptions& given_options) {
     fill_unscanned_in_place(in, mask.scanned);
   }
   double iso = 0;
+  // The shadow walls' isovalue: the edges' (rep.local_iso) where the
+  // classifier's was raised above the bulk (host/auto_iso.hpp).
+  std::optional<double> wall_iso;
   std::string iso_text;
   const std::vector<std::uint8_t>* sc = mask.scanned.empty() ? nullptr : &mask.scanned;
   // The beam axis the isovalue field, the bone cue and the shadow walls take:
@@ -731,10 +735,12 @@ int run_classify(const ClassifyOptions& given_options) {
     ap.local_fraction = o.iso_fraction;
     ap.clip_fraction = o.iso_clip_fraction;
     ap.floor_fraction = o.iso_floor_fraction;
+    ap.bulk_spread = o.iso_bulk_spread;
     ap.field_sigma_mm = o.iso_field_sigma;
     ap.field_depth_sigma_mm = o.iso_field_depth_sigma;
     if (ap.want_field) ap.beam_axis = beam_axis_now();
     ap.sigma_mm = o.auto_iso_sigma;
+    ap.bulk_sigma_mm *= o.length_scale;  // a small volume's, as the other lowpasses
     // The local isovalue field levelled out as it is formed: the classifier
     // then works at one isovalue on data whose brightness no longer drifts
     // (host/auto_iso.hpp).
@@ -769,6 +775,15 @@ int run_classify(const ClassifyOptions& given_options) {
         << " of their contrast (their crests fall by " << rep.floor_drop << " of it within "
         << std::setprecision(1) << ap.floor_reach_mm << " mm)";
       iso_text += t.str();
+    }
+    if (rep.bulk_raised) {
+      // The isovalue raised above the bulk (host/auto_iso.hpp): say from what.
+      std::ostringstream t;
+      t << std::fixed << std::setprecision(1) << "; raised from " << rep.local_iso << " above the bulk: its mode "
+        << rep.bulk_mode << " + " << ap.bulk_spread << " x its half-width " << rep.bulk_half_width
+        << ", the echoes' crests at " << rep.ridge_iso;
+      iso_text += t.str();
+      wall_iso = rep.local_iso;
     }
     iso_text += ")";
   }
@@ -822,7 +837,8 @@ int run_classify(const ClassifyOptions& given_options) {
     step.emplace("shadow walls");
     const ShadowWallParams wp = shadow_wall_params(variational_params(o), beam_axis_now());
     ShadowWallReport wr;
-    walls = std::make_shared<const std::vector<float>>(shadow_wall_weight(rt, in, sc, iso, wp, &wr));
+    walls = std::make_shared<const std::vector<float>>(
+        shadow_wall_weight(rt, in, sc, wall_iso.value_or(iso), wp, &wr));
     std::ostringstream t;
     t << std::fixed << std::setprecision(1) << "; shadow walls: " << 100 * wr.shadow_share
       << " % of the scanned voxels in shadow, edges weighted down on " << 100 * wr.wall_share << " %";
@@ -880,6 +896,13 @@ void add_classify_command(CLI::App& app, Action& action) {
                   "others as much")
       ->capture_default_str()
       ->check(real_range(0, 1));
+  sub->add_option("--iso-bulk-spread", o->iso_bulk_spread,
+                  "The local rule: where the isovalue lies in the upper tail of the data's most common brightness "
+                  "(the bulk: its mode + this x its half-width at half maximum) and the echoes' crests stand above "
+                  "it (well above a distinct bulk), the isovalue is raised to there, so the bulk's speckle is not "
+                  "drawn (docs/parameters.md, \"The isovalue above the bulk\"); 0 turns the rule off")
+      ->capture_default_str()
+      ->check(real_range(0, 10));
   sub->add_option("--iso-field-sigma", o->iso_field_sigma,
                   "The local rule: Gaussian spread (mm) of the boundaries' isovalues into the isovalue field, across "
                   "the beam (objects of different brightness lie side by side)")
