@@ -42,6 +42,8 @@ double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::
 }  // namespace
 
 int main(int argc, char** argv) {
+  const char* const kUsage =
+      "usage: softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep] [--bulk-spread X]\n";
   std::string in, device;
   int reps = 3, threads = 0;
   bool reverb = true;
@@ -55,12 +57,12 @@ int main(int argc, char** argv) {
     else if (a == "--bulk-spread" && i + 1 < argc) bulk_spread = std::atof(argv[++i]);
     else if (in.empty() && a[0] != '-') in = a;
     else {
-      std::cerr << "usage: softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep] [--bulk-spread X]\n";
+      std::cerr << kUsage;
       return 2;
     }
   }
   if (in.empty() || reps < 1 || threads < 0) {
-    std::cerr << "usage: softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep] [--bulk-spread X]\n";
+    std::cerr << kUsage;
     return 2;
   }
   try {

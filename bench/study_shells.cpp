@@ -253,10 +253,10 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
     ShadowWallParams wp = shadow_wall_params(p, nf.axis);
     for (const auto& [k, x] : g_wall_overrides) set_wall_param(wp, k, x);
     ShadowWallReport wr;
-    // At the classifier's isovalue (iso_offset moves both).
-    // The shadow test takes the edges' isovalue, not the one raised above the bulk (host/auto_iso.hpp).
+    // At the classifier's isovalue, the edges' where it was raised above the
+    // bulk (shadow_test_iso, as classify); iso_offset moves both.
     const double wall_iso = iso_offset != 0 ? lv.data.intensity_map().from_unit(p.v_iso)
-                            : iso_report.bulk_raised ? iso_report.local_iso : lv.iso;
+                                            : shadow_test_iso(iso_report, lv.iso);
     auto walls = std::make_shared<const std::vector<float>>(shadow_wall_weight(rt, lv.data, mp, wall_iso, wp, &wr));
     std::fprintf(stderr, "  shadow walls: %.3f of the scanned voxels in shadow, %.3f weighted below 1/2\n", wr.shadow_share,
                  wr.wall_share);

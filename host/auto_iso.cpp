@@ -627,7 +627,6 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     report->floor_drop = floor_drop;
     report->cut_edges = std::move(cut_edges);
     report->field = std::move(field);
-    report->bulk_measured = bulk.measured;
     report->bulk_mode = bulk.mode, report->bulk_half_width = bulk.half_width;
     report->bulk_reach = bulk.mode + params.bulk_spread * bulk.half_width;
     report->bulk_raised = guarded_iso != local_iso;

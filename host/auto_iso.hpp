@@ -133,8 +133,14 @@ struct AutoIsoReport {
   // upper half-width (file units, levelled data), its reach, and whether the
   // isovalue was raised to it from local_iso.
   double bulk_mode = 0, bulk_half_width = 0, bulk_reach = 0;
-  bool bulk_measured = false, bulk_raised = false;
+  bool bulk_raised = false;
 };
+
+// The isovalue the shadow test takes (host/shadow_walls.hpp) when auto_iso
+// returned `iso` with report `r`: the edges' (local_iso) where `iso` was
+// raised above the bulk -- the shadow lies below the level between tissue
+// and shadow, not below the bulk's reach -- else `iso`.
+inline double shadow_test_iso(const AutoIsoReport& r, double iso) { return r.bulk_raised ? r.local_iso : iso; }
 
 // The volume with its local isovalue field levelled out: v - field + iso
 // (file units, float samples). Log-compressed brightness drifts are additive,
@@ -150,8 +156,8 @@ inline Volume level_isovalue(const Volume& v, const std::vector<float>& field, d
 
 // p's length scales times f (a small volume's, host/variational.hpp's
 // small_volume_scale): the lowpass of v~, the field's spread along and
-// across the beam, and the bulk's lowpass. The classify CLI does the same to the ones not given on
-// its command line.
+// across the beam, and the bulk's lowpass. The classify CLI does the same
+// to the ones not given on its command line.
 void scale_length_scales(AutoIsoParams& p, double f);
 
 // `classify --iso auto` for the variational classifier in one call: the

@@ -105,8 +105,8 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   // Given weights are the user's and stay as they are.
   const double scale = small_volume_scale(v.dims, v.spacing, kSmallVolumeMm);
   if (!weights) scale_length_scales(defaults, scale);
-  // The shadow walls' isovalue: the edges' where the classifier's was
-  // raised above the bulk, as classify does (host/auto_iso.hpp).
+  // The shadow walls' isovalue: with auto, shadow_test_iso's, as classify's
+  // (host/auto_iso.hpp); else the isovalue.
   std::optional<double> wall_iso;
   if (iso_text == "auto") {
     // The local rule's field levelled out, as classify does (host/auto_iso.hpp).
@@ -115,7 +115,7 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
     ap.beam_axis = nf.axis;
     AutoIsoReport rep;
     in.iso = auto_iso_level_in_place(v, mask, ap, &rep);
-    if (rep.bulk_raised) wall_iso = rep.local_iso;
+    wall_iso = shadow_test_iso(rep, in.iso);
     in.data = std::move(v);
   } else {
     char* end = nullptr;

@@ -707,8 +707,8 @@ int run_classify(const ClassifyOptions& given_options) {
     fill_unscanned_in_place(in, mask.scanned);
   }
   double iso = 0;
-  // The shadow walls' isovalue: the edges' (rep.local_iso) where the
-  // classifier's was raised above the bulk (host/auto_iso.hpp).
+  // The shadow walls' isovalue: with --iso auto, shadow_test_iso's
+  // (host/auto_iso.hpp); else the isovalue.
   std::optional<double> wall_iso;
   std::string iso_text;
   const std::vector<std::uint8_t>* sc = mask.scanned.empty() ? nullptr : &mask.scanned;
@@ -783,9 +783,9 @@ int run_classify(const ClassifyOptions& given_options) {
         << rep.bulk_mode << " + " << ap.bulk_spread << " x its half-width " << rep.bulk_half_width
         << ", the echoes' crests at " << rep.ridge_iso;
       iso_text += t.str();
-      wall_iso = rep.local_iso;
     }
     iso_text += ")";
+    wall_iso = shadow_test_iso(rep, iso);
   }
   // Levoy's kernel takes the isovalue as a float.
   if (!variational && !(std::fabs(iso) <= 3.0e38)) throw InputError("--iso " + format_iso(iso) + " does not fit a float");
