@@ -641,11 +641,18 @@ Bulk bulk_of(const Volume& v, const std::vector<std::uint8_t>* mask, double sigm
   if (!(sigma_mm > 0)) throw std::invalid_argument("bulk_of: the lowpass must be positive");
   threads = host_threads(threads);
   Bulk b;
-  std::vector<float> low(v.data.begin(), v.data.end());
+  const auto in = [&](std::size_t i) { return !mask || (*mask)[i] != 0; };
+  // The lowpass, each plane copied in just before its blur (in cache, and
+  // first touched by the thread that blurs it); the blur is the same for any
+  // split of the planes.
+  const std::size_t plane = d[0] * d[1];
+  HostVector<float> low(n);
   blur_3d(low.data(), nullptr, d, gaussian_weights(sigma_mm / v.spacing[0], 3.0),
           gaussian_weights(sigma_mm / v.spacing[1], 3.0), gaussian_weights(sigma_mm / v.spacing[2], 3.0), threads,
-          [](std::size_t) {});
-  const auto in = [&](std::size_t i) { return !mask || (*mask)[i] != 0; };
+          [&](std::size_t z) {
+            std::copy(v.data.begin() + std::ptrdiff_t(z * plane), v.data.begin() + std::ptrdiff_t((z + 1) * plane),
+                      low.data() + z * plane);
+          });
   // Histograms per range of voxels, added up (counts: the same for any split).
   const auto histogram = [&](double lo, double hi, int bins) {
     const int parts = range_count(n, threads);
@@ -661,10 +668,24 @@ Bulk bulk_of(const Volume& v, const std::vector<std::uint8_t>* mask, double sigm
       for (int k = 0; k < bins; ++k) h[std::size_t(k)] += p[std::size_t(k)];
     return h;
   };
+  // The extremes of the lowpass over the scanned voxels and their count, per
+  // plane, then joined (the same for any split).
+  std::vector<float> plane_min(d[2], INFINITY), plane_max(d[2], -INFINITY);
+  std::vector<std::size_t> plane_count(d[2], 0);
+  parallel_ranges(d[2], threads, [&](std::size_t z0, std::size_t z1) {
+    for (std::size_t z = z0; z < z1; ++z) {
+      float lo = INFINITY, hi = -INFINITY;
+      std::size_t c = 0;
+      for (std::size_t i = z * plane; i < (z + 1) * plane; ++i)
+        if (in(i)) lo = std::min(lo, low[i]), hi = std::max(hi, low[i]), ++c;
+      plane_min[z] = lo, plane_max[z] = hi, plane_count[z] = c;
+    }
+  });
   double mn = INFINITY, mx = -INFINITY;
   std::size_t count = 0;
-  for (std::size_t i = 0; i < n; ++i)
-    if (in(i)) mn = std::min(mn, double(low[i])), mx = std::max(mx, double(low[i])), ++count;
+  for (std::size_t z = 0; z < d[2]; ++z)
+    if (plane_count[z])
+      mn = std::min(mn, double(plane_min[z])), mx = std::max(mx, double(plane_max[z])), count += plane_count[z];
   if (count < 1000 || !(mx > mn) || !std::isfinite(mx - mn)) return b;
   // The 0.5th and 99.5th percentiles from a fine histogram (to 1/4096 of the range).
   constexpr int kFine = 4096;
