@@ -118,7 +118,8 @@ std::vector<std::pair<std::string, double>> g_overrides;
 bool g_no_cut_hold = false;
 // The band's underside held when drawn as a sheet (host/mask.hpp,
 // hold_band_sheet): --set band_sheet=0 turns it off, band_sheet_mm and
-// band_sheet_patch set its window and cover.
+// band_sheet_patch set its window and cover, band_sheet_deep_mm (0: off)
+// and band_sheet_flat_mm the deep window's reach and flatness.
 bool g_band_sheet = true;
 BandSheetParams g_band_sheet_params;
 // --set data_normals=1: the normal error scores the splats' orientation by
@@ -179,6 +180,8 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "data_normals") g_data_normals = x != 0;
   else if (k == "band_sheet_mm") g_band_sheet_params.window_mm = x;
   else if (k == "band_sheet_patch") g_band_sheet_params.min_patch = x;
+  else if (k == "band_sheet_deep_mm") g_band_sheet_params.deep_mm = x;
+  else if (k == "band_sheet_flat_mm") g_band_sheet_params.flat_mm = x;
   else if (k == "iso_offset") {}  // added to the classifier's v_iso after the levelling (classify_default)
   else if (k == "grad_sigma_auto") {}  // 0: the fixed VariationalParams default instead of the speckle's (classify_default)
   else return set_variational_param(p, k, x);
@@ -268,10 +271,10 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   Volume u = classify_variational(rt, lv.data, p, SolverParams{}, rep, nullptr, mp);
   if (g_band_sheet && nf.found && mp) {
     const std::vector<std::uint8_t> window =
-        band_underside(in, nf, before, mask, g_band_sheet_params.window_mm);
+        band_underside(in, nf, before, mask, g_band_sheet_params.window_mm, g_band_sheet_params.deep_mm);
     const BandSheetReport bs = hold_band_sheet(u, window, nf.axis, mask, g_band_sheet_params);
-    std::fprintf(stderr, "  band sheet: drawn on %zu of %zu lines, largest patch %.3f%s\n", bs.drawn, bs.lines, bs.largest,
-                 bs.held ? ", held" : "");
+    std::fprintf(stderr, "  band sheet: drawn on %zu of %zu lines, largest patch %.3f; deep: largest patch %.3f spread %.2f mm%s\n",
+                 bs.drawn, bs.lines, bs.largest, bs.deep_largest, bs.deep_spread_mm, bs.held ? ", held" : "");
     if (bs.held) u = classify_variational(rt, lv.data, p, SolverParams{}, rep, nullptr, mp);
   }
   return u;

@@ -646,14 +646,16 @@ struct BeamLines {
 
 std::vector<std::uint8_t> band_underside(const Volume& v, const NearFieldReport& nf,
                                          const std::vector<std::uint8_t>& before,
-                                         const std::vector<std::uint8_t>& after, double window_mm) {
+                                         const std::vector<std::uint8_t>& after, double window_mm,
+                                         double deep_mm) {
   if (!nf.found) return {};
-  return band_underside(v.dims, v.spacing[std::size_t(nf.axis)], nf.axis, before, after, window_mm);
+  return band_underside(v.dims, v.spacing[std::size_t(nf.axis)], nf.axis, before, after, window_mm, deep_mm);
 }
 
 std::vector<std::uint8_t> band_underside(const Dims3& dims, double spacing_mm, int axis,
                                          const std::vector<std::uint8_t>& before,
-                                         const std::vector<std::uint8_t>& after, double window_mm) {
+                                         const std::vector<std::uint8_t>& after, double window_mm,
+                                         double deep_mm) {
   const std::size_t n = dims[0] * dims[1] * dims[2];
   if (axis < 0 || axis > 2) throw std::invalid_argument("band_underside: beam axis must be 0, 1 or 2");
   if ((!before.empty() && before.size() != n) || (!after.empty() && after.size() != n))
@@ -668,8 +670,11 @@ std::vector<std::uint8_t> band_underside(const Dims3& dims, double spacing_mm, i
     while (k < len && !before.empty() && !before[base + k * stride]) ++k;  // the skin line
     if (k == len || after[base + k * stride]) continue;                       // no band on this line
     while (k < len && !after[base + k * stride]) ++k;                         // the band
-    for (const std::size_t b = k; k < len && double(k - b) * spacing_mm < window_mm - 1e-9; ++k)
+    const std::size_t b = k;
+    for (; k < len && double(k - b) * spacing_mm < window_mm - 1e-9; ++k)
       if (after[base + k * stride]) window[base + k * stride] = 1, any = true;
+    for (; k < len && double(k - b) * spacing_mm < deep_mm - 1e-9; ++k)
+      if (after[base + k * stride]) window[base + k * stride] = 2, any = true;
   }
   if (!any) window.clear();
   return window;
@@ -685,43 +690,85 @@ BandSheetReport hold_band_sheet(const Volume& u, const std::vector<std::uint8_t>
   if (axis < 0 || axis > 2) throw std::invalid_argument("hold_band_sheet: beam axis must be 0, 1 or 2");
   const BeamLines lines(u.dims, std::size_t(axis));
   const std::size_t nu = lines.nu, nw = lines.nw;
-  // Per beam line: 0 no window, 1 a window, 2 drawn in it.
-  std::vector<std::uint8_t> line(lines.count(), 0);
+  const double along = u.spacing[std::size_t(axis)];
+  // Per beam line: 0 no window, 1 a window, 2 drawn in it; the same for the
+  // deep window (label 2), with the first drawn voxel's place in it.
+  std::vector<std::uint8_t> line(lines.count(), 0), deep(lines.count(), 0);
+  std::vector<std::size_t> deep_at(lines.count(), 0), deep_k(lines.count(), 0), deep_end(lines.count(), 0);
   for (std::size_t l = 0; l < line.size(); ++l) {
-    for (std::size_t k = 0, i = lines.start(l); k < lines.len; ++k, i += lines.stride)
-      if (window[i]) line[l] = std::max<std::uint8_t>(line[l], u.data[i] > params.threshold ? 2 : 1);
+    std::size_t in_deep = 0;
+    for (std::size_t k = 0, i = lines.start(l); k < lines.len; ++k, i += lines.stride) {
+      if (window[i] == 1) line[l] = std::max<std::uint8_t>(line[l], u.data[i] > params.threshold ? 2 : 1);
+      if (window[i] == 2) {
+        if (u.data[i] > params.threshold && deep[l] != 2) deep[l] = 2, deep_at[l] = in_deep, deep_k[l] = k;
+        deep[l] = std::max<std::uint8_t>(deep[l], 1);
+        ++in_deep, deep_end[l] = k + 1;
+      }
+    }
     rep.lines += line[l] > 0, rep.drawn += line[l] == 2;
   }
   if (rep.lines == 0) return rep;
-  // The drawn lines' patches: 4-connected across the beam.
+  // The drawn lines' patches: 4-connected across the beam. `decide` takes a
+  // patch's share of the band's lines (its lines in `members`) and says
+  // whether it is held; `label` is the window's part held.
   std::vector<std::uint32_t> patch(line.size(), 0);
   std::vector<std::size_t> stack, members;
-  std::uint32_t next = 0;
-  for (std::size_t s = 0; s < line.size(); ++s) {
-    if (line[s] != 2 || patch[s]) continue;
-    ++next;
-    members.clear();
-    stack.assign(1, s);
-    patch[s] = next;
-    while (!stack.empty()) {
-      const std::size_t c = stack.back();
-      stack.pop_back();
-      members.push_back(c);
-      const std::size_t q = c % nu, w = c / nu;
-      const std::size_t nb[4] = {q > 0 ? c - 1 : c, q + 1 < nu ? c + 1 : c, w > 0 ? c - nu : c, w + 1 < nw ? c + nu : c};
-      for (std::size_t m : nb)
-        if (line[m] == 2 && !patch[m]) patch[m] = next, stack.push_back(m);
+  const auto patches = [&](const std::vector<std::uint8_t>& drawn, std::uint8_t label, const auto& decide) {
+    std::fill(patch.begin(), patch.end(), 0u);
+    std::uint32_t next = 0;
+    for (std::size_t s = 0; s < drawn.size(); ++s) {
+      if (drawn[s] != 2 || patch[s]) continue;
+      ++next;
+      members.clear();
+      stack.assign(1, s);
+      patch[s] = next;
+      while (!stack.empty()) {
+        const std::size_t c = stack.back();
+        stack.pop_back();
+        members.push_back(c);
+        const std::size_t q = c % nu, w = c / nu;
+        const std::size_t nb[4] = {q > 0 ? c - 1 : c, q + 1 < nu ? c + 1 : c, w > 0 ? c - nu : c,
+                                   w + 1 < nw ? c + nu : c};
+        for (std::size_t m : nb)
+          if (drawn[m] == 2 && !patch[m]) patch[m] = next, stack.push_back(m);
+      }
+      if (!decide(double(members.size()) / double(rep.lines))) continue;
+      for (std::size_t c : members) {
+        for (std::size_t k = 0, i = lines.start(c); k < lines.len; ++k, i += lines.stride)
+          if (window[i] == label && scanned[i]) scanned[i] = 0, ++rep.voxels;
+        if (label != 2) continue;
+        // A deep sheet: also its drawn run (to the deep window's end at
+        // most: what is drawn on below it is no sheet's) and margin_mm on.
+        std::size_t k = deep_k[c];
+        while (k < deep_end[c] && u.data[lines.start(c) + k * lines.stride] > params.threshold) ++k;
+        const std::size_t end = std::min(lines.len, k + std::size_t(std::ceil(params.margin_mm / along - 1e-9)));
+        for (k = deep_k[c]; k < end; ++k) {
+          const std::size_t i = lines.start(c) + k * lines.stride;
+          if (scanned[i]) scanned[i] = 0, ++rep.voxels;
+        }
+      }
     }
-    const double share = double(members.size()) / double(rep.lines);
+  };
+  patches(line, 1, [&](double share) {
     rep.largest = std::max(rep.largest, share);
-    if (share < params.min_patch) continue;
-    ++rep.patches;
-    rep.held_lines += members.size();
-    for (std::size_t c : members)
-      for (std::size_t k = 0, i = lines.start(c); k < lines.len; ++k, i += lines.stride)
-        if (window[i] && scanned[i]) scanned[i] = 0, ++rep.voxels;
-  }
-  rep.held = rep.patches > 0;
+    if (share < params.min_patch) return false;
+    ++rep.patches, rep.held_lines += members.size();
+    return true;
+  });
+  // The deep window: a patch that is a flat sheet (its first drawn voxels'
+  // quartiles within flat_mm of each other).
+  std::vector<std::size_t> at;
+  patches(deep, 2, [&](double share) {
+    at.clear();
+    for (std::size_t c : members) at.push_back(deep_at[c]);
+    std::sort(at.begin(), at.end());
+    const double spread = double(at[at.size() * 3 / 4] - at[at.size() / 4]) * along;
+    if (share > rep.deep_largest) rep.deep_largest = share, rep.deep_spread_mm = spread;
+    if (share < params.min_patch || spread > std::max(params.flat_mm, along) + 1e-9) return false;
+    ++rep.deep_patches, rep.deep_lines += members.size();
+    return true;
+  });
+  rep.held = rep.patches > 0 || rep.deep_patches > 0;
   return rep;
 }
 

@@ -358,33 +358,56 @@ constexpr double kCutRemnantMm = 6.0;
 // and its lines' windows are held at u = 0 and the classification solved
 // again. (The laminae of the real spine sweeps under their bands came in
 // pieces of at most 10 % of the band's lines; the phantoms' sheets 15-50 %.)
+//
+// Deeper, from window_mm to deep_mm under the band, only a flat sheet is
+// held: a patch of at least min_patch of the band's lines whose first drawn
+// voxel lies at the same depth under the band on its lines (the spread
+// between their quartiles at most flat_mm, or one voxel along the beam). The fascia under the
+// subcutaneous fat is such a sheet -- a bright line parallel to the skin
+// some millimetres under the skin's band, drawn across the whole probe --
+// while an object near the probe (a head's crown, a spinous process) is
+// not flat under it. A flat sheet's lines are held in the deep window and,
+// from the sheet on, down its drawn run (u > threshold, to the deep window's
+// end at most) and margin_mm more, past the window if need be (the layer's
+// lower flank). 0 (deep_mm <= window_mm): the near window alone.
 struct BandSheetParams {
   double window_mm = 3.0;
   double min_patch = 0.15;
   float threshold = 0.2f;  // the splat threshold
+  double deep_mm = 8.0;
+  double flat_mm = 1.0;
+  double margin_mm = 2.0;  // a deep sheet is held on past the deep window down its drawn run and this far (a shell's width: the layer's lower flank)
 };
 // The window under the band (1; 0 elsewhere): on each beam line along `axis`
 // (depth growing with the index) whose first voxel scanned in `before` (the
 // skin line; empty: every voxel scanned) is unscanned in `after` (the band
 // removed, remove_near_field), the voxels scanned in `after` from the end of
-// that unscanned run down to window_mm below it. Empty when no line has a
-// band.
+// that unscanned run down to window_mm below it; with deep_mm > window_mm,
+// the voxels from there down to deep_mm below it are the deep window (2).
+// Empty when no line has a band.
 std::vector<std::uint8_t> band_underside(const Dims3& dims, double spacing_mm, int axis,
                                          const std::vector<std::uint8_t>& before,
-                                         const std::vector<std::uint8_t>& after, double window_mm);
+                                         const std::vector<std::uint8_t>& after, double window_mm,
+                                         double deep_mm = 0);
 // The same for the band `nf` found in volume `v` (along nf.axis, at its
 // spacing); empty when none was found.
 std::vector<std::uint8_t> band_underside(const Volume& v, const NearFieldReport& nf,
                                          const std::vector<std::uint8_t>& before,
                                          const std::vector<std::uint8_t>& after,
-                                         double window_mm = BandSheetParams().window_mm);
+                                         double window_mm = BandSheetParams().window_mm,
+                                         double deep_mm = BandSheetParams().deep_mm);
 struct BandSheetReport {
   std::size_t lines = 0;       // beam lines with a window
   std::size_t drawn = 0;       // ... on which u > threshold in the window
   double largest = 0;          // the largest patch of drawn lines, as a share of `lines`
   int patches = 0;             // patches held (min_patch of `lines` or more)
   std::size_t held_lines = 0;  // their lines
-  bool held = false;           // patches > 0
+  // The deep window (BandSheetParams::deep_mm): its flat sheets held, their
+  // lines, and the largest patch's share of `lines` and its depth spread (mm).
+  int deep_patches = 0;
+  std::size_t deep_lines = 0;
+  double deep_largest = 0, deep_spread_mm = 0;
+  bool held = false;           // patches + deep_patches > 0
   std::size_t voxels = 0;      // voxels held
 };
 // Decides on `u` (a solved opacity) and sets the sheets' windows unscanned

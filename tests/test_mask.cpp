@@ -1962,9 +1962,84 @@ TEST(BandSheet, TheUndersideIsTheWindowUnderEachLinesBand) {
   NearFieldReport nf;
   nf.found = true;
   nf.axis = 2;
-  EXPECT_EQ(band_underside(v, nf, before, after, 2.0), w);
+  EXPECT_EQ(band_underside(v, nf, before, after, 2.0, 0.0), w);
   nf.found = false;
   EXPECT_TRUE(band_underside(v, nf, before, after, 2.0).empty());
+  // The deep window (label 2): from the window's end down to deep_mm under
+  // the band, the unscanned voxel skipped as in the window.
+  after[at(2, 2, 11)] = 0;
+  const std::vector<std::uint8_t> wd = band_underside(d, 0.5, 2, before, after, 2.0, 4.0);
+  for (std::size_t y = 0; y < 5; ++y)
+    for (std::size_t x = 0; x < 6; ++x)
+      for (std::size_t z = 0; z < 20; ++z) {
+        const std::size_t from = x || y ? 6 : 4;
+        const bool skip = (x == 2 && y == 2 && (z == 7 || z == 11)) || (x == 1 && y == 1 && (z == 12 || z == 13));
+        const int want = x < 5 && !skip ? (z >= from && z < from + 4 ? 1 : z >= from + 4 && z < from + 8 ? 2 : 0) : 0;
+        ASSERT_EQ(w.size(), wd.size());
+        ASSERT_EQ(int(wd[at(x, y, z)]), want) << x << " " << y << " " << z;
+      }
+  nf.found = true;
+  EXPECT_EQ(band_underside(v, nf, before, after, 2.0, 4.0), wd);
+}
+
+TEST(BandSheet, DeeperOnlyAFlatSheetIsHeld) {
+  // 10 x 10 lines along z (0.5 mm), the near window at z = 2-3 and the deep
+  // one at z = 4-11 on every line (20 deep). Drawn in the deep window: a flat sheet at
+  // z = 7 on the 30 lines x < 3 (0.3 of the lines), a dome on the 30 lines x
+  // >= 7 whose first drawn voxel lies at z = 4 ... 11 across them; nothing
+  // drawn in the near window.
+  const Dims3 d{10, 10, 20};
+  const auto at = [](std::size_t x, std::size_t y, std::size_t z) { return x + 10 * (y + 10 * z); };
+  std::vector<std::uint8_t> window(2000, 0), scanned(2000, 1);
+  Volume u(d, {1, 1, 0.5}, ScalarType::Float32);
+  for (std::size_t y = 0; y < 10; ++y)
+    for (std::size_t x = 0; x < 10; ++x) {
+      for (std::size_t z = 2; z < 12; ++z) window[at(x, y, z)] = z < 4 ? 1 : 2;
+      if (x < 3) u.at(x, y, 7) = u.at(x, y, 8) = 0.6f;
+      if (x == 0 && y == 0)
+        for (std::size_t z = 9; z < 18; ++z) u.at(x, y, z) = 0.6f;  // drawn on past the window
+      if (x >= 7) {
+        const std::size_t top = 4 + (y * 8) / 10;  // 4 ... 11
+        for (std::size_t z = top; z < 12; ++z) u.at(x, y, z) = 0.6f;
+      }
+    }
+  std::vector<std::uint8_t> held = scanned;
+  const BandSheetReport r = hold_band_sheet(u, window, 2, held);
+  EXPECT_EQ(r.lines, 100u);
+  EXPECT_EQ(r.drawn, 0u);
+  EXPECT_EQ(r.patches, 0);
+  EXPECT_EQ(r.deep_patches, 1);
+  EXPECT_EQ(r.deep_lines, 30u);
+  EXPECT_DOUBLE_EQ(r.deep_largest, 0.3);
+  EXPECT_TRUE(r.held);
+  // The flat sheet's lines' deep windows and, from the sheet on, its drawn
+  // run and 2 mm (4 voxels) more: z 7-12, one past the window; on line (0,
+  // 0) the run is cut at the window's end (z 11), and 2 mm on: z 12-15.
+  EXPECT_EQ(r.voxels, 30u * 8u + 29u + 4u);
+  for (std::size_t y = 0; y < 10; ++y)
+    for (std::size_t x = 0; x < 10; ++x)
+      for (std::size_t z = 0; z < 20; ++z)
+        ASSERT_EQ(held[at(x, y, z)], x < 3 && z >= 4 && (z < 13 || (x == 0 && y == 0 && z < 16)) ? 0 : 1)
+            << x << " " << y << " " << z;
+  // The dome alone (the sheet not drawn): its quartiles 2 mm apart, not held; with
+  // flat_mm 4 it is.
+  for (std::size_t y = 0; y < 10; ++y)
+    for (std::size_t x = 0; x < 3; ++x)
+      for (std::size_t z = 7; z < 18; ++z) u.at(x, y, z) = 0;
+  held = scanned;
+  const BandSheetReport dome = hold_band_sheet(u, window, 2, held);
+  EXPECT_FALSE(dome.held);
+  EXPECT_DOUBLE_EQ(dome.deep_largest, 0.3);
+  EXPECT_GT(dome.deep_spread_mm, 1.0);
+  EXPECT_EQ(held, scanned);
+  BandSheetParams wide;
+  wide.flat_mm = 4.0;
+  EXPECT_EQ(hold_band_sheet(u, window, 2, held, wide).deep_patches, 1);
+  // A window without a deep part (label 1 only) decides as before.
+  std::vector<std::uint8_t> near(window);
+  for (auto& w : near) w = w == 2 ? 0 : w;
+  held = scanned;
+  EXPECT_FALSE(hold_band_sheet(u, near, 2, held).held);
 }
 
 TEST(BandSheet, OnlyAPatchOfAtLeastMinPatchOfTheBandsLinesIsHeld) {
@@ -2486,6 +2561,24 @@ TEST_F(CliMask, NearFieldIsRemovedByDefaultAndKeptOnRequest) {
   EXPECT_LT(cued_max, 0.2f) << "the cue draws no flat bright layer";
 }
 
+// The beam lines (x, y in 4-27, along z) on which u > 0.2 somewhere in z0 ... z1 - 1.
+std::size_t lines_drawn(const Volume& u, std::size_t z0, std::size_t z1) {
+  std::size_t lines = 0;
+  for (std::size_t y = 4; y < 28; ++y)
+    for (std::size_t x = 4; x < 28; ++x) {
+      float m = 0;
+      for (std::size_t z = z0; z < z1; ++z) m = std::max(m, u.at(x, y, z));
+      lines += m > 0.2f;
+    }
+  return lines;
+}
+// The largest u on the line (16, 16) in z0 ... z1 - 1.
+float centre_max(const Volume& u, std::size_t z0, std::size_t z1) {
+  float m = 0;
+  for (std::size_t z = z0; z < z1; ++z) m = std::max(m, u.at(16, 16, z));
+  return m;
+}
+
 TEST_F(CliMask, TheBandsUndersideDrawnAsASheetIsHeldAndKeptOnRequest) {
   // A bright band (230, 3 mm) over a dimmer plateau (125, 3 mm) over dark
   // tissue (40): the band is removed down to its bottom and margin (about
@@ -2507,22 +2600,41 @@ TEST_F(CliMask, TheBandsUndersideDrawnAsASheetIsHeldAndKeptOnRequest) {
   ASSERT_EQ(k.status, 0) << k.err;
   EXPECT_EQ(k.out.find("underside"), std::string::npos) << k.out;
   const Volume u = read_volume(file("u.nrrd")), uk = read_volume(file("k.nrrd"));
-  std::size_t lines_kept = 0, lines_held = 0;
-  for (std::size_t y = 4; y < 28; ++y)
-    for (std::size_t x = 4; x < 28; ++x) {
-      float mk = 0, mh = 0;
-      for (std::size_t z = 6; z < 18; ++z) mk = std::max(mk, uk.at(x, y, z)), mh = std::max(mh, u.at(x, y, z));
-      lines_kept += mk > 0.2f, lines_held += mh > 0.2f;
-    }
-  EXPECT_GT(lines_kept, 24u * 24u * 3 / 4) << "kept: the plateau's edge is a sheet";
-  EXPECT_EQ(lines_held, 0u) << "held: no sheet under the band";
-  float block = 0, block_kept = 0;
-  for (std::size_t z = 26; z < 34; ++z) block = std::max(block, u.at(16, 16, z)), block_kept = std::max(block_kept, uk.at(16, 16, z));
-  EXPECT_GT(block, 0.5f) << "the block's top is drawn";
-  EXPECT_GT(block_kept, 0.5f);
+  EXPECT_GT(lines_drawn(uk, 6, 18), 24u * 24u * 3 / 4) << "kept: the plateau's edge is a sheet";
+  EXPECT_EQ(lines_drawn(u, 6, 18), 0u) << "held: no sheet under the band";
+  EXPECT_GT(centre_max(u, 26, 34), 0.5f) << "the block's top is drawn";
+  EXPECT_GT(centre_max(uk, 26, 34), 0.5f);
   expect_one_line_error(run({"classify", file("tail.nrrd"), "--iso", "80", "--band-sheet", "drop", "-o", file("x.nrrd")}),
                         {"--band-sheet", "hold", "keep"});
   EXPECT_FALSE(fs::exists(file("x.nrrd")));
+}
+
+TEST_F(CliMask, AFlatSheetDeeperUnderTheBandIsHeld) {
+  // Skin (230, 2 mm) over fat (30, 7 mm: too deep a dip for a layered band)
+  // over a fascia (230, 2 mm) over tissue (80): the band removed is the skin
+  // alone (about 3 mm), and at the isovalue 150 the fascia is a flat sheet 6-7
+  // mm under it on every line (host/mask.hpp, BandSheetParams::deep_mm). By
+  // default it is held; --band-sheet keep draws it. A bright block deeper
+  // down (20-23 mm) is drawn either way.
+  Volume v = layered_scan({32, 32, 64}, {0.5, 0.5, 0.5}, 2, {{2.0, 230}, {7.0, 30}, {2.0, 230}}, 80,
+                          test::seed() + 13);
+  for (std::size_t z = 40; z < 46; ++z)
+    for (std::size_t y = 10; y < 22; ++y)
+      for (std::size_t x = 10; x < 22; ++x) v.at(x, y, z) = 220;
+  write_volume(file("fascia.nrrd"), v);
+  const test::RunResult r = run({"classify", file("fascia.nrrd"), "--iso", "150", "-o", file("u.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("near field removed"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("1 flat sheet deeper on"), std::string::npos) << r.out;
+  const test::RunResult k =
+      run({"classify", file("fascia.nrrd"), "--iso", "150", "--band-sheet", "keep", "-o", file("k.nrrd")});
+  ASSERT_EQ(k.status, 0) << k.err;
+  EXPECT_EQ(k.out.find("underside"), std::string::npos) << k.out;
+  const Volume u = read_volume(file("u.nrrd")), uk = read_volume(file("k.nrrd"));
+  EXPECT_GT(lines_drawn(uk, 14, 26), 24u * 24u * 3 / 4) << "kept: the fascia is a sheet";
+  EXPECT_EQ(lines_drawn(u, 14, 26), 0u) << "held: no sheet at the fascia";
+  EXPECT_GT(centre_max(u, 36, 44), 0.5f) << "the block's top is drawn";
+  EXPECT_GT(centre_max(uk, 36, 44), 0.5f);
 }
 
 TEST_F(CliMask, FluidAtTheFloorIsOptIn) {

@@ -171,9 +171,14 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   if (grad_choice)
     note << ", gradient lowpass " << std::fixed << std::setprecision(2) << grad_choice->sigma_mm << " mm ("
          << (grad_choice->echoes ? "from the speckle" : "the strong edges are no echoes") << ")";
-  if (sheet.held)
-    note << ", the band's underside held (a sheet on " << std::fixed << std::setprecision(0)
-         << 100.0 * double(sheet.held_lines) / double(sheet.lines) << " % of its lines)";
+  if (sheet.held) {
+    note << ", the band's underside held (" << std::fixed << std::setprecision(0);
+    if (sheet.patches > 0) note << "a sheet on " << 100.0 * double(sheet.held_lines) / double(sheet.lines) << " % of its lines";
+    if (sheet.patches > 0 && sheet.deep_patches > 0) note << ", ";
+    if (sheet.deep_patches > 0)
+      note << "a flat sheet deeper under it on " << 100.0 * double(sheet.deep_lines) / double(sheet.lines) << " % of its lines";
+    note << ")";
+  }
   in.note = note.str();
   return in;
 }

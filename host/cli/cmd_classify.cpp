@@ -296,10 +296,18 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
                                o.hooks ? &o.hooks->start : nullptr);
       timing.setup += first.setup, timing.solve += first.solve;
       std::ostringstream t;
-      t << std::fixed << std::setprecision(0) << "; the band's underside drawn as a sheet: " << bs.patches
-        << (bs.patches == 1 ? " patch" : " patches") << " on " << 100.0 * double(bs.held_lines) / double(bs.lines)
-        << " % of its lines, the " << std::setprecision(1) << BandSheetParams().window_mm
-        << " mm under it held at u = 0 there (" << bs.voxels << " voxels) and solved again (--band-sheet keep to keep it)";
+      const BandSheetParams bp;
+      t << std::fixed << std::setprecision(0) << "; the band's underside drawn as a sheet: ";
+      if (bs.patches > 0)
+        t << bs.patches << (bs.patches == 1 ? " patch" : " patches") << " on "
+          << 100.0 * double(bs.held_lines) / double(bs.lines) << " % of its lines, the " << std::setprecision(1)
+          << bp.window_mm << " mm under it held at u = 0 there";
+      if (bs.patches > 0 && bs.deep_patches > 0) t << ", and ";
+      if (bs.deep_patches > 0)
+        t << std::setprecision(0) << bs.deep_patches << (bs.deep_patches == 1 ? " flat sheet" : " flat sheets")
+          << " deeper on " << 100.0 * double(bs.deep_lines) / double(bs.lines) << " % of its lines, "
+          << std::setprecision(1) << bp.window_mm << "-" << bp.deep_mm << " mm under it, held there";
+      t << " (" << bs.voxels << " voxels) and solved again (--band-sheet keep to keep it)";
       sheet_text = t.str();
     }
   }
@@ -953,8 +961,10 @@ void add_classify_command(CLI::App& app, Action& action) {
   sub->add_option("--band-sheet", o->band_sheet,
                   "hold: when the variational shell draws a sheet just under a removed near-field band (in the "
                   "3 mm under it, one patch on at least 15 % of its beam lines: the band's fading copies, not anatomy), "
-                  "those 3 mm are held at u = 0 like the band and the volume solved again; keep: left as drawn "
-                  "(docs/parameters.md, \"The band's underside\")")
+                  "those 3 mm are held at u = 0 like the band and the volume solved again; the same, 3-8 mm under it, "
+                  "for a flat sheet (at one depth under the band across its lines: a fascia under the fat, not an "
+                  "object near the probe), held down its drawn run; keep: left as drawn (docs/parameters.md, \"The "
+                  "band's underside\")")
       ->capture_default_str()
       ->type_name("hold|keep")
       ->check(one_of({"hold", "keep"}));
