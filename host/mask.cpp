@@ -1772,6 +1772,19 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
   };
   const double lo = quantile(0.5), hi = quantile(0.99);
   if (!(hi > lo)) return done();
+  // The strong echoes must stand out of the data's spread (1.4826 x the
+  // median absolute deviation from lo): in a texture without a reflector
+  // the 99th percentile is only a few spreads up, and its "first strong
+  // echo" is speckle on every line.
+  if (params.min_stand > 0) {
+    const std::size_t k = std::size_t(0.5 * double(count - 1));
+    const double spread = 1.4826 * double(kth_smallest_where(n, k, threads, [&](std::size_t i, float& f) {
+                            f = float(std::fabs(double(lp[i]) - lo));
+                            return is_scanned(i);
+                          }));
+    rep.stand = spread > 0 ? (hi - lo) / spread : std::numeric_limits<double>::infinity();
+    if (rep.stand < params.min_stand) return done();
+  }
   const double strong = lo + params.strong * (hi - lo);
   const int u_ax = ax == 0 ? 1 : 0, w_ax = ax == 2 ? 1 : 2;
   const std::size_t stride[3] = {1, d[0], d[0] * d[1]};

@@ -164,6 +164,15 @@ struct ReverbParams {
   // The second copy must be a bump: Q falls back by half its rise within
   // 2 x tolerance x its spacing after it (false: any maximum in its window).
   bool second_peak = true;
+  // A reflector at all: hi - lo at least this many of the data's spreads
+  // (1.4826 x the median absolute deviation of the lowpassed samples from
+  // lo); 0: no test. Found on the cross-check's cysts in a low-contrast
+  // texture (hi - lo 1.8-2.0 spreads), whose speckle passed for an echo
+  // train on every line and held 74-80 % of the scan at 0; the PLUS flat
+  // reflector (IMLiF) stands 8.1 spreads up, the other PLUS volumes 5-28,
+  // the family's one reverberation (spine 2414) 4.7 (docs/real-data.md,
+  // "A reflector that stands out").
+  double min_stand = 3.0;
 };
 struct ReverbReport {
   bool found = false;
@@ -173,6 +182,7 @@ struct ReverbReport {
   std::size_t lines = 0;            // beam lines with a first strong echo
   double jump_mm = 0;               // 75th percentile of the echo's depth step between neighbouring lines
   std::size_t voxels = 0;           // voxels in the region
+  double stand = 0;                 // hi - lo in the data's spreads (ReverbParams::min_stand); 0: not measured
 };
 // The region (1) below the first strong echo of each line when the echo
 // train is a reverberation; all 0 otherwise. `axis` the beam's.

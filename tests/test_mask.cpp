@@ -1020,6 +1020,21 @@ TEST(Reverb, EquallySpacedCopiesOfAFlatReflectorAreFoundBelowItsEcho) {
   m = mask;
   EXPECT_FALSE(remove_near_field(v, m, keep).reverb.found);
   EXPECT_EQ(m, mask);
+  // The reflector stands out of the data's spread (ReverbParams::min_stand):
+  // measured, and a bound above it finds no train; 0 takes no measure.
+  EXPECT_GT(r.stand, ReverbParams().min_stand);
+  ReverbParams above;
+  above.min_stand = r.stand * 1.01;
+  ReverbReport ra;
+  EXPECT_EQ(count_unscanned(reverberation_region(v, &mask, 1, above, &ra)), v.voxels());
+  EXPECT_FALSE(ra.found);
+  EXPECT_DOUBLE_EQ(ra.stand, r.stand);
+  ReverbParams none;
+  none.min_stand = 0;
+  ReverbReport rn;
+  EXPECT_EQ(reverberation_region(v, &mask, 1, none, &rn), region);
+  EXPECT_TRUE(rn.found);
+  EXPECT_EQ(rn.stand, 0.0);
 }
 
 TEST(Reverb, BrightSpeckleUnderAFaintBandIsNoFlatReflector) {
@@ -1045,15 +1060,25 @@ TEST(Reverb, BrightSpeckleUnderAFaintBandIsNoFlatReflector) {
   const NearFieldReport nf = remove_near_field(ph.volume, mask, np);
   ASSERT_TRUE(nf.found);
   EXPECT_TRUE(nf.faint);
+  // The flatness test alone (no test of the echoes' standing, min_stand 0).
+  ReverbParams flat_only;
+  flat_only.min_stand = 0;
   ReverbReport r;
-  reverberation_region(ph.volume, &mask, nf.axis, ReverbParams{}, &r);
+  reverberation_region(ph.volume, &mask, nf.axis, flat_only, &r);
   EXPECT_FALSE(r.found);
   EXPECT_GT(r.jump_mm, 2.0);
-  ReverbParams any_depth;
+  ReverbParams any_depth = flat_only;
   any_depth.max_jump_mm = 1e9;
   reverberation_region(ph.volume, &mask, nf.axis, any_depth, &r);
   EXPECT_TRUE(r.found);
   EXPECT_GT(double(r.voxels), 0.3 * double(ph.volume.voxels()));
+  // With the defaults the grains do not stand out of the data's spread
+  // either: no train, whatever the depths.
+  any_depth.min_stand = ReverbParams().min_stand;
+  reverberation_region(ph.volume, &mask, nf.axis, any_depth, &r);
+  EXPECT_FALSE(r.found);
+  EXPECT_LT(r.stand, ReverbParams().min_stand);
+  EXPECT_GT(r.stand, 0.0);
 }
 
 TEST(Reverb, BrightTextureUnderAnObjectsFirstEchoIsNoReverberation) {
@@ -1085,6 +1110,7 @@ TEST(Reverb, BrightTextureUnderAnObjectsFirstEchoIsNoReverberation) {
     // themselves are there either way).
     ReverbParams no_gap;
     no_gap.min_gap = 0;
+    no_gap.min_stand = 0;  // the bright inside is most of the object's lines: the gap rule alone
     reverberation_region(v, nullptr, 2, no_gap, &r);
     EXPECT_TRUE(r.found) << "echo " << r.echo << " trough " << r.trough << " copy " << r.copy1 << " second "
                          << r.copy2 << " spacing " << r.spacing_mm << " lines " << r.lines;
@@ -1131,9 +1157,14 @@ TEST(Reverb, SkinFatAndFasciaOverGainRisingWithDepthAreNoTrain) {
                             test::seed() + 32);
   ReverbParams any_max;
   any_max.second_peak = false;
+  any_max.min_stand = 0;  // the second copy's test alone
   ReverbReport r;
   reverberation_region(v, nullptr, 2, any_max, &r);
   EXPECT_TRUE(r.found) << "spacing " << r.spacing_mm << " copy " << r.copy1 << " second " << r.copy2;
+  ReverbParams peak_only;
+  peak_only.min_stand = 0;
+  reverberation_region(v, nullptr, 2, peak_only, &r);
+  EXPECT_FALSE(r.found) << "spacing " << r.spacing_mm << " copy " << r.copy1 << " second " << r.copy2;
   const auto region = reverberation_region(v, nullptr, 2, ReverbParams{}, &r);
   EXPECT_FALSE(r.found) << "spacing " << r.spacing_mm << " copy " << r.copy1 << " second " << r.copy2;
   EXPECT_EQ(std::count(region.begin(), region.end(), std::uint8_t{1}), 0);
@@ -1157,6 +1188,7 @@ TEST(Reverb, RealFlatReflectorScanHasItsGhostsFoundTheSpineSweepNone) {
   ASSERT_TRUE(r.reverb.found);
   EXPECT_NEAR(r.reverb.spacing_mm, 3.0, 0.3);
   EXPECT_GT(r.reverb.copy1, 0.6 * r.reverb.echo);  // the first ghost nearly as bright as the reflector (0.74)
+  EXPECT_GT(r.reverb.stand, 2 * ReverbParams().min_stand);  // 8.1 spreads up
   // The reflector (rows 59-62 at the middle of the fan) stays, its first ghost (rows 88-91) goes.
   EXPECT_EQ(mask[v.index(167, 60, 11)], 1);
   EXPECT_EQ(mask[v.index(167, 90, 11)], 0);
