@@ -273,7 +273,8 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
     const std::vector<std::uint8_t> window =
         band_underside(in, nf, before, mask, g_band_sheet_params.window_mm, g_band_sheet_params.deep_mm);
     const BandSheetReport bs = hold_band_sheet(u, window, nf.axis, mask, g_band_sheet_params);
-    std::fprintf(stderr, "  band sheet: drawn on %zu of %zu lines, largest patch %.3f; deep: largest patch %.3f spread %.2f mm%s\n",
+    std::fprintf(stderr,
+                 "  band sheet: drawn on %zu of %zu lines, largest patch %.3f; deep: largest patch %.3f spread %.2f mm%s\n",
                  bs.drawn, bs.lines, bs.largest, bs.deep_largest, bs.deep_spread_mm, bs.held ? ", held" : "");
     if (bs.held) u = classify_variational(rt, lv.data, p, SolverParams{}, rep, nullptr, mp);
   }

@@ -1763,13 +1763,15 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
                                                                 [](std::uint8_t m) { return m != 0; }))
                                     : n;
   if (count < 100) return done();
-  const auto quantile = [&](double q) {
+  // The q-quantile of value(lowpassed sample) over the scanned voxels.
+  const auto quantile_of = [&](double q, const auto& value) {
     const auto k = std::size_t(q * double(count - 1));
     return double(kth_smallest_where(n, k, threads, [&](std::size_t i, float& f) {
-      f = lp[i];
+      f = value(lp[i]);
       return is_scanned(i);
     }));
   };
+  const auto quantile = [&](double q) { return quantile_of(q, [](float x) { return x; }); };
   const double lo = quantile(0.5), hi = quantile(0.99);
   if (!(hi > lo)) return done();
   // The strong echoes must stand out of the data's spread (1.4826 x the
@@ -1777,11 +1779,7 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
   // the 99th percentile is only a few spreads up, and its "first strong
   // echo" is speckle on every line.
   if (params.min_stand > 0) {
-    const std::size_t k = std::size_t(0.5 * double(count - 1));
-    const double spread = 1.4826 * double(kth_smallest_where(n, k, threads, [&](std::size_t i, float& f) {
-                            f = float(std::fabs(double(lp[i]) - lo));
-                            return is_scanned(i);
-                          }));
+    const double spread = 1.4826 * quantile_of(0.5, [lo](float x) { return float(std::fabs(double(x) - lo)); });
     rep.stand = spread > 0 ? (hi - lo) / spread : std::numeric_limits<double>::infinity();
     if (rep.stand < params.min_stand) return done();
   }

@@ -372,9 +372,10 @@ constexpr double kCutRemnantMm = 6.0;
 // Deeper, from window_mm to deep_mm under the band, only a flat sheet is
 // held: a patch of at least min_patch of the band's lines whose first drawn
 // voxel lies at the same depth under the band on its lines (the spread
-// between their quartiles at most flat_mm, or one voxel along the beam). The fascia under the
-// subcutaneous fat is such a sheet -- a bright line parallel to the skin
-// some millimetres under the skin's band, drawn across the whole probe --
+// between their quartiles at most flat_mm, or one voxel along the beam).
+// The fascia under the subcutaneous fat is such a sheet -- a bright line
+// parallel to the skin some millimetres under the skin's band, drawn across
+// the whole probe --
 // while an object near the probe (a head's crown, a spinous process) is
 // not flat under it. A flat sheet's lines are held in the deep window and,
 // from the sheet on, down its drawn run (u > threshold, to the deep window's
@@ -386,7 +387,9 @@ struct BandSheetParams {
   float threshold = 0.2f;  // the splat threshold
   double deep_mm = 8.0;
   double flat_mm = 1.0;
-  double margin_mm = 2.0;  // a deep sheet is held on past the deep window down its drawn run and this far (a shell's width: the layer's lower flank)
+  // A deep sheet is held on down its drawn run and this far more (a shell's
+  // width: the layer's lower flank).
+  double margin_mm = 2.0;
 };
 // The window under the band (1; 0 elsewhere): on each beam line along `axis`
 // (depth growing with the index) whose first voxel scanned in `before` (the

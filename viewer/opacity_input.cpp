@@ -172,11 +172,11 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
     note << ", gradient lowpass " << std::fixed << std::setprecision(2) << grad_choice->sigma_mm << " mm ("
          << (grad_choice->echoes ? "from the speckle" : "the strong edges are no echoes") << ")";
   if (sheet.held) {
+    const auto share = [&](std::size_t lines) { return 100.0 * double(lines) / double(sheet.lines); };
     note << ", the band's underside held (" << std::fixed << std::setprecision(0);
-    if (sheet.patches > 0) note << "a sheet on " << 100.0 * double(sheet.held_lines) / double(sheet.lines) << " % of its lines";
+    if (sheet.patches > 0) note << "a sheet on " << share(sheet.held_lines) << " % of its lines";
     if (sheet.patches > 0 && sheet.deep_patches > 0) note << ", ";
-    if (sheet.deep_patches > 0)
-      note << "a flat sheet deeper under it on " << 100.0 * double(sheet.deep_lines) / double(sheet.lines) << " % of its lines";
+    if (sheet.deep_patches > 0) note << "a flat sheet deeper under it on " << share(sheet.deep_lines) << " % of its lines";
     note << ")";
   }
   in.note = note.str();
