@@ -505,15 +505,18 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   }
   if (crests.empty())  // no usable voxel has a gradient (e.g. a one-voxel checkerboard)
     throw InputError("--iso auto: the volume has no boundary to pick an isovalue at (|grad v~| is 0 everywhere)");
-  std::vector<float> sorted = crests;
-  std::nth_element(sorted.begin(), sorted.begin() + long(sorted.size() / 2), sorted.end());
-  const double ridge_iso = sorted[sorted.size() / 2];
+  // The medians by the threads' selection (the order statistics nth_element gives).
+  const auto median_of = [&](const std::vector<float>& x) {
+    return double(kth_smallest_where(x.size(), x.size() / 2, threads, [&](std::size_t i, float& f) {
+      f = x[i];
+      return true;
+    }));
+  };
+  const double ridge_iso = median_of(crests);
   double local_iso = ridge_iso;
   HostVector<float> field;  // resize leaves it untouched: the threads filling it touch it first
   if (!locals.empty()) {
-    sorted = locals;
-    std::nth_element(sorted.begin(), sorted.begin() + long(sorted.size() / 2), sorted.end());
-    local_iso = sorted[sorted.size() / 2];
+    local_iso = median_of(locals);
     if (params.want_field) {
       // Normalised convolution of the edges' isovalues, with the global
       // median as a prior of field_prior edges' weight per Gaussian volume.

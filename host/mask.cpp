@@ -839,6 +839,54 @@ std::pair<double, double> brightness_variation(const Volume& v, const std::vecto
 
 }  // namespace
 
+namespace {
+
+// sq[x] = ((q[x] - p[x]) / h)^2 in double where both samples are nonzero
+// (not unscanned fill or the floor) and, with a mask m, both scanned
+// (m[x], m[x + m_step]); else 0. Returns how many pairs counted. Four at a
+// time in GCC vector types (built for AVX2 too, no fused multiply-add: the
+// same bits as one at a time).
+__attribute__((target_clones("avx2", "default"))) std::size_t neighbour_squares(const float* p, const float* q,
+                                                                               const std::uint8_t* m,
+                                                                               std::size_t m_step, double h,
+                                                                               std::size_t n, double* sq) {
+  typedef float v4f __attribute__((vector_size(16)));
+  typedef double v4d __attribute__((vector_size(32)));
+  typedef long long v4l __attribute__((vector_size(32)));
+  static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the mask bytes are read as a little-endian integer");
+  const v4l lanes = {0xffLL, 0xffLL << 8, 0xffLL << 16, 0xffLL << 24};  // lane j's byte of 4
+  const v4d zero = {0, 0, 0, 0}, hv = {h, h, h, h};
+  std::size_t count = 0, x = 0;
+  for (; x + 4 <= n; x += 4) {
+    v4f a, b;
+    std::memcpy(&a, p + x, sizeof a);
+    std::memcpy(&b, q + x, sizeof b);
+    const v4d ad = __builtin_convertvector(a, v4d), bd = __builtin_convertvector(b, v4d);
+    v4l ok = (ad != zero) & (bd != zero);
+    if (m) {
+      // 4 mask bytes as one integer in every lane, each lane testing its own
+      // byte (as normalised_taps does).
+      std::uint32_t m0, m1;
+      std::memcpy(&m0, m + x, sizeof m0);
+      std::memcpy(&m1, m + x + m_step, sizeof m1);
+      const v4l b0 = {m0, m0, m0, m0}, b1 = {m1, m1, m1, m1};
+      ok &= ((b0 & lanes) != 0) & ((b1 & lanes) != 0);
+    }
+    const v4d g = (bd - ad) / hv;
+    const v4d s = ok ? g * g : zero;
+    std::memcpy(sq + x, &s, sizeof s);
+    count += std::size_t(-(ok[0] + ok[1] + ok[2] + ok[3]));
+  }
+  for (; x < n; ++x) {
+    const bool ok = p[x] != 0.0f && q[x] != 0.0f && (!m || (m[x] && m[x + m_step]));
+    const double g = (double(q[x]) - double(p[x])) / h;
+    sq[x] = ok ? g * g : 0.0, count += ok;
+  }
+  return count;
+}
+
+}  // namespace
+
 int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int threads, std::size_t plane_step) {
   // Speckle is finest along the beam (the axial resolution is the best of
   // the three), so the data's mean squared difference between neighbours, per
@@ -851,6 +899,7 @@ int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int 
   std::vector<double> psum(3 * d[2], 0.0);
   std::vector<std::size_t> pcount(3 * d[2], 0);
   parallel_ranges(d[2], host_threads(threads), [&](std::size_t z0, std::size_t z1) {
+    std::vector<double> sq(d[0]);
     for (std::size_t z = z0; z < z1; ++z)
       for (int a = 0; a < 3; ++a) {
         if (d[a] < 2 || z % std::max<std::size_t>(1, plane_step) != 0) continue;
@@ -860,13 +909,15 @@ int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int 
         for (std::size_t y = 0; y < d[1]; ++y) {
           if (a == 1 && y + 1 >= d[1]) continue;
           const std::size_t x_end = a == 0 ? d[0] - 1 : d[0];
-          for (std::size_t x = 0, i = z * plane + y * d[0]; x < x_end; ++x, ++i) {  // i ascending, as before
-            const std::size_t j = i + stride[a];
-            if (v.data[i] == 0.0f || v.data[j] == 0.0f) continue;  // unscanned fill or the floor
-            if (scanned && (!(*scanned)[i] || !(*scanned)[j])) continue;
-            const double g = (double(v.data[j]) - double(v.data[i])) / v.spacing[a];
-            sum += g * g, ++count;
-          }
+          // The row's squares first (without branches: the zeros of dark
+          // speckle made them unpredictable; a skipped pair's square is 0),
+          // then their sum in ascending i, as before.
+          const float* p = v.data.data() + z * plane + y * d[0];
+          const float* q = p + stride[a];
+          const std::uint8_t* m = scanned ? scanned->data() + z * plane + y * d[0] : nullptr;
+          const double h = v.spacing[a];
+          count += neighbour_squares(p, q, m, stride[a], h, x_end, sq.data());
+          for (std::size_t x = 0; x < x_end; ++x) sum += sq[x];
         }
         psum[3 * z + std::size_t(a)] = sum, pcount[3 * z + std::size_t(a)] = count;
       }
@@ -916,7 +967,10 @@ __attribute__((target_clones("avx2", "default"))) void normalised_taps(float* ou
   typedef float v4f __attribute__((vector_size(16)));
   typedef double v4d __attribute__((vector_size(32)));
   typedef long long v4l __attribute__((vector_size(32)));
-  typedef unsigned char v4b __attribute__((vector_size(4)));
+  // Output x0 + j's mask byte within 8 bytes read as a little-endian integer.
+  static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the mask bytes are read as a little-endian integer");
+  const v4l lanes_lo = {0xffLL, 0xffLL << 8, 0xffLL << 16, 0xffLL << 24},
+            lanes_hi = {0xffLL << 32, 0xffLL << 40, 0xffLL << 48, (long long)(0xffULL << 56)};
   std::size_t x0 = 0;
   for (; x0 + 8 <= width; x0 += 8) {
     v4d a0 = {0, 0, 0, 0}, a1 = a0, s0 = a0, s1 = a0;
@@ -930,10 +984,13 @@ __attribute__((target_clones("avx2", "default"))) void normalised_taps(float* ou
       std::memcpy(&f1, src[t] + x0 + 4, sizeof f1);
       const v4d p0 = __builtin_convertvector(wk * f0, v4d), p1 = __builtin_convertvector(wk * f1, v4d);
       if (mask) {
-        v4b m0, m1;
-        std::memcpy(&m0, mask[t] + x0, sizeof m0);
-        std::memcpy(&m1, mask[t] + x0 + 4, sizeof m1);
-        const v4l c0 = __builtin_convertvector(m0, v4l) != 0, c1 = __builtin_convertvector(m1, v4l) != 0;
+        // The 8 mask bytes as one integer in every lane, each lane testing
+        // its own byte (a conversion of the bytes to lanes compiled to a
+        // scalar extraction and insert per byte: half the loop's time).
+        long long m;
+        std::memcpy(&m, mask[t] + x0, sizeof m);
+        const v4l mv = {m, m, m, m};
+        const v4l c0 = (mv & lanes_lo) != 0, c1 = (mv & lanes_hi) != 0;
         a0 += c0 ? p0 : zero, a1 += c1 ? p1 : zero;
         s0 += c0 ? wv : zero, s1 += c1 ? wv : zero;
       } else {
@@ -1011,16 +1068,21 @@ HostVector<float> lowpass_across_beam(const Volume& v, const std::vector<std::ui
         std::vector<const float*> rows(taps);
         std::vector<const std::uint8_t*> mrows(taps);
         std::vector<double> acc(ny), wsum(ny);
+        // The transposes in tiles of kTile x kTile (one whole plane at a
+        // time strode through the other side's cache lines).
+        constexpr std::size_t kTile = 16;
+        const auto transpose = [&](auto* to, const auto* from, std::size_t rows_in, std::size_t cols_in) {
+          for (std::size_t r0 = 0; r0 < rows_in; r0 += kTile)
+            for (std::size_t c0 = 0; c0 < cols_in; c0 += kTile)
+              for (std::size_t r = r0; r < std::min(r0 + kTile, rows_in); ++r)
+                for (std::size_t c = c0; c < std::min(c0 + kTile, cols_in); ++c) to[c * rows_in + r] = from[r * cols_in + c];
+        };
         for (std::size_t z = z0; z < z1; ++z) {
           const std::size_t plane = z * nx * ny;
-          for (std::size_t y = 0; y < ny; ++y)
-            for (std::size_t x = 0; x < nx; ++x) {
-              t[x * ny + y] = src[plane + y * nx + x];
-              if (mask) tm[x * ny + y] = mask[plane + y * nx + x];
-            }
+          transpose(t.data(), src + plane, ny, nx);
+          if (mask) transpose(tm.data(), mask + plane, ny, nx);
           filter_rows(tout.data(), t.data(), mask ? tm.data() : nullptr, nx, ny, ny, w, rows, mrows, acc, wsum);
-          for (std::size_t y = 0; y < ny; ++y)
-            for (std::size_t x = 0; x < nx; ++x) dst[plane + y * nx + x] = tout[x * ny + y];
+          transpose(dst + plane, tout.data(), nx, ny);
         }
       });
     } else if (axis == 1) {
@@ -1325,21 +1387,31 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     std::vector<std::vector<float>> presid(static_cast<std::size_t>(parts));
     std::vector<double> pmax(static_cast<std::size_t>(parts), vmax), pmin(static_cast<std::size_t>(parts), vmin);
     parallel_ranges_indexed(d[w_ax], threads, [&](int part, std::size_t b0, std::size_t b1) {
+      // Each thread's sums in locals, stored once at the end (updated in the
+      // shared vectors per voxel, the threads' cache lines ping-ponged: half
+      // a second at 256^3).
+      std::size_t count = 0;
+      float hi = -std::numeric_limits<float>::infinity(), lo = std::numeric_limits<float>::infinity();
+      std::vector<float>& resid = presid[std::size_t(part)];
+      const float* data = v.data.data();
+      const float* low = lp.data();
+      const std::uint8_t* in = scanned ? scanned->data() : nullptr;
       for (std::size_t z = 0; z < d[ax]; ++z)
         for (std::size_t bb = b0; bb < b1; ++bb)
           for (std::size_t a = 0; a < d[u_ax]; ++a) {
             const std::size_t l = a + bb * d[u_ax];
             const std::size_t i = voxel(a, bb, z);
-            if (scanned && !(*scanned)[i]) continue;
-            ++pall[std::size_t(part)];
-            pmax[std::size_t(part)] = std::max(pmax[std::size_t(part)], double(v.data[i]));
-            pmin[std::size_t(part)] = std::min(pmin[std::size_t(part)], double(v.data[i]));
+            if (in && !in[i]) continue;
+            ++count;
+            hi = std::max(hi, data[i]), lo = std::min(lo, data[i]);
             const long k = long(z) - skin[l];
             if (k < long(K)) {
-              A[l * K + std::size_t(k)] = lp[i];
-              if (k >= long(top_k) && k < long(K_search)) presid[std::size_t(part)].push_back(v.data[i] - lp[i]);
+              A[l * K + std::size_t(k)] = low[i];
+              if (k >= long(top_k) && k < long(K_search)) resid.push_back(data[i] - low[i]);
             }
           }
+      pall[std::size_t(part)] = count;
+      pmax[std::size_t(part)] = double(hi), pmin[std::size_t(part)] = double(lo);
     });
     for (std::size_t c : pall) all += c;
     for (const auto& pr : presid) R.insert(R.end(), pr.begin(), pr.end());
@@ -1358,13 +1430,23 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   // P(d): the median over the lines of their samples in each depth bin.
   std::vector<double> P(bins);
   {
-    std::vector<std::vector<float>> at_depth(bins);
-    for (std::size_t l = 0; l < lines; ++l)
-      for (std::size_t k = 0; k < K; ++k) {
-        const auto bin = std::size_t(double(k) * hz / 0.5);
-        if (bin < bins && !std::isnan(A[l * K + k])) at_depth[bin].push_back(A[l * K + k]);
-      }
-    for (std::size_t b = 0; b < bins; ++b) P[b] = median(at_depth[b]);
+    // Bins over threads: each gathers its bins' samples (line by line, as
+    // one serial pass did) and takes their medians.
+    std::vector<std::size_t> k_of_bin(bins + 1, K);  // the first k of each bin
+    for (std::size_t k = K; k-- > 0;) {
+      const auto bin = std::size_t(double(k) * hz / 0.5);
+      for (std::size_t b = 0; b <= std::min(bin, bins); ++b) k_of_bin[b] = std::min(k_of_bin[b], k);
+    }
+    parallel_ranges(bins, threads, [&](std::size_t b0, std::size_t b1) {
+      std::vector<std::vector<float>> at_depth(b1 - b0);
+      const std::size_t k0 = k_of_bin[b0], k1 = k_of_bin[b1];
+      for (std::size_t l = 0; l < lines; ++l)
+        for (std::size_t k = k0; k < k1; ++k) {
+          const auto bin = std::size_t(double(k) * hz / 0.5);
+          if (bin >= b0 && bin < b1 && !std::isnan(A[l * K + k])) at_depth[bin - b0].push_back(A[l * K + k]);
+        }
+      for (std::size_t b = b0; b < b1; ++b) P[b] = median(at_depth[b - b0]);
+    });
   }
   const auto top_bins = std::size_t(std::ceil(params.top_mm / 0.5));
   double top = -1e300, below = 1e300;
@@ -1384,9 +1466,17 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   // speckle_sds of it: on bright tissue (grey levels near the top of the
   // range) a saturated band can never be min_ratio brighter.
   if (R.size() >= 100) {
-    const double m = median(R);
-    for (float& x : R) x = float(std::fabs(double(x) - m));
-    rep.speckle_sd = 1.4826 * median(R);
+    // The medians by the threads' selection (the same order statistics as
+    // nth_element's).
+    const std::size_t half = R.size() / 2;
+    const double m = kth_smallest_where(R.size(), half, threads, [&](std::size_t i, float& f) {
+      f = R[i];
+      return true;
+    });
+    rep.speckle_sd = 1.4826 * double(kth_smallest_where(R.size(), half, threads, [&](std::size_t i, float& f) {
+                       f = float(std::fabs(double(R[i]) - m));
+                       return true;
+                     }));
   }
   std::vector<float>().swap(R);
   // Per beam line (docs/real-data.md, "The near field"): the line's own top,
@@ -1470,17 +1560,27 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     std::vector<std::uint32_t> top_at_max(lines, 0), top_count(lines, 0);
     const int parts = range_count(lines, threads);
     std::vector<std::size_t> pat(static_cast<std::size_t>(parts), 0), pcount(static_cast<std::size_t>(parts), 0);
-    parallel_ranges_indexed(lines, threads, [&](int part, std::size_t l0, std::size_t l1) {
-      for (std::size_t l = l0; l < l1; ++l) {
-        if (skin[l] < 0) continue;
-        for (std::size_t k = 0; k < std::max(top_k, K_search) && std::size_t(skin[l]) + k < d[ax]; ++k) {
-          const std::size_t i = voxel(l % d[u_ax], l / d[u_ax], std::size_t(skin[l]) + k);
-          if (scanned && !(*scanned)[i]) continue;
-          const bool at_max = double(v.data[i]) >= clip_level;
-          if (k < top_k) ++top_count[l], top_at_max[l] += at_max;
-          else if (k < K_search) ++pcount[std::size_t(part)], pat[std::size_t(part)] += at_max;
-        }
-      }
+    // In memory order, as A above (line by line, a cache miss per sample;
+    // integer counts: the same for any order), each thread's sums in locals.
+    const long k_end = long(std::max(top_k, K_search));
+    long z_end = 0;
+    for (std::size_t l = 0; l < lines; ++l) z_end = std::max(z_end, skin[l] + k_end);
+    z_end = std::min(z_end, long(d[ax]));
+    parallel_ranges_indexed(d[w_ax], threads, [&](int part, std::size_t b0, std::size_t b1) {
+      std::size_t at = 0, count = 0;
+      for (std::size_t z = 0; z < std::size_t(z_end); ++z)
+        for (std::size_t bb = b0; bb < b1; ++bb)
+          for (std::size_t a = 0; a < d[u_ax]; ++a) {
+            const std::size_t l = a + bb * d[u_ax];
+            const long k = long(z) - skin[l];
+            if (skin[l] < 0 || k < 0 || k >= k_end) continue;
+            const std::size_t i = voxel(a, bb, z);
+            if (scanned && !(*scanned)[i]) continue;
+            const bool at_max = double(v.data[i]) >= clip_level;
+            if (std::size_t(k) < top_k) ++top_count[l], top_at_max[l] += at_max;
+            else if (std::size_t(k) < K_search) ++count, at += at_max;
+          }
+      pat[std::size_t(part)] = at, pcount[std::size_t(part)] = count;
     });
     std::size_t at_max = 0, count = 0;
     for (int k = 0; k < parts; ++k) at_max += pat[std::size_t(k)], count += pcount[std::size_t(k)];
@@ -1771,8 +1871,14 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
       return is_scanned(i);
     }));
   };
-  const auto quantile = [&](double q) { return quantile_of(q, [](float x) { return x; }); };
-  const double lo = quantile(0.5), hi = quantile(0.99);
+  // lo and hi in one call (one count and one gather for both).
+  const std::vector<float> lo_hi = kth_smallest_of_where(
+      n, {std::size_t(0.5 * double(count - 1)), std::size_t(0.99 * double(count - 1))}, threads,
+      [&](std::size_t i, float& f) {
+        f = lp[i];
+        return is_scanned(i);
+      });
+  const double lo = lo_hi[0], hi = lo_hi[1];
   if (!(hi > lo)) return done();
   // The strong echoes must stand out of the data's spread (1.4826 x the
   // median absolute deviation from lo): in a texture without a reflector
@@ -1844,22 +1950,32 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
   if (!(params.max_spacing_mm / h >= double(smin)) || smax < smin) return done();
   // At most the beam lines' length (a spacing in the wrong unit made smax huge).
   const std::size_t S = std::min<std::size_t>(d[ax], std::size_t(std::ceil(double(smax) * (2.0 + params.tolerance))) + 1);
-  std::vector<std::vector<float>> at_s(S);
-  for (std::size_t l = 0; l < lines; ++l) {
-    if (echo[l] < 0) continue;
-    for (std::size_t s = 0; s < S && std::size_t(echo[l]) + s < d[ax]; ++s) {
-      const std::size_t i = at(l, std::size_t(echo[l]) + s);
-      if (is_scanned(i)) at_s[s].push_back(lp[i]);
+  // Depths over threads: each gathers its depths' samples, line by line,
+  // and takes their medians.
+  std::vector<double> median_at(S, 0.0);
+  std::vector<std::size_t> lines_at(S, 0);
+  parallel_ranges(S, threads, [&](std::size_t s0, std::size_t s1) {
+    std::vector<std::vector<float>> at_s(s1 - s0);
+    for (std::size_t l = 0; l < lines; ++l) {
+      if (echo[l] < 0) continue;
+      for (std::size_t s = s0; s < s1 && std::size_t(echo[l]) + s < d[ax]; ++s) {
+        const std::size_t i = at(l, std::size_t(echo[l]) + s);
+        if (is_scanned(i)) at_s[s - s0].push_back(lp[i]);
+      }
     }
-  }
+    for (std::size_t s = s0; s < s1; ++s) {
+      auto& x = at_s[s - s0];
+      lines_at[s] = x.size();
+      if (x.empty()) continue;
+      std::nth_element(x.begin(), x.begin() + long(x.size() / 2), x.end());
+      median_at[s] = double(x[x.size() / 2]);
+    }
+  });
   std::vector<double> Q;  // up to the first depth too few lines reach
   for (std::size_t s = 0; s < S; ++s) {
-    auto& x = at_s[s];
-    if (double(x.size()) < 0.25 * double(rep.lines)) break;
-    std::nth_element(x.begin(), x.begin() + long(x.size() / 2), x.end());
-    Q.push_back(double(x[x.size() / 2]));
+    if (double(lines_at[s]) < 0.25 * double(rep.lines)) break;
+    Q.push_back(median_at[s]);
   }
-  std::vector<std::vector<float>>().swap(at_s);
   const auto argext = [&](std::size_t a, std::size_t b, bool max) {  // [a, b], b < Q.size()
     std::size_t k = a;
     for (std::size_t s = a + 1; s <= b; ++s)
@@ -1983,11 +2099,13 @@ NearFieldReport remove_near_field(const Volume& v, std::vector<std::uint8_t>& sc
   // band, of the mask without the band. It never mixes depths along the
   // beam, so only the planes across the beam that hold band voxels change:
   // those are lowpassed again, as a slab of the volume (the same sums per
-  // voxel, the same bits), and the rest is the band's. Only with a mask
-  // before and after (a null mask is another sum) and the same sigma.
+  // voxel, the same bits), and the rest is the band's. Only with the same
+  // sigma. Without a mask (every voxel scanned) the lowpass adds the same
+  // terms in the same order as under a mask of ones (normalised_taps), so
+  // the band's lowpass serves there too, and a band found then makes the
+  // mask a plane at a time as before.
   HostVector<float> lp;
-  const bool share = params.band && params.reverb && !scanned.empty() &&
-                     params.reverb_params.sigma_mm == params.sigma_mm;
+  const bool share = params.band && params.reverb && params.reverb_params.sigma_mm == params.sigma_mm;
   if (params.band)
     band = near_field_band(v, scanned.empty() ? nullptr : &scanned, params, &rep, share ? &lp : nullptr);
   else

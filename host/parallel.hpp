@@ -77,15 +77,17 @@ void parallel_ranges(std::size_t n, int parts, F&& f) {
 }
 
 // The k-th smallest (k from 0) of the values that value(i, out) yields for i
-// in [0, n) (it returns false for an i that has none; no NaN): what
-// std::nth_element over them gives, without gathering them all. Floats order
-// as a key made of their bits (sign flipped for positives, all bits for
-// negatives; -0 taken as +0): count the values per top 16 bits of their key
-// on every thread, find the bucket that holds rank k, and select within it
-// (a serial gather and nth_element of 8 M values took 0.06-0.08 s at 256^3).
-// Throws std::invalid_argument when k is not below their count.
+// in [0, n) (it returns false for an i that has none; no NaN), for each k of
+// ks: what std::nth_element over them gives, without gathering them all.
+// Floats order as a key made of their bits (sign flipped for positives, all
+// bits for negatives; -0 taken as +0): count the values per top 16 bits of
+// their key on every thread, find the bucket that holds each rank, gather
+// those buckets' values in one more pass and select within each (a serial
+// gather and nth_element of 8 M values took 0.06-0.08 s at 256^3; two ranks
+// in one call count and gather once). Throws std::invalid_argument when a k
+// is not below their count.
 template <class Value>
-float kth_smallest_where(std::size_t n, std::size_t k, int threads, Value value) {
+std::vector<float> kth_smallest_of_where(std::size_t n, const std::vector<std::size_t>& ks, int threads, Value value) {
   constexpr std::size_t kBuckets = 1u << 16;
   auto bucket_of = [](float f) {
     f += 0.0f;  // -0 as +0
@@ -102,25 +104,51 @@ float kth_smallest_where(std::size_t n, std::size_t k, int threads, Value value)
     for (std::size_t i = i0; i < i1; ++i)
       if (value(i, f)) ++c[bucket_of(f)];
   });
-  std::size_t bucket = 0, below = 0;
-  for (;; ++bucket) {
-    if (bucket == kBuckets) throw std::invalid_argument("kth_smallest_where: k is not below the count");
-    std::size_t c = 0;
-    for (const auto& part : counts) c += part[bucket];
-    if (below + c > k) break;
-    below += c;
+  std::vector<std::size_t> total(kBuckets, 0);
+  for (const auto& part : counts)
+    for (std::size_t b = 0; b < kBuckets; ++b) total[b] += part[b];
+  // Each rank's bucket, and how many values lie in the buckets below it.
+  std::vector<std::size_t> bucket(ks.size()), below(ks.size());
+  std::vector<std::uint8_t> wanted(kBuckets, 0);
+  for (std::size_t j = 0; j < ks.size(); ++j) {
+    std::size_t b = 0, under = 0;
+    for (;; ++b) {
+      if (b == kBuckets) throw std::invalid_argument("kth_smallest_where: k is not below the count");
+      if (under + total[b] > ks[j]) break;
+      under += total[b];
+    }
+    bucket[j] = b, below[j] = under, wanted[b] = 1;
   }
-  std::vector<std::vector<float>> found;
-  found.resize(std::size_t(parts));
+  std::vector<std::vector<std::vector<float>>> found(std::size_t(parts), std::vector<std::vector<float>>(ks.size()));
   parallel_ranges_indexed(n, threads, [&](int t, std::size_t i0, std::size_t i1) {
     float f;
-    for (std::size_t i = i0; i < i1; ++i)
-      if (value(i, f) && bucket_of(f) == bucket) found[std::size_t(t)].push_back(f);
+    for (std::size_t i = i0; i < i1; ++i) {
+      if (!value(i, f)) continue;
+      const std::size_t b = bucket_of(f);
+      if (!wanted[b]) continue;
+      for (std::size_t j = 0; j < ks.size(); ++j)
+        if (bucket[j] == b) {
+          found[std::size_t(t)][j].push_back(f);
+          break;  // ranks in one bucket share the first one's values
+        }
+    }
   });
-  std::vector<float> in_bucket;
-  for (const auto& f : found) in_bucket.insert(in_bucket.end(), f.begin(), f.end());
-  std::nth_element(in_bucket.begin(), in_bucket.begin() + long(k - below), in_bucket.end());
-  return in_bucket[k - below];
+  std::vector<float> out(ks.size());
+  for (std::size_t j = 0; j < ks.size(); ++j) {
+    std::size_t first = 0;  // the first rank in this bucket holds its values
+    while (bucket[first] != bucket[j]) ++first;
+    std::vector<float> in_bucket;
+    for (const auto& part : found) in_bucket.insert(in_bucket.end(), part[first].begin(), part[first].end());
+    std::nth_element(in_bucket.begin(), in_bucket.begin() + long(ks[j] - below[j]), in_bucket.end());
+    out[j] = in_bucket[ks[j] - below[j]];
+  }
+  return out;
+}
+
+// The same for one rank.
+template <class Value>
+float kth_smallest_where(std::size_t n, std::size_t k, int threads, Value value) {
+  return kth_smallest_of_where(n, std::vector<std::size_t>{k}, threads, value)[0];
 }
 
 // A std::vector whose constructor and resize leave new floats (or other

@@ -2360,6 +2360,88 @@ TEST(HostThreads, KthNonNegativeIsNthElementOverTheNonNegativeValues) {
       EXPECT_EQ(got, ref[k]) << "k = " << k << ", threads " << threads;
     }
   }
+  // Several ranks in one call (one count, one gather), two of them in one
+  // bucket, in any order: each is what nth_element gives.
+  const std::vector<std::size_t> ks = {taken.size() * 99 / 100, taken.size() / 2, taken.size() / 2 + 1, 0};
+  for (const int threads : {1, 2, 5}) {
+    const std::vector<float> got = kth_smallest_of_where(h.size(), ks, threads, [&](std::size_t i, float& f) {
+      f = h[i];
+      return i % 2 == 0;
+    });
+    ASSERT_EQ(got.size(), ks.size());
+    for (std::size_t j = 0; j < ks.size(); ++j) {
+      std::vector<float> ref = taken;
+      std::nth_element(ref.begin(), ref.begin() + long(ks[j]), ref.end());
+      EXPECT_EQ(got[j], ref[ks[j]]) << "k = " << ks[j] << ", threads " << threads;
+    }
+  }
+  EXPECT_THROW(kth_smallest_of_where(h.size(), {0, taken.size()}, 2,
+                                     [&](std::size_t i, float& f) {
+                                       f = h[i];
+                                       return i % 2 == 0;
+                                     }),
+               std::invalid_argument);
+}
+
+TEST(NearField, LowpassWithoutAMaskIsTheLowpassUnderAMaskOfOnes) {
+  // remove_near_field hands the band's lowpass (no mask: every voxel
+  // scanned) to the reverberation rule, which would otherwise lowpass under
+  // a mask of ones: the two must be the same bits. Odd sizes leave tails
+  // after the blocks of 8, and every beam axis transposes another way.
+  std::mt19937 rng(test::seed());
+  std::uniform_real_distribution<float> uni(0.0f, 255.0f);
+  Volume v;
+  v.dims = {37, 29, 23};
+  v.spacing = {0.4, 0.5, 0.3};
+  v.data.resize(v.voxels());
+  for (float& x : v.data) x = uni(rng);
+  const std::vector<std::uint8_t> ones(v.voxels(), 1);
+  for (int ax = 0; ax < 3; ++ax) {
+    const HostVector<float> a = lowpass_across_beam(v, nullptr, ax, 1.0, 2);
+    const HostVector<float> b = lowpass_across_beam(v, &ones, ax, 1.0, 3);
+    ASSERT_EQ(a.size(), b.size());
+    EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(float)), 0) << "beam axis " << ax;
+  }
+  // With holes in the mask: a plain per-voxel normalised sum, in float64,
+  // agrees to rounding (the kernel's terms are float products summed in
+  // double, tap by tap).
+  std::vector<std::uint8_t> holes(v.voxels());
+  for (auto& m : holes) m = uni(rng) > 60.0f;
+  const HostVector<float> got = lowpass_across_beam(v, &holes, 2, 1.0, 2);
+  const std::vector<float> wx = gaussian_weights(1.0 / v.spacing[0], 3.0), wy = gaussian_weights(1.0 / v.spacing[1], 3.0);
+  const long rx = long(wx.size() / 2), ry = long(wy.size() / 2);
+  const Dims3& d = v.dims;
+  // Pass along x under the mask, then along y under the mask (an output with
+  // no scanned tap keeps its input).
+  std::vector<double> px(v.voxels());
+  for (std::size_t z = 0; z < d[2]; ++z)
+    for (std::size_t y = 0; y < d[1]; ++y)
+      for (std::size_t x = 0; x < d[0]; ++x) {
+        double a = 0, w = 0;
+        for (long k = -rx; k <= rx; ++k) {
+          const long xx = long(x) + k;
+          if (xx < 0 || xx >= long(d[0])) continue;
+          const std::size_t j = v.index(std::size_t(xx), y, z);
+          if (holes[j]) a += double(wx[std::size_t(k + rx)]) * v.data[j], w += wx[std::size_t(k + rx)];
+        }
+        const std::size_t i = v.index(x, y, z);
+        px[i] = w > 0 ? a / w : v.data[i];
+      }
+  double worst = 0;
+  for (std::size_t z = 0; z < d[2]; ++z)
+    for (std::size_t y = 0; y < d[1]; ++y)
+      for (std::size_t x = 0; x < d[0]; ++x) {
+        double a = 0, w = 0;
+        for (long k = -ry; k <= ry; ++k) {
+          const long yy = long(y) + k;
+          if (yy < 0 || yy >= long(d[1])) continue;
+          const std::size_t j = v.index(x, std::size_t(yy), z);
+          if (holes[j]) a += double(wy[std::size_t(k + ry)]) * px[j], w += wy[std::size_t(k + ry)];
+        }
+        const std::size_t i = v.index(x, y, z);
+        worst = std::max(worst, std::fabs((w > 0 ? a / w : px[i]) - double(got[i])));
+      }
+  EXPECT_LT(worst, 1e-3) << "largest deviation from the float64 reference (grey levels)";
 }
 
 TEST(HostThreads, MaskNearFieldFillAndIsoAreTheSameForAnyThreadCount) {
