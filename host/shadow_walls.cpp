@@ -2,6 +2,7 @@
 #include "shadow_walls.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <optional>
 #include <stdexcept>
@@ -105,6 +106,20 @@ FanBeams fan_beams(const std::vector<std::uint8_t>& scanned, const Dims3& dims, 
   return fan;
 }
 
+namespace {
+
+// std::lround(x) for |x| < 2^52 without a libm call: x - trunc(x) is exact
+// there, and a half rounds away from zero.
+long round_half_away(double x) {
+  long r = long(x);
+  const double frac = x - double(r);
+  if (frac >= 0.5) ++r;
+  else if (frac <= -0.5) --r;
+  return r;
+}
+
+}  // namespace
+
 std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::vector<std::uint8_t>* scanned,
                                       double iso, const ShadowWallParams& params, ShadowWallReport* report) {
   const Dims3& d = v.dims;
@@ -137,6 +152,17 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
     len = std::sqrt(len);
     for (int k = 0; k < 3; ++k) b[k] /= len;
   };
+  // beam_at's component along the axis alone (the same operations for it).
+  const auto beam_along = [&](const std::size_t c[3]) {
+    double b[3], len = 0;
+    for (int k = 0; k < 3; ++k) {
+      b[k] = k == ax ? (double(c[k]) - (fan.found ? fan.apex[k] : -1.0)) * v.spacing[std::size_t(k)]
+             : fan.spreads[k] ? (double(c[k]) - fan.apex[k]) * v.spacing[std::size_t(k)]
+                              : 0.0;
+      len += b[k] * b[k];
+    }
+    return b[ax] / std::sqrt(len);
+  };
   if (fan.found) {
     // Down each beam from the apex, plane by plane along the axis: a voxel's
     // predecessor is the nearest voxel of the plane above on its beam, and a
@@ -165,7 +191,7 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
               bool inside = true;
               for (int k = 0; k < 3; ++k) {
                 if (k == ax || !fan.spreads[k]) continue;
-                pc[k] = std::lround(fan.apex[k] + (double(c[k]) - fan.apex[k]) * (dd - 1.0) / dd);
+                pc[k] = round_half_away(fan.apex[k] + (double(c[k]) - fan.apex[k]) * (dd - 1.0) / dd);
                 inside = inside && pc[k] >= 0 && pc[k] < long(d[std::size_t(k)]);
               }
               if (inside) {
@@ -177,9 +203,7 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
             cur_top[cell] = top;
             if (!is_scanned(i)) continue;
             if (top < 0) cur_top[cell] = top = long(depth);
-            double b[3];
-            beam_at(c, b);
-            const double along = h_ax / std::fabs(b[ax]);  // mm along the beam per plane
+            const double along = h_ax / std::fabs(beam_along(c));  // mm along the beam per plane
             if (vs.data[i] > level) {
               if (double(long(depth) - top) * along >= params.fan_skip_mm) cur[cell] = long(depth);
             } else if (up >= 0 && vs.data[i] < level) {
@@ -237,7 +261,7 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
     std::size_t i0[3], i1[3];
     double f[3];
     for (int k = 0; k < 3; ++k) {
-      i0[k] = std::size_t(std::floor(c[k]));
+      i0[k] = std::size_t(c[k]);  // c >= 0: floor's value, without a libm call
       i1[k] = std::min(i0[k] + 1, d[std::size_t(k)] - 1);
       f[k] = c[k] - double(i0[k]);
     }
@@ -289,12 +313,22 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
   const Volume ws = params.smooth_mm > 0 ? lowpass_volume(rt, wall, {params.smooth_mm, 3.0}) : wall;
   std::vector<float> weight(n);
   std::size_t scanned_count = 0, in_shadow = 0, walls = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    weight[i] = std::clamp(1.0f - ws.data[i], 0.0f, 1.0f);
-    if (!is_scanned(i)) continue;
-    ++scanned_count;
-    in_shadow += shadow[i] > 0;
-    walls += weight[i] < 0.5f;
+  {
+    // Over threads; the counts are sums (the same for any split).
+    const int parts = range_count(n, threads);
+    std::vector<std::array<std::size_t, 3>> counts(std::size_t(parts), {0, 0, 0});
+    parallel_ranges_indexed(n, threads, [&](int part, std::size_t i0, std::size_t i1) {
+      std::size_t c0 = 0, c1 = 0, c2 = 0;
+      for (std::size_t i = i0; i < i1; ++i) {
+        weight[i] = std::clamp(1.0f - ws.data[i], 0.0f, 1.0f);
+        if (!is_scanned(i)) continue;
+        ++c0;
+        c1 += shadow[i] > 0;
+        c2 += weight[i] < 0.5f;
+      }
+      counts[std::size_t(part)] = {c0, c1, c2};
+    });
+    for (const auto& c : counts) scanned_count += c[0], in_shadow += c[1], walls += c[2];
   }
   if (report) {
     report->fan = fan;
