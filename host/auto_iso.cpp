@@ -506,17 +506,11 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   if (crests.empty())  // no usable voxel has a gradient (e.g. a one-voxel checkerboard)
     throw InputError("--iso auto: the volume has no boundary to pick an isovalue at (|grad v~| is 0 everywhere)");
   // The medians by the threads' selection (the order statistics nth_element gives).
-  const auto median_of = [&](const std::vector<float>& x) {
-    return double(kth_smallest_where(x.size(), x.size() / 2, threads, [&](std::size_t i, float& f) {
-      f = x[i];
-      return true;
-    }));
-  };
-  const double ridge_iso = median_of(crests);
+  const double ridge_iso = median_of(crests, threads);
   double local_iso = ridge_iso;
   HostVector<float> field;  // resize leaves it untouched: the threads filling it touch it first
   if (!locals.empty()) {
-    local_iso = median_of(locals);
+    local_iso = median_of(locals, threads);
     if (params.want_field) {
       // Normalised convolution of the edges' isovalues, with the global
       // median as a prior of field_prior edges' weight per Gaussian volume.

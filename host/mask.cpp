@@ -1432,19 +1432,17 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   {
     // Bins over threads: each gathers its bins' samples (line by line, as
     // one serial pass did) and takes their medians.
-    std::vector<std::size_t> k_of_bin(bins + 1, K);  // the first k of each bin
-    for (std::size_t k = K; k-- > 0;) {
-      const auto bin = std::size_t(double(k) * hz / 0.5);
-      for (std::size_t b = 0; b <= std::min(bin, bins); ++b) k_of_bin[b] = std::min(k_of_bin[b], k);
-    }
+    const auto bin_of = [&](std::size_t k) { return std::size_t(double(k) * hz / 0.5); };  // nondecreasing in k
+    std::vector<std::size_t> k_of_bin(bins + 1, K);  // the first k of bin b or beyond (K: none)
+    for (std::size_t k = 0, b = 0; k < K; ++k)
+      for (; b <= std::min(bin_of(k), bins); ++b) k_of_bin[b] = k;
     parallel_ranges(bins, threads, [&](std::size_t b0, std::size_t b1) {
       std::vector<std::vector<float>> at_depth(b1 - b0);
+      // k in [k0, k1) lies in exactly the bins [b0, b1).
       const std::size_t k0 = k_of_bin[b0], k1 = k_of_bin[b1];
       for (std::size_t l = 0; l < lines; ++l)
-        for (std::size_t k = k0; k < k1; ++k) {
-          const auto bin = std::size_t(double(k) * hz / 0.5);
-          if (bin >= b0 && bin < b1 && !std::isnan(A[l * K + k])) at_depth[bin - b0].push_back(A[l * K + k]);
-        }
+        for (std::size_t k = k0; k < k1; ++k)
+          if (!std::isnan(A[l * K + k])) at_depth[bin_of(k) - b0].push_back(A[l * K + k]);
       for (std::size_t b = b0; b < b1; ++b) P[b] = median(at_depth[b - b0]);
     });
   }
@@ -1468,15 +1466,9 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   if (R.size() >= 100) {
     // The medians by the threads' selection (the same order statistics as
     // nth_element's).
-    const std::size_t half = R.size() / 2;
-    const double m = kth_smallest_where(R.size(), half, threads, [&](std::size_t i, float& f) {
-      f = R[i];
-      return true;
-    });
-    rep.speckle_sd = 1.4826 * double(kth_smallest_where(R.size(), half, threads, [&](std::size_t i, float& f) {
-                       f = float(std::fabs(double(R[i]) - m));
-                       return true;
-                     }));
+    const double m = median_of(R, threads);
+    for (float& x : R) x = float(std::fabs(double(x) - m));
+    rep.speckle_sd = 1.4826 * double(median_of(R, threads));
   }
   std::vector<float>().swap(R);
   // Per beam line (docs/real-data.md, "The near field"): the line's own top,

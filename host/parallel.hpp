@@ -107,9 +107,11 @@ std::vector<float> kth_smallest_of_where(std::size_t n, const std::vector<std::s
   std::vector<std::size_t> total(kBuckets, 0);
   for (const auto& part : counts)
     for (std::size_t b = 0; b < kBuckets; ++b) total[b] += part[b];
-  // Each rank's bucket, and how many values lie in the buckets below it.
-  std::vector<std::size_t> bucket(ks.size()), below(ks.size());
-  std::vector<std::uint8_t> wanted(kBuckets, 0);
+  // Each rank's bucket, how many values lie in the buckets below it, and
+  // its slot: where its bucket's values are gathered (ranks in one bucket
+  // share the slot of the first of them; -1: a bucket no rank is in).
+  std::vector<std::size_t> below(ks.size());
+  std::vector<int> slot(ks.size()), slot_of(kBuckets, -1);
   for (std::size_t j = 0; j < ks.size(); ++j) {
     std::size_t b = 0, under = 0;
     for (;; ++b) {
@@ -117,28 +119,22 @@ std::vector<float> kth_smallest_of_where(std::size_t n, const std::vector<std::s
       if (under + total[b] > ks[j]) break;
       under += total[b];
     }
-    bucket[j] = b, below[j] = under, wanted[b] = 1;
+    if (slot_of[b] < 0) slot_of[b] = int(j);
+    below[j] = under, slot[j] = slot_of[b];
   }
   std::vector<std::vector<std::vector<float>>> found(std::size_t(parts), std::vector<std::vector<float>>(ks.size()));
   parallel_ranges_indexed(n, threads, [&](int t, std::size_t i0, std::size_t i1) {
     float f;
-    for (std::size_t i = i0; i < i1; ++i) {
-      if (!value(i, f)) continue;
-      const std::size_t b = bucket_of(f);
-      if (!wanted[b]) continue;
-      for (std::size_t j = 0; j < ks.size(); ++j)
-        if (bucket[j] == b) {
-          found[std::size_t(t)][j].push_back(f);
-          break;  // ranks in one bucket share the first one's values
-        }
-    }
+    for (std::size_t i = i0; i < i1; ++i)
+      if (value(i, f)) {
+        const int s = slot_of[bucket_of(f)];
+        if (s >= 0) found[std::size_t(t)][std::size_t(s)].push_back(f);
+      }
   });
   std::vector<float> out(ks.size());
   for (std::size_t j = 0; j < ks.size(); ++j) {
-    std::size_t first = 0;  // the first rank in this bucket holds its values
-    while (bucket[first] != bucket[j]) ++first;
     std::vector<float> in_bucket;
-    for (const auto& part : found) in_bucket.insert(in_bucket.end(), part[first].begin(), part[first].end());
+    for (const auto& part : found) in_bucket.insert(in_bucket.end(), part[std::size_t(slot[j])].begin(), part[std::size_t(slot[j])].end());
     std::nth_element(in_bucket.begin(), in_bucket.begin() + long(ks[j] - below[j]), in_bucket.end());
     out[j] = in_bucket[ks[j] - below[j]];
   }
@@ -149,6 +145,15 @@ std::vector<float> kth_smallest_of_where(std::size_t n, const std::vector<std::s
 template <class Value>
 float kth_smallest_where(std::size_t n, std::size_t k, int threads, Value value) {
   return kth_smallest_of_where(n, std::vector<std::size_t>{k}, threads, value)[0];
+}
+
+// x's element of rank x.size() / 2 (its upper median), as nth_element gives
+// it, selected on the threads. x must not be empty.
+inline float median_of(const std::vector<float>& x, int threads) {
+  return kth_smallest_where(x.size(), x.size() / 2, threads, [&x](std::size_t i, float& f) {
+    f = x[i];
+    return true;
+  });
 }
 
 // A std::vector whose constructor and resize leave new floats (or other

@@ -141,7 +141,8 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
   const FanBeams fan = params.fan && scanned ? fan_beams(*scanned, d, v.spacing, ax) : FanBeams{};
   // The beam through voxel c (unit, in mm): from the fan's apex, else along
   // the axis.
-  const auto beam_at = [&](const std::size_t c[3], double b[3]) {
+  // Its components before normalising, and their length.
+  const auto beam_unnormalised = [&](const std::size_t c[3], double b[3]) {
     double len = 0;
     for (int k = 0; k < 3; ++k) {
       b[k] = k == ax ? (double(c[k]) - (fan.found ? fan.apex[k] : -1.0)) * v.spacing[std::size_t(k)]
@@ -149,19 +150,17 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
                               : 0.0;
       len += b[k] * b[k];
     }
-    len = std::sqrt(len);
+    return std::sqrt(len);
+  };
+  const auto beam_at = [&](const std::size_t c[3], double b[3]) {
+    const double len = beam_unnormalised(c, b);
     for (int k = 0; k < 3; ++k) b[k] /= len;
   };
-  // beam_at's component along the axis alone (the same operations for it).
+  // Its component along the axis alone.
   const auto beam_along = [&](const std::size_t c[3]) {
-    double b[3], len = 0;
-    for (int k = 0; k < 3; ++k) {
-      b[k] = k == ax ? (double(c[k]) - (fan.found ? fan.apex[k] : -1.0)) * v.spacing[std::size_t(k)]
-             : fan.spreads[k] ? (double(c[k]) - fan.apex[k]) * v.spacing[std::size_t(k)]
-                              : 0.0;
-      len += b[k] * b[k];
-    }
-    return b[ax] / std::sqrt(len);
+    double b[3];
+    const double len = beam_unnormalised(c, b);
+    return b[ax] / len;
   };
   if (fan.found) {
     // Down each beam from the apex, plane by plane along the axis: a voxel's
