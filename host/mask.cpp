@@ -10,12 +10,15 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <limits>
 #include <numeric>
 #include <stdexcept>
 #include <utility>
+
+#include <immintrin.h>
 
 #include "error.hpp"
 #include "filter.hpp"
@@ -39,71 +42,73 @@ void for_face_neighbours(const Dims3& d, std::size_t i, F&& f) {
   if (z + 1 < d[2]) f(i + nxy);
 }
 
+// Byte loops over a row, as functions whose pointers are restrict: written
+// inline in the lambdas of filter_axis, each byte store might alias the row length
+// they captured by reference, which was then loaded again per byte and
+// nothing vectorised.
+void breaks_of(std::uint8_t* __restrict out, const std::uint8_t* __restrict in, std::size_t n, std::uint8_t flip) {
+  for (std::size_t x = 0; x < n; ++x) out[x] = std::uint8_t((in[x] != 0) ^ flip);
+}
+void or_into(std::uint8_t* __restrict acc, const std::uint8_t* __restrict in, std::size_t n) {
+  for (std::size_t x = 0; x < n; ++x) acc[x] |= in[x];
+}
+void xor_into(std::uint8_t* __restrict out, const std::uint8_t* __restrict in, std::size_t n, std::uint8_t flip) {
+  for (std::size_t x = 0; x < n; ++x) out[x] = in[x] ^ flip;
+}
+
 // One axis of a binary cube filter with half-width r, in place on `a`:
 // erode (all of [i - r, i + r] set; outside the volume counts as set) or
 // dilate (any of them set). Along x a row at a time, the 2r + 1 offsets ORed
-// in; along y (the rows of a z-plane) and z (the rows of a y-slice) running
-// counts for a whole row of x at once, O(voxels), so every read and write is
-// a contiguous row (the lines along z wrote a byte per plane: the cube filter
-// took 0.24-0.36 s of a 0.40-0.54 s mask at 256^3). Every line is read
-// before any of it is written.
+// in; along y (the rows of a z-plane) and z (the rows of a y-slice) the
+// window's rows ORed for a whole row of x at once, so every read and write
+// is a contiguous row (the lines along z wrote a byte per plane: the cube
+// filter took 0.24-0.36 s of a 0.40-0.54 s mask at 256^3). Every line is
+// read before any of it is written.
 void filter_axis(std::vector<std::uint8_t>& a, const Dims3& d, int axis, int r, bool erode, int threads) {
   const std::size_t nx = d[0], ny = d[1], nz = d[2];
-  // A voxel that breaks the test: unset for erosion, set for dilation.
-  const auto breaks = [erode](std::uint8_t v) { return std::uint32_t((v != 0) != erode); };
+  // A voxel that breaks the test: 1 where the byte is 0 (erode) or not 0
+  // (dilate); the output is the OR of the window's breaks, flipped back.
+  const std::uint8_t flip = erode ? 1 : 0;
   const std::size_t len = d[axis];
   if (axis == 0) {
     // Per row, the breaks at each offset t in [-r, r] ORed in (clamped to
     // the row: the window's part inside the volume), a pass per offset that
     // vectorises (r is the mask's cube half-width, 2 by default).
     parallel_ranges(ny * nz, threads, [&](std::size_t l0, std::size_t l1) {
-      std::vector<std::uint8_t> brk(nx), any(nx);
+      const std::size_t w = nx;
+      std::vector<std::uint8_t> brk(w), any(w);
       for (std::size_t l = l0; l < l1; ++l) {
-        std::uint8_t* const row = a.data() + l * nx;
-        for (std::size_t i = 0; i < nx; ++i) brk[i] = std::uint8_t(breaks(row[i]));
+        std::uint8_t* const row = a.data() + l * w;
+        breaks_of(brk.data(), row, w, flip);
         std::fill(any.begin(), any.end(), std::uint8_t{0});
         for (long t = -long(r); t <= long(r); ++t) {
-          const long i0 = std::max(0L, -t), i1 = long(nx) - std::max(0L, t);
+          const long i0 = std::max(0L, -t), i1 = long(w) - std::max(0L, t);
           if (i1 <= i0) continue;
-          const std::uint8_t* const src = brk.data() + (i0 + t);  // brk[i + t] for i from i0
-          std::uint8_t* const dst = any.data() + i0;
-          for (long j = 0; j < i1 - i0; ++j) dst[j] |= src[j];
+          or_into(any.data() + i0, brk.data() + (i0 + t), std::size_t(i1 - i0));  // brk[i + t] for i from i0
         }
-        for (std::size_t i = 0; i < nx; ++i) row[i] = std::uint8_t(erode ? !any[i] : any[i]);
+        xor_into(row, any.data(), w, flip);
       }
     });
     return;
   }
-  // The rows along the axis: of z-plane o (y) or of y-slice o (z), copied
-  // first; a running count per x of the breaks in the window [k - r, k + r].
+  // The rows along the axis: of z-plane o (y) or of y-slice o (z), their
+  // breaks copied first; each output row the OR of the window's rows
+  // [k - r, k + r] (clamped), 2r + 1 byte passes that vectorise.
   const std::size_t outer = axis == 1 ? nz : ny, step = axis == 1 ? nx : nx * ny;
   parallel_ranges(outer, threads, [&](std::size_t o0, std::size_t o1) {
-    std::vector<std::uint8_t> rows(len * nx);
-    std::vector<std::uint32_t> count(nx);
+    const std::size_t w = nx;
+    std::vector<std::uint8_t> rows(len * w), any(w);
     for (std::size_t o = o0; o < o1; ++o) {
-      std::uint8_t* const base = a.data() + (axis == 1 ? o * nx * ny : o * nx);
-      for (std::size_t k = 0; k < len; ++k) std::copy_n(base + k * step, nx, rows.data() + k * nx);
-      std::fill(count.begin(), count.end(), 0u);
-      for (std::size_t k = 0; k < std::min(len, std::size_t(r) + 1); ++k)
-        for (std::size_t x = 0; x < nx; ++x) count[x] += breaks(rows[k * nx + x]);
+      std::uint8_t* const base = a.data() + (axis == 1 ? o * w * ny : o * w);
+      for (std::size_t k = 0; k < len; ++k) breaks_of(rows.data() + k * w, base + k * step, w, flip);
       for (std::size_t k = 0; k < len; ++k) {
-        std::uint8_t* const out = base + k * step;
-        for (std::size_t x = 0; x < nx; ++x) out[x] = std::uint8_t(erode ? count[x] == 0 : count[x] != 0);
-        if (k + std::size_t(r) + 1 < len) {
-          const std::uint8_t* const in = rows.data() + (k + std::size_t(r) + 1) * nx;
-          for (std::size_t x = 0; x < nx; ++x) count[x] += breaks(in[x]);
-        }
-        if (k >= std::size_t(r)) {
-          const std::uint8_t* const gone = rows.data() + (k - std::size_t(r)) * nx;
-          for (std::size_t x = 0; x < nx; ++x) count[x] -= breaks(gone[x]);
-        }
+        const std::size_t q0 = k > std::size_t(r) ? k - std::size_t(r) : 0, q1 = std::min(len - 1, k + std::size_t(r));
+        std::copy_n(rows.data() + q0 * w, w, any.data());
+        for (std::size_t q = q0 + 1; q <= q1; ++q) or_into(any.data(), rows.data() + q * w, w);
+        xor_into(base + k * step, any.data(), w, flip);
       }
     }
   });
-}
-
-void cube_filter(std::vector<std::uint8_t>& a, const Dims3& d, int r, bool erode, int threads) {
-  for (int axis = 0; axis < 3; ++axis) filter_axis(a, d, axis, r, erode, threads);
 }
 
 // The unscanned voxels (mask 0) with a face neighbour that passes `take`, in
@@ -216,6 +221,10 @@ std::vector<std::uint8_t> between_data(const Dims3& d, const std::vector<std::ui
 
 }  // namespace
 
+void mask_detail::cube_filter(std::vector<std::uint8_t>& a, const Dims3& d, int r, bool erode, int threads) {
+  for (int axis = 0; axis < 3; ++axis) filter_axis(a, d, axis, r, erode, threads);
+}
+
 std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params, MaskReport* report) {
   const Dims3& d = v.dims;
   const std::size_t n = v.voxels();
@@ -234,32 +243,32 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
   rep.zeros = static_cast<std::size_t>(std::count(zero.begin(), zero.end(), std::uint8_t{1}));
   std::vector<std::uint8_t> solid = zero;
   if (params.solid > 0) {
-    cube_filter(solid, d, params.solid, true, threads);
-    cube_filter(solid, d, params.solid, false, threads);
+    mask_detail::cube_filter(solid, d, params.solid, true, threads);
+    mask_detail::cube_filter(solid, d, params.solid, false, threads);
   }
 
   // 2. Flood fill of the solid regions from the volume's faces. state: 0 not
   // visited, 1 visited (region too small or being measured), 2 unscanned.
   enum : std::uint8_t { kFree = 0, kSeen = 1, kUnscanned = 2, kFluid = 3 };  // kFluid: 2c gave it back to the scan
   std::vector<std::uint8_t> state(n, kFree);
-  std::vector<std::size_t> stack;
-  auto fill = [&](std::size_t seed, std::uint8_t from, std::uint8_t to) {
-    std::size_t size = 0;
-    stack.clear();
+  std::vector<std::size_t> stack, region;
+  // Marks the solid free region around seed as seen; its voxels in `region`.
+  auto fill = [&](std::size_t seed) {
+    stack.clear(), region.clear();
     stack.push_back(seed);
-    state[seed] = to;
+    state[seed] = kSeen;
     while (!stack.empty()) {
       const std::size_t i = stack.back();
       stack.pop_back();
-      ++size;
+      region.push_back(i);
       for_face_neighbours(d, i, [&](std::size_t j) {
-        if (state[j] == from && solid[j]) {
-          state[j] = to;
+        if (state[j] == kFree && solid[j]) {
+          state[j] = kSeen;
           stack.push_back(j);
         }
       });
     }
-    return size;
+    return region.size();
   };
   for (std::size_t z = 0; z < d[2]; ++z)
     for (std::size_t y = 0; y < d[1]; ++y)
@@ -272,9 +281,9 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
         const std::size_t i = v.index(x, y, z);
         if (state[i] != kFree || !solid[i]) continue;
         ++rep.regions;
-        if (fill(i, kFree, kSeen) >= min_size) {
+        if (fill(i) >= min_size) {
           ++rep.unscanned_regions;
-          fill(i, kSeen, kUnscanned);
+          for (const std::size_t j : region) state[j] = kUnscanned;  // (a second flood fill before)
         }
       }
   std::vector<std::uint8_t> mask(n);
@@ -334,11 +343,15 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
       const auto nparts = static_cast<std::size_t>(parts);
       std::vector<std::size_t> pe(nparts, 0), pt(nparts, 0);
       parallel_ranges_indexed(d[2], threads, [&](int k, std::size_t z0, std::size_t z1) {
+        // Counted in locals (in the shared vectors per voxel, the threads'
+        // cache lines ping-ponged).
+        std::size_t e = 0, t = 0;
         each_voxel(z0, z1, [&](std::size_t i, std::size_t l, std::uint32_t pos) {
           if (state[i] != kUnscanned) return;
-          ++pt[std::size_t(k)];
-          pe[std::size_t(k)] += first[l] < pos && pos < last[l];
+          ++t;
+          e += first[l] < pos && pos < last[l];
         });
+        pe[std::size_t(k)] = e, pt[std::size_t(k)] = t;
       });
       for (int k = 0; k < parts; ++k) enclosed += pe[std::size_t(k)], total += pt[std::size_t(k)];
     }
@@ -465,8 +478,8 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
       std::vector<std::uint8_t> plane(w * h);  // the face's zeros, opened by the square
       for (std::size_t p = 0; p < w * h; ++p) plane[p] = zero[index(p)];
       const Dims3 pd{w, h, 1};
-      cube_filter(plane, pd, params.solid, true, threads);  // one plane: the square of step 1's cube
-      cube_filter(plane, pd, params.solid, false, threads);
+      mask_detail::cube_filter(plane, pd, params.solid, true, threads);  // one plane: the square of step 1's cube
+      mask_detail::cube_filter(plane, pd, params.solid, false, threads);
       // Flood the face from its unscanned voxels through those zeros (the
       // face's plane holds the whole path: a voxel off the face is no zero
       // of it).
@@ -954,54 +967,85 @@ namespace {
 // mask is null) / the sum of their weights, or fallback[x] when none is
 // scanned. Each output's terms are added in tap order in double, an
 // unscanned tap adding 0 (which leaves a sum that started at +0 unchanged:
-// the same bits as skipping it). Built for AVX2 too (products and sums as
-// written, no fused multiply-add: the same bits as the default build).
-__attribute__((target_clones("avx2", "default"))) void normalised_taps(float* out, const float* const* src,
-                                                                    const std::uint8_t* const* mask, const float* w,
-                                                                    std::size_t taps, std::size_t width, double* acc,
-                                                                    double* wsum, const float* fallback) {
-  // Blocks of 8 outputs keep their sums in registers over all taps (per tap
-  // and output the loop below loads and stores two doubles: bound by the
-  // L1's load/store rate). GCC vector types: two lanes per SSE2 register in
-  // the default build, four per AVX2 register.
+// the same bits as skipping it), products in float. Two builds of it give
+// the same bits: the portable one below (GCC vector types) and an AVX2 one
+// (intrinsics: GCC's vector types converted each 4 floats to doubles in two
+// halves and an insert, a third of the loop), chosen once by the CPU.
+//
+// Blocks of 8 outputs keep their sums in registers over all taps (per tap
+// and output a loop over taps in memory loads and stores two doubles: bound
+// by the L1's load/store rate). A block whose outputs see only scanned taps
+// (the mask's interior: most blocks) adds every term and takes the weights'
+// sum over every tap, added in tap order (the same additions as each lane's).
+void normalised_taps_portable(float* out, const float* const* src, const std::uint8_t* const* mask, const float* w,
+                              std::size_t taps, std::size_t width, double* acc, double* wsum, const float* fallback,
+                              double all_taps, std::size_t x0) {
+  // Two lanes per SSE2 register.
   typedef float v4f __attribute__((vector_size(16)));
   typedef double v4d __attribute__((vector_size(32)));
   typedef long long v4l __attribute__((vector_size(32)));
+  typedef int v4i __attribute__((vector_size(16)));
   // Output x0 + j's mask byte within 8 bytes read as a little-endian integer.
-  static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the mask bytes are read as a little-endian integer");
   const v4l lanes_lo = {0xffLL, 0xffLL << 8, 0xffLL << 16, 0xffLL << 24},
             lanes_hi = {0xffLL << 32, 0xffLL << 40, 0xffLL << 48, (long long)(0xffULL << 56)};
-  std::size_t x0 = 0;
+  const v4d all_v = {all_taps, all_taps, all_taps, all_taps};
   for (; x0 + 8 <= width; x0 += 8) {
     v4d a0 = {0, 0, 0, 0}, a1 = a0, s0 = a0, s1 = a0;
     const v4d zero = a0;
-    for (std::size_t t = 0; t < taps; ++t) {
-      const float wk = w[t];
-      const double wd = wk;
-      const v4d wv = {wd, wd, wd, wd};
-      v4f f0, f1;
-      std::memcpy(&f0, src[t] + x0, sizeof f0);
-      std::memcpy(&f1, src[t] + x0 + 4, sizeof f1);
-      const v4d p0 = __builtin_convertvector(wk * f0, v4d), p1 = __builtin_convertvector(wk * f1, v4d);
-      if (mask) {
+    bool every = true;
+    if (mask) {
+      constexpr std::uint64_t kOnes = 0x0101010101010101ULL, kHighs = 0x8080808080808080ULL;
+      std::uint64_t zero_byte = 0;  // a high bit where some tap's byte is 0
+      for (std::size_t t = 0; t < taps; ++t) {
+        std::uint64_t m;
+        std::memcpy(&m, mask[t] + x0, sizeof m);
+        zero_byte |= (m - kOnes) & ~m & kHighs;
+      }
+      every = zero_byte == 0;
+    }
+    if (every) {
+      for (std::size_t t = 0; t < taps; ++t) {
+        const float wk = w[t];
+        v4f f0, f1;
+        std::memcpy(&f0, src[t] + x0, sizeof f0);
+        std::memcpy(&f1, src[t] + x0 + 4, sizeof f1);
+        a0 += __builtin_convertvector(wk * f0, v4d), a1 += __builtin_convertvector(wk * f1, v4d);
+      }
+      s0 = all_v, s1 = all_v;
+    } else {
+      for (std::size_t t = 0; t < taps; ++t) {
+        const float wk = w[t];
+        const double wd = wk;
+        const v4d wv = {wd, wd, wd, wd};
+        v4f f0, f1;
+        std::memcpy(&f0, src[t] + x0, sizeof f0);
+        std::memcpy(&f1, src[t] + x0 + 4, sizeof f1);
+        const v4d p0 = __builtin_convertvector(wk * f0, v4d), p1 = __builtin_convertvector(wk * f1, v4d);
         // The 8 mask bytes as one integer in every lane, each lane testing
-        // its own byte (a conversion of the bytes to lanes compiled to a
-        // scalar extraction and insert per byte: half the loop's time).
+        // its own byte.
         long long m;
         std::memcpy(&m, mask[t] + x0, sizeof m);
         const v4l mv = {m, m, m, m};
         const v4l c0 = (mv & lanes_lo) != 0, c1 = (mv & lanes_hi) != 0;
         a0 += c0 ? p0 : zero, a1 += c1 ? p1 : zero;
         s0 += c0 ? wv : zero, s1 += c1 ? wv : zero;
-      } else {
-        a0 += p0, a1 += p1, s0 += wv, s1 += wv;
       }
     }
-    for (int j = 0; j < 4; ++j) acc[x0 + j] = a0[j], acc[x0 + 4 + j] = a1[j], wsum[x0 + j] = s0[j], wsum[x0 + 4 + j] = s1[j];
+    // The quotients four at a time (division and narrowing round as the
+    // scalar ones do); an output without a scanned tap keeps its fallback.
+    v4f fb0, fb1;
+    std::memcpy(&fb0, fallback + x0, sizeof fb0);
+    std::memcpy(&fb1, fallback + x0 + 4, sizeof fb1);
+    const v4f q0 = __builtin_convertvector(a0 / s0, v4f), q1 = __builtin_convertvector(a1 / s1, v4f);
+    const v4i k0 = __builtin_convertvector(s0 > zero, v4i), k1 = __builtin_convertvector(s1 > zero, v4i);
+    const v4f o0 = k0 ? q0 : fb0, o1 = k1 ? q1 : fb1;
+    std::memcpy(out + x0, &o0, sizeof o0);
+    std::memcpy(out + x0 + 4, &o1, sizeof o1);
   }
+  // The tail, output by output.
   std::fill(acc + x0, acc + width, 0.0), std::fill(wsum + x0, wsum + width, 0.0);
   for (std::size_t t = 0; t < taps && x0 < width; ++t) {
-    const float wk = w[t];  // float products, as the per-voxel loop
+    const float wk = w[t];
     const float* s = src[t];
     if (mask) {
       const std::uint8_t* m = mask[t];
@@ -1013,7 +1057,99 @@ __attribute__((target_clones("avx2", "default"))) void normalised_taps(float* ou
       for (std::size_t x = x0; x < width; ++x) acc[x] += wk * s[x], wsum[x] += wk;
     }
   }
-  for (std::size_t x = 0; x < width; ++x) out[x] = wsum[x] > 0 ? float(acc[x] / wsum[x]) : fallback[x];
+  for (std::size_t x = x0; x < width; ++x) out[x] = wsum[x] > 0 ? float(acc[x] / wsum[x]) : fallback[x];
+}
+
+// 8 outputs a0 / s0 (the first 4), a1 / s1, narrowed to float, or the
+// fallback where a weight sum is 0.
+__attribute__((target("avx2"))) inline void store_quotients(float* out, const float* fallback, __m256d a0,
+                                                            __m256d a1, __m256d s0, __m256d s1) {
+  const __m256d zero = _mm256_setzero_pd();
+  const __m256 q = _mm256_set_m128(_mm256_cvtpd_ps(_mm256_div_pd(a1, s1)), _mm256_cvtpd_ps(_mm256_div_pd(a0, s0)));
+  const __m256 keep = _mm256_set_m128(_mm256_cvtpd_ps(_mm256_cmp_pd(s1, zero, _CMP_GT_OQ)),
+                                      _mm256_cvtpd_ps(_mm256_cmp_pd(s0, zero, _CMP_GT_OQ)));
+  _mm256_storeu_ps(out, _mm256_blendv_ps(_mm256_loadu_ps(fallback), q, keep));
+}
+
+// The AVX2 build's blocks (no fused multiply-add: products and sums as the
+// portable build rounds them); returns where the tail starts.
+__attribute__((target("avx2"))) std::size_t normalised_taps_avx2(float* out, const float* const* src,
+                                                                 const std::uint8_t* const* mask, const float* w,
+                                                                 std::size_t taps, std::size_t width,
+                                                                 double all_taps, const float* fallback) {
+  const __m256d zero = _mm256_setzero_pd(), all_v = _mm256_set1_pd(all_taps);
+  const __m256i zero_i = _mm256_setzero_si256();
+  std::size_t x0 = 0;
+  constexpr std::uint64_t kOnes = 0x0101010101010101ULL, kHighs = 0x8080808080808080ULL;
+  const auto every_of = [&](std::size_t at, std::size_t bytes) {
+    std::uint64_t zero_byte = 0;  // a high bit where some tap's byte is 0
+    for (std::size_t t = 0; t < taps; ++t)
+      for (std::size_t b = 0; b < bytes; b += 8) {
+        std::uint64_t m;
+        std::memcpy(&m, mask[t] + at + b, sizeof m);
+        zero_byte |= (m - kOnes) & ~m & kHighs;
+      }
+    return zero_byte == 0;
+  };
+  while (x0 + 8 <= width) {
+    // 16 outputs whose taps are all scanned: four sums per tap that do not
+    // wait for each other.
+    if (x0 + 16 <= width && (!mask || every_of(x0, 16))) {
+      __m256d a0 = zero, a1 = zero, a2 = zero, a3 = zero;
+      for (std::size_t t = 0; t < taps; ++t) {
+        const __m256 wk = _mm256_set1_ps(w[t]);
+        const __m256 p = _mm256_mul_ps(wk, _mm256_loadu_ps(src[t] + x0));
+        const __m256 p2 = _mm256_mul_ps(wk, _mm256_loadu_ps(src[t] + x0 + 8));
+        a0 = _mm256_add_pd(a0, _mm256_cvtps_pd(_mm256_castps256_ps128(p)));
+        a1 = _mm256_add_pd(a1, _mm256_cvtps_pd(_mm256_extractf128_ps(p, 1)));
+        a2 = _mm256_add_pd(a2, _mm256_cvtps_pd(_mm256_castps256_ps128(p2)));
+        a3 = _mm256_add_pd(a3, _mm256_cvtps_pd(_mm256_extractf128_ps(p2, 1)));
+      }
+      store_quotients(out + x0, fallback + x0, a0, a1, all_v, all_v);
+      store_quotients(out + x0 + 8, fallback + x0 + 8, a2, a3, all_v, all_v);
+      x0 += 16;
+      continue;
+    }
+    // 8 outputs, their taps all scanned or not.
+    __m256d a0 = zero, a1 = zero, s0 = zero, s1 = zero;
+    if (!mask || every_of(x0, 8)) {
+      for (std::size_t t = 0; t < taps; ++t) {
+        const __m256 p = _mm256_mul_ps(_mm256_set1_ps(w[t]), _mm256_loadu_ps(src[t] + x0));
+        a0 = _mm256_add_pd(a0, _mm256_cvtps_pd(_mm256_castps256_ps128(p)));
+        a1 = _mm256_add_pd(a1, _mm256_cvtps_pd(_mm256_extractf128_ps(p, 1)));
+      }
+      s0 = all_v, s1 = all_v;
+    } else {
+      for (std::size_t t = 0; t < taps; ++t) {
+        const __m256 p = _mm256_mul_ps(_mm256_set1_ps(w[t]), _mm256_loadu_ps(src[t] + x0));
+        const __m256d wv = _mm256_set1_pd(double(w[t]));
+        // All ones in a lane whose mask byte is 0: that lane adds +0.
+        const __m128i m8 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(mask[t] + x0));
+        const __m256d u0 = _mm256_castsi256_pd(_mm256_cmpeq_epi64(_mm256_cvtepu8_epi64(m8), zero_i));
+        const __m256d u1 = _mm256_castsi256_pd(_mm256_cmpeq_epi64(_mm256_cvtepu8_epi64(_mm_srli_si128(m8, 4)), zero_i));
+        a0 = _mm256_add_pd(a0, _mm256_andnot_pd(u0, _mm256_cvtps_pd(_mm256_castps256_ps128(p))));
+        a1 = _mm256_add_pd(a1, _mm256_andnot_pd(u1, _mm256_cvtps_pd(_mm256_extractf128_ps(p, 1))));
+        s0 = _mm256_add_pd(s0, _mm256_andnot_pd(u0, wv));
+        s1 = _mm256_add_pd(s1, _mm256_andnot_pd(u1, wv));
+      }
+    }
+    store_quotients(out + x0, fallback + x0, a0, a1, s0, s1);
+    x0 += 8;
+  }
+  return x0;
+}
+
+std::atomic<bool> g_portable_taps{false};  // mask_detail::use_portable_taps
+
+void normalised_taps(float* out, const float* const* src, const std::uint8_t* const* mask, const float* w,
+                     std::size_t taps, std::size_t width, double* acc, double* wsum, const float* fallback) {
+  double all_taps = 0;
+  for (std::size_t t = 0; t < taps; ++t) all_taps += double(w[t]);
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  std::size_t x0 = 0;
+  if (avx2 && !g_portable_taps.load(std::memory_order_relaxed))
+    x0 = normalised_taps_avx2(out, src, mask, w, taps, width, all_taps, fallback);
+  normalised_taps_portable(out, src, mask, w, taps, width, acc, wsum, fallback, all_taps, x0);
 }
 
 // Filters along the rows' index of a len x width array (row p at
@@ -1036,13 +1172,36 @@ void filter_rows(float* out, const float* src, const std::uint8_t* mask, std::si
   }
 }
 
+// Filters one row along itself (the taps x + k, k in [-r, r] clamped to the
+// row), the same sums as filter_rows on the row's transpose: one call of
+// normalised_taps whose tap rows are the row shifted, padded with r
+// unscanned samples either side (a tap outside adds 0 to both sums: the
+// same bits as not visiting it). pad and mpad hold len + 2r + 8.
+void filter_along_row(float* out, const float* src, const std::uint8_t* mask, std::size_t len,
+                      const std::vector<float>& w, std::vector<const float*>& rows,
+                      std::vector<const std::uint8_t*>& mrows, std::vector<double>& acc, std::vector<double>& wsum,
+                      std::vector<float>& pad, std::vector<std::uint8_t>& mpad) {
+  const std::size_t r = w.size() / 2;
+  std::copy(src, src + len, pad.begin() + long(r));
+  if (mask)
+    std::copy(mask, mask + len, mpad.begin() + long(r));
+  else
+    std::fill(mpad.begin() + long(r), mpad.begin() + long(r + len), std::uint8_t(1));
+  for (std::size_t t = 0; t < w.size(); ++t) rows[t] = pad.data() + t, mrows[t] = mpad.data() + t;
+  normalised_taps(out, rows.data(), mrows.data(), w.data(), w.size(), len, acc.data(), wsum.data(), src);
+}
+
 }  // namespace
 
+void mask_detail::use_portable_taps(bool on) { g_portable_taps.store(on); }
+
 // Every pass filters whole rows at a time, vectorised across them: along y
-// (z) the rows of a z-plane (y-slice); along x a z-plane transposed, so its
-// columns are rows. Split by z-planes or y-rows, the result does not depend
-// on the thread count. (Along x it ran voxel by voxel, with a branch per tap:
-// 0.4 s of the near field's 1.3 s at 256^3; now the same bits in a fraction.)
+// (z) the rows of a z-plane (y-slice); along x each row along itself, its
+// taps the row shifted (it went through a transpose of each plane, of its
+// mask and back: a fifth of the pass). Split by z-planes or y-rows, the
+// result does not depend on the thread count. (Along x it ran voxel by
+// voxel, with a branch per tap: 0.4 s of the near field's 1.3 s at 256^3;
+// now the same bits in a fraction.)
 HostVector<float> lowpass_across_beam(const Volume& v, const std::vector<std::uint8_t>* scanned, int ax, double sigma_mm,
                                        int threads) {
   const Dims3& d = v.dims;
@@ -1051,48 +1210,50 @@ HostVector<float> lowpass_across_beam(const Volume& v, const std::vector<std::ui
   const std::uint8_t* mask = scanned ? scanned->data() : nullptr;
   const std::size_t nx = d[0], ny = d[1], nz = d[2];
   threads = host_threads(threads);
-  HostVector<float> a(n), b(n);
-  const float* src = v.data.data();
-  float* dst = a.data();
+  // One array: the first pass reads the data and writes it, the second
+  // filters it in place, each plane (along y) or slice (along z) copied out
+  // first (a second array's first touch cost more than the copies).
+  HostVector<float> out(n);
   for (const int axis : {u_ax, w_ax}) {
+    const bool in_place = axis == w_ax;
+    const float* src = in_place ? out.data() : v.data.data();
+    float* const dst = out.data();
     // At most as wide as the axis (wider is flat across it anyway: a
     // spacing in the wrong unit made it 30000 taps, O(n r) for nothing).
     const double sigma_vox = std::clamp(sigma_mm / v.spacing[axis], 0.5, std::max(0.5, double(d[axis])));
     const std::vector<float> w = gaussian_weights(sigma_vox, 3.0);
     const std::size_t taps = w.size();
     if (axis == 0) {
+      // Always the first pass (the second is y or z); each row is copied
+      // into its padded scratch before it is written.
       parallel_ranges(nz, threads, [&](std::size_t z0, std::size_t z1) {
-        // A plane transposed: row x holds the column x (ny samples).
-        std::vector<float> t(nx * ny), tout(nx * ny);
-        std::vector<std::uint8_t> tm(mask ? nx * ny : 0);
         std::vector<const float*> rows(taps);
         std::vector<const std::uint8_t*> mrows(taps);
-        std::vector<double> acc(ny), wsum(ny);
-        // The transposes in tiles of kTile x kTile (one whole plane at a
-        // time strode through the other side's cache lines).
-        constexpr std::size_t kTile = 16;
-        const auto transpose = [&](auto* to, const auto* from, std::size_t rows_in, std::size_t cols_in) {
-          for (std::size_t r0 = 0; r0 < rows_in; r0 += kTile)
-            for (std::size_t c0 = 0; c0 < cols_in; c0 += kTile)
-              for (std::size_t r = r0; r < std::min(r0 + kTile, rows_in); ++r)
-                for (std::size_t c = c0; c < std::min(c0 + kTile, cols_in); ++c) to[c * rows_in + r] = from[r * cols_in + c];
-        };
-        for (std::size_t z = z0; z < z1; ++z) {
-          const std::size_t plane = z * nx * ny;
-          transpose(t.data(), src + plane, ny, nx);
-          if (mask) transpose(tm.data(), mask + plane, ny, nx);
-          filter_rows(tout.data(), t.data(), mask ? tm.data() : nullptr, nx, ny, ny, w, rows, mrows, acc, wsum);
-          transpose(dst + plane, tout.data(), nx, ny);
-        }
+        std::vector<double> acc(nx), wsum(nx);
+        // The row padded with taps / 2 unscanned samples either side.
+        std::vector<float> pad(nx + taps + 8, 0.0f);
+        std::vector<std::uint8_t> mpad(nx + taps + 8, 0);
+        for (std::size_t z = z0; z < z1; ++z)
+          for (std::size_t y = 0; y < ny; ++y) {
+            const std::size_t at = (z * ny + y) * nx;
+            filter_along_row(dst + at, src + at, mask ? mask + at : nullptr, nx, w, rows, mrows, acc, wsum, pad,
+                             mpad);
+          }
       });
     } else if (axis == 1) {
       parallel_ranges(nz, threads, [&](std::size_t z0, std::size_t z1) {
         std::vector<const float*> rows(taps);
         std::vector<const std::uint8_t*> mrows(taps);
         std::vector<double> acc(nx), wsum(nx);
+        std::vector<float> copy(in_place ? nx * ny : 0);
         for (std::size_t z = z0; z < z1; ++z) {
           const std::size_t plane = z * nx * ny;
-          filter_rows(dst + plane, src + plane, mask ? mask + plane : nullptr, ny, nx, nx, w, rows, mrows, acc, wsum);
+          const float* from = src + plane;
+          if (in_place) {
+            std::copy_n(from, nx * ny, copy.data());
+            from = copy.data();
+          }
+          filter_rows(dst + plane, from, mask ? mask + plane : nullptr, ny, nx, nx, w, rows, mrows, acc, wsum);
         }
       });
     } else {
@@ -1100,16 +1261,24 @@ HostVector<float> lowpass_across_beam(const Volume& v, const std::vector<std::ui
         std::vector<const float*> rows(taps);
         std::vector<const std::uint8_t*> mrows(taps);
         std::vector<double> acc(nx), wsum(nx);
+        // Always the second pass, in place: the y-slice's rows (z, y)
+        // gathered z-major, filtered there and written back.
+        std::vector<float> slice(nz * nx), filtered(slice.size());
+        std::vector<std::uint8_t> mslice(mask ? nz * nx : 0);
         for (std::size_t y = y0; y < y1; ++y) {
           const std::size_t at = y * nx;
-          filter_rows(dst + at, src + at, mask ? mask + at : nullptr, nz, nx, nx * ny, w, rows, mrows, acc, wsum);
+          for (std::size_t z = 0; z < nz; ++z) {
+            std::copy_n(src + at + z * nx * ny, nx, slice.data() + z * nx);
+            if (mask) std::copy_n(mask + at + z * nx * ny, nx, mslice.data() + z * nx);
+          }
+          filter_rows(filtered.data(), slice.data(), mask ? mslice.data() : nullptr, nz, nx, nx, w, rows, mrows, acc,
+                      wsum);
+          for (std::size_t z = 0; z < nz; ++z) std::copy_n(filtered.data() + z * nx, nx, dst + at + z * nx * ny);
         }
       });
     }
-    src = dst;
-    dst = b.data();
   }
-  return b;
+  return out;
 }
 
 namespace {
@@ -1372,7 +1541,9 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   const auto K = std::min<std::size_t>(d[ax], std::size_t(std::ceil(0.5 * double(bins) / hz)) + 1);
   const auto K_search = std::min(K, std::size_t(std::ceil(params.search_mm / hz)));
   const float nan = std::numeric_limits<float>::quiet_NaN();
-  std::vector<float> A(lines * K, nan);
+  // Uninitialised: each thread of the pass below sets its own lines' part
+  // to NaN first (its pages first touched there, in parallel).
+  HostVector<float> A(lines * K);
   // The speckle's own spread (below) from R: each scanned sample's departure
   // from the lowpass, at depths top_mm ... search_mm below the skin line
   // (gathered per thread; only their median and spread are used).
@@ -1393,6 +1564,10 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
       std::size_t count = 0;
       float hi = -std::numeric_limits<float>::infinity(), lo = std::numeric_limits<float>::infinity();
       std::vector<float>& resid = presid[std::size_t(part)];
+      // At most every line's samples in the window: reserved (not touched),
+      // so the pushes below never move what they gathered.
+      if (K_search > top_k) resid.reserve((b1 - b0) * d[u_ax] * (K_search - top_k));
+      std::fill(A.data() + b0 * d[u_ax] * K, A.data() + b1 * d[u_ax] * K, nan);
       const float* data = v.data.data();
       const float* low = lp.data();
       const std::uint8_t* in = scanned ? scanned->data() : nullptr;
@@ -1488,7 +1663,10 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   const auto box_across = [&](int lat, double h_lat) {
     const std::size_t n_along = lat == 0 ? d[u_ax] : d[w_ax], n_other = lat == 0 ? d[w_ax] : d[u_ax];
     const long r = std::max(0L, long(std::lround(params.profile_mm / h_lat)));
-    std::vector<float> out(A.size(), nan);
+    HostVector<float> out(A.size());
+    parallel_ranges(out.size(), threads, [&](std::size_t i0, std::size_t i1) {
+      std::fill(out.data() + i0, out.data() + i1, nan);
+    });
     parallel_ranges(n_other, threads, [&](std::size_t o0, std::size_t o1) {
       for (std::size_t o = o0; o < o1; ++o) {
         const auto line = [&](long t) { return lat == 0 ? std::size_t(t) + o * d[u_ax] : o + std::size_t(t) * d[u_ax]; };
@@ -1636,14 +1814,22 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     for (std::size_t l = 0; l < lines; ++l)
       if (candidate(l)) cand.push_back(l), x.push_back(ltop[l]);
     const double half = 0.5 * (median(x) + below);
-    std::vector<double> Pc;
-    for (std::size_t k = 0; k < K_search && !cand.empty(); ++k) {
-      x.clear();
-      for (std::size_t l : cand)
-        if (!std::isnan(A[l * K + k])) x.push_back(A[l * K + k]);
-      if (double(x.size()) < 0.5 * double(cand.size())) break;
-      Pc.push_back(median(x));
-    }
+    // Pc(k): the candidates' median at depth k, up to the first depth where
+    // fewer than half of them have a sample (the depths over the threads,
+    // each its own gather and selection; then cut at that depth).
+    std::vector<double> Pc(cand.empty() ? 0 : K_search);
+    std::vector<std::uint8_t> few(Pc.size(), 0);
+    parallel_ranges(Pc.size(), threads, [&](std::size_t k0, std::size_t k1) {
+      std::vector<float> xs;
+      for (std::size_t k = k0; k < k1; ++k) {
+        xs.clear();
+        for (std::size_t l : cand)
+          if (!std::isnan(A[l * K + k])) xs.push_back(A[l * K + k]);
+        if (double(xs.size()) < 0.5 * double(cand.size())) few[k] = 1;
+        else Pc[k] = median(xs);
+      }
+    });
+    Pc.resize(std::size_t(std::find(few.begin(), few.end(), std::uint8_t{1}) - few.begin()));
     const auto gap_k = std::size_t(std::floor(params.layer_gap_mm / hz));
     const auto stay_k = std::max<std::size_t>(1, std::size_t(std::ceil(params.stay_mm / hz)));
     std::size_t k = 0;
@@ -1894,28 +2080,36 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
   std::vector<long> echo(lines, -1);
   std::size_t with_data = 0;
   {
-    // Lines over threads (each line's search is its own; the counts are sums).
+    // Lines over threads (each line's search is its own; the counts are
+    // sums), each thread's lines walked a plane across the beam at a time
+    // (in memory order where the beam is z; line by line down the beam it
+    // read a cache line per sample): per line the first scanned sample at
+    // or above `strong` (not below it), then the brightest scanned one up to crest_reach
+    // below it (the first of equals), as a search down each line finds them.
     const int parts = range_count(lines, threads);
     std::vector<std::size_t> pechoes(std::size_t(parts), 0), pdata(std::size_t(parts), 0);
     parallel_ranges_indexed(lines, threads, [&](int k, std::size_t l0, std::size_t l1) {
-      for (std::size_t l = l0; l < l1; ++l) {
-        bool any = false;
-        for (std::size_t p = 0; p < d[ax]; ++p) {
-          const std::size_t i = at(l, p);
+      const std::size_t m = l1 - l0;
+      std::vector<std::size_t> base(m);
+      for (std::size_t j = 0; j < m; ++j) base[j] = at(l0 + j, 0);
+      std::vector<long> first(m, -1);  // the first strong sample's position
+      std::vector<float> crest(m);     // the brightest from there
+      std::vector<std::uint8_t> any(m, 0);
+      const std::size_t step = stride[ax];
+      for (std::size_t p = 0; p < d[ax]; ++p)
+        for (std::size_t j = 0; j < m; ++j) {
+          const std::size_t i = base[j] + p * step;
           if (!is_scanned(i)) continue;
-          any = true;
-          if (lp[i] < strong) continue;
-          std::size_t best = p;
-          for (std::size_t q = p + 1; q < d[ax] && q <= p + crest_reach; ++q) {
-            const std::size_t j = at(l, q);
-            if (is_scanned(j) && lp[j] > lp[at(l, best)]) best = q;
+          any[j] = 1;
+          if (first[j] < 0) {
+            if (!(lp[i] < strong)) first[j] = long(p), echo[l0 + j] = long(p), crest[j] = lp[i];
+          } else if (p <= std::size_t(first[j]) + crest_reach && lp[i] > crest[j]) {
+            echo[l0 + j] = long(p), crest[j] = lp[i];
           }
-          echo[l] = long(best);
-          ++pechoes[std::size_t(k)];
-          break;
         }
-        pdata[std::size_t(k)] += any;
-      }
+      std::size_t echoes = 0, data = 0;
+      for (std::size_t j = 0; j < m; ++j) echoes += first[j] >= 0, data += any[j];
+      pechoes[std::size_t(k)] = echoes, pdata[std::size_t(k)] = data;
     });
     for (int k = 0; k < parts; ++k) rep.lines += pechoes[std::size_t(k)], with_data += pdata[std::size_t(k)];
   }

@@ -119,6 +119,16 @@ int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int 
 HostVector<float> lowpass_across_beam(const Volume& v, const std::vector<std::uint8_t>* scanned, int beam_axis,
                                        double sigma_mm, int threads = 0);
 
+namespace mask_detail {
+// Tests only: lowpass_across_beam's sums through the portable build of its
+// inner loop even where the CPU has AVX2 (both give the same bits).
+void use_portable_taps(bool on);
+// A binary cube filter of half-width r in place on `a` (0 or 1 per voxel):
+// erode (every voxel of the cube around it set, outside the volume counting
+// as set) or dilate (any set); scanned_mask opens the exact zeros with it.
+void cube_filter(std::vector<std::uint8_t>& a, const Dims3& d, int r, bool erode, int threads);
+}  // namespace mask_detail
+
 // The bright layered near field under the probe (skin, fat, muscle: an
 // occluder, not the object; docs/real-data.md, "The near field"). Along the
 // beam (params.axis, or the data's own, beam_axis_of), depth is counted

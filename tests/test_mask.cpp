@@ -2178,24 +2178,72 @@ class CliMask : public test::CliTest {
   }
 };
 
+TEST(MaskCube, FilterIsTheCubeTestPerVoxel) {
+  // The cube filter (erosion: every voxel of the (2r+1)^3 cube set, outside
+  // the volume counting as set; dilation: any set) against a per-voxel
+  // reference, for several half-widths, on sizes that leave vector tails
+  // and axes shorter than the cube, any thread count.
+  std::mt19937 rng(test::seed());
+  std::uniform_real_distribution<float> coin(0.0f, 1.0f);
+  for (const Dims3 d : {Dims3{37, 21, 19}, Dims3{3, 40, 5}})
+    for (const float density : {0.3f, 0.9f})
+      for (const int r : {1, 2, 4})
+        for (const bool erode : {true, false}) {
+          std::vector<std::uint8_t> a(d[0] * d[1] * d[2]);
+          for (auto& x : a) x = coin(rng) < density ? 1 : 0;
+          std::vector<std::uint8_t> ref(a.size());
+          for (long z = 0; z < long(d[2]); ++z)
+            for (long y = 0; y < long(d[1]); ++y)
+              for (long x = 0; x < long(d[0]); ++x) {
+                bool all = true, any = false;
+                for (long k = -r; k <= r; ++k)
+                  for (long j = -r; j <= r; ++j)
+                    for (long i = -r; i <= r; ++i) {
+                      const long q[3] = {x + i, y + j, z + k};
+                      if (q[0] < 0 || q[1] < 0 || q[2] < 0 || q[0] >= long(d[0]) || q[1] >= long(d[1]) ||
+                          q[2] >= long(d[2]))
+                        continue;
+                      const bool set = a[(std::size_t(q[2]) * d[1] + std::size_t(q[1])) * d[0] + std::size_t(q[0])] != 0;
+                      all = all && set, any = any || set;
+                    }
+                ref[(std::size_t(z) * d[1] + std::size_t(y)) * d[0] + std::size_t(x)] = (erode ? all : any) ? 1 : 0;
+              }
+          for (const int threads : {1, 3}) {
+            std::vector<std::uint8_t> got = a;
+            mask_detail::cube_filter(got, d, r, erode, threads);
+            EXPECT_EQ(got, ref) << d[0] << "x" << d[1] << "x" << d[2] << ", r " << r << (erode ? ", erode" : ", dilate")
+                                << ", density " << density << ", threads " << threads;
+          }
+        }
+}
+
 TEST(NearField, LowpassAcrossTheBeamIsTheNormalisedSumPerVoxel) {
-  // lowpass_across_beam filters whole rows in vector blocks of 8 (and a
-  // transposed plane along x): against a per-voxel reference in the stated
-  // order (float products, double sums in tap order over the scanned taps
-  // inside the volume, the sample itself where none is), bit for bit, for
-  // every beam axis, with and without a mask, on sizes that leave tails.
+  // lowpass_across_beam filters whole rows in vector blocks of 8 (along x
+  // the row's interior as shifted copies of itself, its borders alone):
+  // against a per-voxel reference in the stated order (float products,
+  // double sums in tap order over the scanned taps inside the volume, the
+  // sample itself where none is), bit for bit, for every beam axis, without
+  // a mask, under a sparse one and under one scanned almost everywhere
+  // (blocks whose every tap is scanned take a path of their own; its bytes
+  // 1 or 200: any non-zero byte is scanned), on sizes that leave tails and
+  // rows along x both shorter and longer than the filter; both builds of
+  // the inner loop (AVX2 where the CPU has it, and the portable one).
   std::mt19937 rng(test::seed());
   std::uniform_real_distribution<float> val(-3.0f, 250.0f), coin(0.0f, 1.0f);
+  for (const Dims3 dims : {Dims3{19, 13, 11}, Dims3{45, 29, 23}}) {
   Volume v;
-  v.dims = {19, 13, 11};
+  v.dims = dims;
   v.spacing = {0.4, 0.7, 0.55};
   v.data.resize(v.voxels());
   for (float& x : v.data) x = val(rng);
-  std::vector<std::uint8_t> mask(v.voxels());
-  for (auto& m : mask) m = coin(rng) < 0.7f ? 1 : 0;
+  std::vector<std::uint8_t> sparse(v.voxels()), mostly(v.voxels());
+  for (auto& m : sparse) m = coin(rng) < 0.7f ? 1 : 0;
+  for (auto& m : mostly) m = coin(rng) < 0.998f ? (coin(rng) < 0.5f ? 1 : 200) : 0;
   const double sigma_mm = 1.1;
   for (int beam = 0; beam < 3; ++beam)
-    for (const bool masked : {false, true}) {
+    for (const int which : {0, 1, 2}) {
+      const bool masked = which > 0;
+      const std::vector<std::uint8_t>& mask = which == 1 ? sparse : mostly;
       const std::vector<std::uint8_t>* scanned = masked ? &mask : nullptr;
       std::vector<float> ref = v.data, next(v.voxels());
       for (const int axis : {beam == 0 ? 1 : 0, beam == 2 ? 1 : 2}) {
@@ -2220,13 +2268,19 @@ TEST(NearField, LowpassAcrossTheBeamIsTheNormalisedSumPerVoxel) {
             }
         ref.swap(next);
       }
-      for (const int threads : {1, 3}) {
-        const HostVector<float> got = lowpass_across_beam(v, scanned, beam, sigma_mm, threads);
-        std::size_t differ = 0;
-        for (std::size_t i = 0; i < v.voxels(); ++i) differ += got[i] != ref[i];
-        EXPECT_EQ(differ, 0u) << "beam axis " << beam << (masked ? ", masked" : "") << ", threads " << threads;
-      }
+      for (const bool portable : {false, true})
+        for (const int threads : {1, 3}) {
+          mask_detail::use_portable_taps(portable);
+          const HostVector<float> got = lowpass_across_beam(v, scanned, beam, sigma_mm, threads);
+          mask_detail::use_portable_taps(false);
+          std::size_t differ = 0;
+          for (std::size_t i = 0; i < v.voxels(); ++i) differ += got[i] != ref[i];
+          EXPECT_EQ(differ, 0u) << dims[0] << "x" << dims[1] << "x" << dims[2] << ", beam axis " << beam
+                                << (which == 1 ? ", sparse mask" : which == 2 ? ", mask almost everywhere" : "")
+                                << ", threads " << threads << (portable ? ", portable build" : "");
+        }
     }
+  }
 }
 
 // ---- threads ---------------------------------------------------------------------------------------------
