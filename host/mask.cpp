@@ -56,6 +56,18 @@ void xor_into(std::uint8_t* __restrict out, const std::uint8_t* __restrict in, s
   for (std::size_t x = 0; x < n; ++x) out[x] = in[x] ^ flip;
 }
 
+// One plane of scanned_mask's step 2b along z: for each of its m voxels (a
+// line each), the first depth with data (first still `none`: this one) and
+// the last (this one).
+void first_last_rows(const float* __restrict data, std::size_t m, std::uint32_t z, std::uint32_t none,
+                     std::uint32_t* __restrict first, std::uint32_t* __restrict last) {
+  for (std::size_t i = 0; i < m; ++i) {
+    const bool set = data[i] != 0.0f;
+    first[i] = set && first[i] == none ? z : first[i];
+    last[i] = set ? z : last[i];
+  }
+}
+
 // One axis of a binary cube filter with half-width r, in place on `a`:
 // erode (all of [i - r, i + r] set; outside the volume counts as set) or
 // dilate (any of them set). Along x a row at a time, the 2r + 1 offsets ORed
@@ -237,10 +249,19 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
   const int threads = host_threads(params.threads);
   // 1. The exact zeros, opened by the cube.
   std::vector<std::uint8_t> zero(n);
-  parallel_ranges(n, threads, [&](std::size_t i0, std::size_t i1) {
-    for (std::size_t i = i0; i < i1; ++i) zero[i] = v.data[i] == 0.0f ? 1 : 0;
-  });
-  rep.zeros = static_cast<std::size_t>(std::count(zero.begin(), zero.end(), std::uint8_t{1}));
+  {
+    // Counted while set (a serial count after it read the 16 MB again).
+    std::vector<std::size_t> pzeros(std::size_t(range_count(n, threads)), 0);
+    parallel_ranges_indexed(n, threads, [&](int k, std::size_t i0, std::size_t i1) {
+      std::uint8_t* const z = zero.data();
+      const float* const data = v.data.data();
+      std::size_t c = 0;
+      for (std::size_t i = i0; i < i1; ++i) z[i] = data[i] == 0.0f ? 1 : 0, c += data[i] == 0.0f;
+      pzeros[std::size_t(k)] = c;
+    });
+    rep.zeros = 0;
+    for (const std::size_t c : pzeros) rep.zeros += c;
+  }
   std::vector<std::uint8_t> solid = zero;
   if (params.solid > 0) {
     mask_detail::cube_filter(solid, d, params.solid, true, threads);
@@ -329,6 +350,15 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
         std::vector<std::uint32_t>& f = pf[std::size_t(k)];
         std::vector<std::uint32_t>& l_ = pl[std::size_t(k)];
         f.assign(n / len, std::uint32_t(len)), l_.assign(n / len, 0);
+        if (axis == 2) {
+          // The beam along z: a plane's rows are lines x + nx y at depth z,
+          // the planes in increasing z (the first depth with data is the
+          // first one set, the last the latest): row loops that vectorise.
+          for (std::size_t z = z0; z < z1; ++z)
+            first_last_rows(v.data.data() + z * nx * ny, nx * ny, std::uint32_t(z), std::uint32_t(len), f.data(),
+                            l_.data());
+          return;
+        }
         each_voxel(z0, z1, [&](std::size_t i, std::size_t l, std::uint32_t pos) {
           if (v.data[i] != 0.0f) f[l] = std::min(f[l], pos), l_[l] = std::max(l_[l], pos);
         });
@@ -1202,22 +1232,25 @@ void mask_detail::use_portable_taps(bool on) { g_portable_taps.store(on); }
 // result does not depend on the thread count. (Along x it ran voxel by
 // voxel, with a branch per tap: 0.4 s of the near field's 1.3 s at 256^3;
 // now the same bits in a fraction.)
-HostVector<float> lowpass_across_beam(const Volume& v, const std::vector<std::uint8_t>* scanned, int ax, double sigma_mm,
-                                       int threads) {
+namespace {
+
+// lowpass_across_beam of the planes [k0, k1) across the beam (indices along
+// ax) into out, a whole volume's array; the rest of out untouched. The
+// passes filter across the beam only, so a plane's values do not depend on
+// the others: the same bits as filtering the whole volume.
+void lowpass_planes(const Volume& v, const std::uint8_t* mask, int ax, double sigma_mm, int threads, float* out,
+                    std::size_t k0, std::size_t k1) {
   const Dims3& d = v.dims;
-  const std::size_t n = v.voxels();
   const int u_ax = ax == 0 ? 1 : 0, w_ax = ax == 2 ? 1 : 2;  // the two lateral axes
-  const std::uint8_t* mask = scanned ? scanned->data() : nullptr;
   const std::size_t nx = d[0], ny = d[1], nz = d[2];
-  threads = host_threads(threads);
-  // One array: the first pass reads the data and writes it, the second
-  // filters it in place, each plane (along y) or slice (along z) copied out
-  // first (a second array's first touch cost more than the copies).
-  HostVector<float> out(n);
+  // Each axis's range: [k0, k1) along the beam, all of the others.
+  std::size_t lo[3] = {0, 0, 0}, hi[3] = {nx, ny, nz};
+  lo[ax] = k0, hi[ax] = k1;
+  const std::size_t xw = hi[0] - lo[0];  // the x-rows' part filtered
   for (const int axis : {u_ax, w_ax}) {
     const bool in_place = axis == w_ax;
-    const float* src = in_place ? out.data() : v.data.data();
-    float* const dst = out.data();
+    const float* src = in_place ? out : v.data.data();
+    float* const dst = out;
     // At most as wide as the axis (wider is flat across it anyway: a
     // spacing in the wrong unit made it 30000 taps, O(n r) for nothing).
     const double sigma_vox = std::clamp(sigma_mm / v.spacing[axis], 0.5, std::max(0.5, double(d[axis])));
@@ -1226,58 +1259,72 @@ HostVector<float> lowpass_across_beam(const Volume& v, const std::vector<std::ui
     if (axis == 0) {
       // Always the first pass (the second is y or z); each row is copied
       // into its padded scratch before it is written.
-      parallel_ranges(nz, threads, [&](std::size_t z0, std::size_t z1) {
+      parallel_ranges(hi[2] - lo[2], threads, [&](std::size_t z0, std::size_t z1) {
         std::vector<const float*> rows(taps);
         std::vector<const std::uint8_t*> mrows(taps);
         std::vector<double> acc(nx), wsum(nx);
         // The row padded with taps / 2 unscanned samples either side.
         std::vector<float> pad(nx + taps + 8, 0.0f);
         std::vector<std::uint8_t> mpad(nx + taps + 8, 0);
-        for (std::size_t z = z0; z < z1; ++z)
-          for (std::size_t y = 0; y < ny; ++y) {
+        for (std::size_t z = lo[2] + z0; z < lo[2] + z1; ++z)
+          for (std::size_t y = lo[1]; y < hi[1]; ++y) {
             const std::size_t at = (z * ny + y) * nx;
             filter_along_row(dst + at, src + at, mask ? mask + at : nullptr, nx, w, rows, mrows, acc, wsum, pad,
                              mpad);
           }
       });
     } else if (axis == 1) {
-      parallel_ranges(nz, threads, [&](std::size_t z0, std::size_t z1) {
+      // A z-plane's rows, their part [lo[0], hi[0]) in x.
+      parallel_ranges(hi[2] - lo[2], threads, [&](std::size_t z0, std::size_t z1) {
         std::vector<const float*> rows(taps);
         std::vector<const std::uint8_t*> mrows(taps);
         std::vector<double> acc(nx), wsum(nx);
         std::vector<float> copy(in_place ? nx * ny : 0);
-        for (std::size_t z = z0; z < z1; ++z) {
-          const std::size_t plane = z * nx * ny;
+        for (std::size_t z = lo[2] + z0; z < lo[2] + z1; ++z) {
+          const std::size_t plane = z * nx * ny + lo[0];
           const float* from = src + plane;
           if (in_place) {
-            std::copy_n(from, nx * ny, copy.data());
+            std::copy_n(from, nx * ny - lo[0], copy.data());
             from = copy.data();
           }
-          filter_rows(dst + plane, from, mask ? mask + plane : nullptr, ny, nx, nx, w, rows, mrows, acc, wsum);
+          filter_rows(dst + plane, from, mask ? mask + plane : nullptr, ny, xw, nx, w, rows, mrows, acc, wsum);
         }
       });
     } else {
-      parallel_ranges(ny, threads, [&](std::size_t y0, std::size_t y1) {
+      // Always the second pass, in place: the y-slice's rows (z, y), their
+      // part [lo[0], hi[0]) in x, gathered z-major, filtered there and
+      // written back.
+      parallel_ranges(hi[1] - lo[1], threads, [&](std::size_t y0, std::size_t y1) {
         std::vector<const float*> rows(taps);
         std::vector<const std::uint8_t*> mrows(taps);
-        std::vector<double> acc(nx), wsum(nx);
-        // Always the second pass, in place: the y-slice's rows (z, y)
-        // gathered z-major, filtered there and written back.
-        std::vector<float> slice(nz * nx), filtered(slice.size());
-        std::vector<std::uint8_t> mslice(mask ? nz * nx : 0);
-        for (std::size_t y = y0; y < y1; ++y) {
-          const std::size_t at = y * nx;
+        std::vector<double> acc(xw), wsum(xw);
+        std::vector<float> slice(nz * xw), filtered(slice.size());
+        std::vector<std::uint8_t> mslice(mask ? nz * xw : 0);
+        for (std::size_t y = lo[1] + y0; y < lo[1] + y1; ++y) {
+          const std::size_t at = y * nx + lo[0];
           for (std::size_t z = 0; z < nz; ++z) {
-            std::copy_n(src + at + z * nx * ny, nx, slice.data() + z * nx);
-            if (mask) std::copy_n(mask + at + z * nx * ny, nx, mslice.data() + z * nx);
+            std::copy_n(src + at + z * nx * ny, xw, slice.data() + z * xw);
+            if (mask) std::copy_n(mask + at + z * nx * ny, xw, mslice.data() + z * xw);
           }
-          filter_rows(filtered.data(), slice.data(), mask ? mslice.data() : nullptr, nz, nx, nx, w, rows, mrows, acc,
+          filter_rows(filtered.data(), slice.data(), mask ? mslice.data() : nullptr, nz, xw, xw, w, rows, mrows, acc,
                       wsum);
-          for (std::size_t z = 0; z < nz; ++z) std::copy_n(filtered.data() + z * nx, nx, dst + at + z * nx * ny);
+          for (std::size_t z = 0; z < nz; ++z) std::copy_n(filtered.data() + z * xw, xw, dst + at + z * nx * ny);
         }
       });
     }
   }
+}
+
+}  // namespace
+
+HostVector<float> lowpass_across_beam(const Volume& v, const std::vector<std::uint8_t>* scanned, int ax, double sigma_mm,
+                                       int threads) {
+  // One array: the first pass reads the data and writes it, the second
+  // filters it in place, each plane (along y) or slice (along z) copied out
+  // first (a second array's first touch cost more than the copies).
+  HostVector<float> out(v.voxels());
+  lowpass_planes(v, scanned ? scanned->data() : nullptr, ax, sigma_mm, host_threads(threads), out.data(), 0,
+                 v.dims[ax]);
   return out;
 }
 
@@ -1571,8 +1618,13 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
       const float* data = v.data.data();
       const float* low = lp.data();
       const std::uint8_t* in = scanned ? scanned->data() : nullptr;
-      for (std::size_t z = 0; z < d[ax]; ++z)
-        for (std::size_t bb = b0; bb < b1; ++bb)
+      // A row of lines (bb) at a time, down the beam: its lines' stretch of
+      // A stays in cache while the depths fill it (plane by plane over all
+      // the thread's lines, every sample's store went to another cache line
+      // of 17.6 MB). The counts, extremes and residuals' median do not
+      // depend on the order.
+      for (std::size_t bb = b0; bb < b1; ++bb)
+        for (std::size_t z = 0; z < d[ax]; ++z)
           for (std::size_t a = 0; a < d[u_ax]; ++a) {
             const std::size_t l = a + bb * d[u_ax];
             const std::size_t i = voxel(a, bb, z);
@@ -2239,44 +2291,36 @@ std::size_t clip_depth(const Volume& v, std::vector<std::uint8_t>& scanned, int 
   return clipped;
 }
 
-namespace {
-
-// lowpass_across_beam(v, scanned, ax, sigma_mm) written into lp for the
-// planes across the beam (index along ax) that hold a voxel set in
-// `changed`, from a slab of the volume spanning them; lp elsewhere is kept.
-void relowpass_planes(const Volume& v, const std::vector<std::uint8_t>& scanned,
+void mask_detail::relowpass_planes(const Volume& v, const std::vector<std::uint8_t>& scanned,
                       const std::vector<std::uint8_t>& changed, int ax, double sigma_mm, int threads,
                       HostVector<float>& lp) {
   const Dims3& d = v.dims;
-  const std::size_t stride[3] = {1, d[0], d[0] * d[1]};
-  std::size_t k0 = d[ax], k1 = 0;  // the planes [k0, k1)
-  for (std::size_t i = 0; i < changed.size(); ++i)
-    if (changed[i]) {
-      const std::size_t k = (i / stride[ax]) % d[ax];
-      k0 = std::min(k0, k), k1 = std::max(k1, k + 1);
-    }
-  if (k0 >= k1) return;
-  Dims3 sd = d;
-  sd[ax] = k1 - k0;
-  Volume slab = v.with_data(std::vector<float>(sd[0] * sd[1] * sd[2]), v.source_type);
-  slab.dims = sd;
-  std::vector<std::uint8_t> mask(slab.data.size());
-  // Voxel (x, y, z) of the slab is (x, y, z) + k0 along ax of the volume:
-  // f(at in the volume, at in the slab) for the slab's x-rows.
-  const std::size_t offset = k0 * stride[ax];
-  const auto each_row = [&](auto&& f) {
-    for (std::size_t z = 0; z < sd[2]; ++z)
-      for (std::size_t y = 0; y < sd[1]; ++y) f(offset + (z * d[1] + y) * d[0], (z * sd[1] + y) * sd[0]);
-  };
-  each_row([&](std::size_t from, std::size_t to) {
-    std::copy_n(v.data.data() + from, sd[0], slab.data.data() + to);
-    std::copy_n(scanned.data() + from, sd[0], mask.data() + to);
+  // The planes [k0, k1) along ax that hold a changed voxel (per z-plane in
+  // memory order over the threads, a plane's own extent along ax joined).
+  const int parts = range_count(d[2], host_threads(threads));
+  std::vector<std::size_t> pk0(std::size_t(parts), d[ax]), pk1(std::size_t(parts), 0);
+  parallel_ranges_indexed(d[2], host_threads(threads), [&](int k, std::size_t z0, std::size_t z1) {
+    std::size_t a = d[ax], b = 0;
+    for (std::size_t z = z0; z < z1; ++z)
+      for (std::size_t y = 0; y < d[1]; ++y) {
+        const std::uint8_t* row = changed.data() + (z * d[1] + y) * d[0];
+        std::size_t x0 = 0;
+        while (x0 < d[0] && !row[x0]) ++x0;
+        if (x0 == d[0]) continue;
+        std::size_t x1 = d[0];
+        while (!row[x1 - 1]) --x1;
+        const std::size_t c0[3] = {x0, y, z}, c1[3] = {x1 - 1, y, z};
+        a = std::min(a, c0[ax]), b = std::max(b, c1[ax] + 1);
+      }
+    pk0[std::size_t(k)] = a, pk1[std::size_t(k)] = b;
   });
-  const HostVector<float> part = lowpass_across_beam(slab, &mask, ax, sigma_mm, threads);
-  each_row([&](std::size_t from, std::size_t to) { std::copy_n(part.data() + to, sd[0], lp.data() + from); });
+  const std::size_t k0 = *std::min_element(pk0.begin(), pk0.end()), k1 = *std::max_element(pk1.begin(), pk1.end());
+  if (k0 >= k1) return;
+  // In place in lp (it was a slab of the volume copied out, filtered and
+  // copied back: three serial copies and two arrays more).
+  lowpass_planes(v, scanned.data(), ax, sigma_mm, host_threads(threads), lp.data(), k0, k1);
 }
 
-}  // namespace
 
 NearFieldReport remove_near_field(const Volume& v, std::vector<std::uint8_t>& scanned, const NearFieldParams& params) {
   NearFieldReport rep;
@@ -2284,8 +2328,8 @@ NearFieldReport remove_near_field(const Volume& v, std::vector<std::uint8_t>& sc
   // The reverberation rule reads the same lowpass across the beam as the
   // band, of the mask without the band. It never mixes depths along the
   // beam, so only the planes across the beam that hold band voxels change:
-  // those are lowpassed again, as a slab of the volume (the same sums per
-  // voxel, the same bits), and the rest is the band's. Only with the same
+  // those are lowpassed again, in place (the same sums per voxel, the same
+  // bits), and the rest is the band's. Only with the same
   // sigma. Without a mask (every voxel scanned) the lowpass adds the same
   // terms in the same order as under a mask of ones (normalised_taps), so
   // the band's lowpass serves there too, and a band found then makes the
@@ -2301,7 +2345,7 @@ NearFieldReport remove_near_field(const Volume& v, std::vector<std::uint8_t>& sc
     if (scanned.empty()) scanned.assign(v.voxels(), 1);
     for (std::size_t i = 0; i < band.size(); ++i)
       if (band[i]) scanned[i] = 0;
-    if (!lp.empty()) relowpass_planes(v, scanned, band, rep.axis, params.sigma_mm, params.threads, lp);
+    if (!lp.empty()) mask_detail::relowpass_planes(v, scanned, band, rep.axis, params.sigma_mm, params.threads, lp);
   }
   if (params.reverb) {
     const std::vector<std::uint8_t> region =

@@ -127,6 +127,13 @@ void use_portable_taps(bool on);
 // erode (every voxel of the cube around it set, outside the volume counting
 // as set) or dilate (any set); scanned_mask opens the exact zeros with it.
 void cube_filter(std::vector<std::uint8_t>& a, const Dims3& d, int r, bool erode, int threads);
+// lowpass_across_beam(v, &scanned, ax, sigma_mm) written into lp, in place,
+// for the planes across the beam (index along ax) from the first to the last
+// that holds a voxel set in `changed`; lp elsewhere is kept (remove_near_field:
+// the reverberation rule's lowpass of the mask without the band).
+void relowpass_planes(const Volume& v, const std::vector<std::uint8_t>& scanned,
+                      const std::vector<std::uint8_t>& changed, int ax, double sigma_mm, int threads,
+                      HostVector<float>& lp);
 }  // namespace mask_detail
 
 // The bright layered near field under the probe (skin, fat, muscle: an

@@ -2437,6 +2437,40 @@ TEST(HostThreads, KthNonNegativeIsNthElementOverTheNonNegativeValues) {
                std::invalid_argument);
 }
 
+TEST(NearField, TheBandsPlanesLowpassedAgainAreTheLowpassOfTheNewMask) {
+  // remove_near_field lowpasses again, in place, only the planes across the
+  // beam that hold voxels the band took from the mask: bit for bit the
+  // lowpass of the whole volume under the new mask, for every beam axis,
+  // with the change in a few inner planes or reaching the volume's first.
+  std::mt19937 rng(test::seed());
+  std::uniform_real_distribution<float> val(0.0f, 255.0f), coin(0.0f, 1.0f);
+  Volume v;
+  v.dims = {37, 23, 29};
+  v.spacing = {0.5, 0.6, 0.45};
+  v.data.resize(v.voxels());
+  for (float& x : v.data) x = val(rng);
+  std::vector<std::uint8_t> before(v.voxels());
+  for (auto& m : before) m = coin(rng) < 0.97f ? 1 : 0;
+  for (int ax = 0; ax < 3; ++ax)
+    for (const std::size_t first : {std::size_t(0), std::size_t(5)}) {
+      std::vector<std::uint8_t> after = before, changed(v.voxels(), 0);
+      for (std::size_t z = 0; z < v.dims[2]; ++z)
+        for (std::size_t y = 0; y < v.dims[1]; ++y)
+          for (std::size_t x = 0; x < v.dims[0]; ++x) {
+            const std::size_t c[3] = {x, y, z}, i = v.index(x, y, z);
+            if (c[ax] >= first && c[ax] < first + 4 && after[i] && coin(rng) < 0.5f) after[i] = 0, changed[i] = 1;
+          }
+      for (const int threads : {1, 3}) {
+        HostVector<float> lp = lowpass_across_beam(v, &before, ax, 1.0, threads);
+        mask_detail::relowpass_planes(v, after, changed, ax, 1.0, threads, lp);
+        const HostVector<float> want = lowpass_across_beam(v, &after, ax, 1.0, threads);
+        std::size_t differ = 0;
+        for (std::size_t i = 0; i < v.voxels(); ++i) differ += lp[i] != want[i];
+        EXPECT_EQ(differ, 0u) << "beam axis " << ax << ", planes from " << first << ", threads " << threads;
+      }
+    }
+}
+
 TEST(NearField, LowpassWithoutAMaskIsTheLowpassUnderAMaskOfOnes) {
   // remove_near_field hands the band's lowpass (no mask: every voxel
   // scanned) to the reverberation rule, which would otherwise lowpass under
