@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "filter.hpp"
+#include "mask.hpp"
 #include "parallel.hpp"
 
 namespace softshell {
@@ -156,12 +157,6 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
     const double len = beam_unnormalised(c, b);
     for (int k = 0; k < 3; ++k) b[k] /= len;
   };
-  // Its component along the axis alone.
-  const auto beam_along = [&](const std::size_t c[3]) {
-    double b[3];
-    const double len = beam_unnormalised(c, b);
-    return b[ax] / len;
-  };
   if (fan.found) {
     // Down each beam from the apex, plane by plane along the axis: a voxel's
     // predecessor is the nearest voxel of the plane above on its beam, and a
@@ -174,8 +169,32 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
     const std::size_t planes = d[std::size_t(ax)], per_plane = n / planes;
     const std::size_t la = ax == 0 ? 1 : 0, lb = ax == 2 ? 1 : 2;  // the plane's axes
     std::vector<long> prev(per_plane, -1), cur(per_plane, -1), prev_top(per_plane, -1), cur_top(per_plane, -1);
+    // Per plane, tables along each of the plane's two axes (a value depends
+    // on the plane and on that one coordinate, so the same expressions give
+    // the same values as per voxel, where they took a division and a
+    // rounding per axis and the beam's squared components per voxel): where
+    // the beam through coordinate t crosses the plane above (-1: outside
+    // the volume), and the beam's squared component b_k^2 (beam_unnormalised).
+    std::vector<long> above[3];
+    std::vector<double> square[3];
+    for (const std::size_t k : {la, lb}) above[k].resize(d[k]), square[k].resize(d[k]);
     for (std::size_t depth = 0; depth < planes; ++depth) {
       const double dd = double(depth) - fan.apex[ax];
+      const bool from_above = depth > 0 && dd > 1.0;
+      for (const std::size_t k : {la, lb})
+        for (std::size_t t = 0; t < d[k]; ++t) {
+          long at = long(t);
+          if (from_above && fan.spreads[k]) {
+            at = round_half_away(fan.apex[k] + (double(t) - fan.apex[k]) * (dd - 1.0) / dd);
+            if (at < 0 || at >= long(d[k])) at = -1;
+          }
+          above[k][t] = at;
+          const double b = fan.spreads[k] ? (double(t) - fan.apex[k]) * v.spacing[k] : 0.0;
+          square[k][t] = b * b;
+        }
+      // The beam's component along the axis, as beam_unnormalised forms it.
+      const double b_ax = (double(depth) - (fan.found ? fan.apex[ax] : -1.0)) * v.spacing[std::size_t(ax)];
+      const double square_ax = b_ax * b_ax;
       parallel_ranges(d[lb], per_plane >= 65536 ? threads : 1, [&](std::size_t q0, std::size_t q1) {
         for (std::size_t q = q0; q < q1; ++q)
           for (std::size_t p = 0; p < d[la]; ++p) {
@@ -184,17 +203,11 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
             const std::size_t i = c[0] * stride[0] + c[1] * stride[1] + c[2] * stride[2];
             const std::size_t cell = p + d[la] * q;
             long up = -1, top = -1;
-            if (depth > 0 && dd > 1.0) {
+            if (from_above) {
               // The plane above, where this voxel's beam crosses it.
-              long pc[3] = {long(c[0]), long(c[1]), long(c[2])};
-              bool inside = true;
-              for (int k = 0; k < 3; ++k) {
-                if (k == ax || !fan.spreads[k]) continue;
-                pc[k] = round_half_away(fan.apex[k] + (double(c[k]) - fan.apex[k]) * (dd - 1.0) / dd);
-                inside = inside && pc[k] >= 0 && pc[k] < long(d[std::size_t(k)]);
-              }
-              if (inside) {
-                const std::size_t pcell = std::size_t(pc[la]) + d[la] * std::size_t(pc[lb]);
+              const long pa = above[la][p], pb = above[lb][q];
+              if (pa >= 0 && pb >= 0) {
+                const std::size_t pcell = std::size_t(pa) + d[la] * std::size_t(pb);
                 up = prev[pcell], top = prev_top[pcell];
               }
             }
@@ -202,11 +215,18 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
             cur_top[cell] = top;
             if (!is_scanned(i)) continue;
             if (top < 0) cur_top[cell] = top = long(depth);
-            const double along = h_ax / std::fabs(beam_along(c));  // mm along the beam per plane
+            // mm along the beam per plane: h_ax / |b_ax / |b||, |b|^2 summed
+            // over the axes in index order as beam_unnormalised does.
+            const auto along = [&] {
+              double sq[3];
+              sq[ax] = square_ax, sq[la] = square[la][p], sq[lb] = square[lb][q];
+              const double len = std::sqrt(((0.0 + sq[0]) + sq[1]) + sq[2]);
+              return h_ax / std::fabs(b_ax / len);
+            };
             if (vs.data[i] > level) {
-              if (double(long(depth) - top) * along >= params.fan_skip_mm) cur[cell] = long(depth);
+              if (double(long(depth) - top) * along() >= params.fan_skip_mm) cur[cell] = long(depth);
             } else if (up >= 0 && vs.data[i] < level) {
-              if (double(long(depth) - up) * along >= params.gap_mm) shadow[i] = 1.0f;
+              if (double(long(depth) - up) * along() >= params.gap_mm) shadow[i] = 1.0f;
             }
           }
       });
@@ -272,12 +292,31 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
     }
     return s;
   };
+  // Voxels with no shadow within reach: their dark side's sample is 0 (its
+  // eight corners are), so their wall is 0 (0 times the bright side's
+  // share, in [0, 1]), as written below; skipped. The dark side lies at
+  // most reach_mm / spacing voxels away along each axis, and its sample
+  // reads the voxels at and after its floor: the shadow dilated by a cube of
+  // that reach plus one (a superset) marks every voxel that may have one.
+  std::vector<std::uint8_t> near(n);
+  {
+    int r = 1;
+    for (int k = 0; k < 3; ++k)
+      r = std::max(r, int(std::ceil(params.reach_mm / v.spacing[std::size_t(k)])) + 1);
+    // (A reach of many voxels, fine spacing: every voxel is visited, as
+    // without the test; the cube filter's cost grows with its width.)
+    const bool wide = r > 32;
+    parallel_ranges(n, threads, [&](std::size_t i0, std::size_t i1) {
+      for (std::size_t i = i0; i < i1; ++i) near[i] = wide || shadow[i] != 0.0f ? 1 : 0;
+    });
+    if (!wide) mask_detail::cube_filter(near, d, r, false, threads);
+  }
   parallel_ranges(d[2], threads, [&](std::size_t z0, std::size_t z1) {
     for (std::size_t z = z0; z < z1; ++z)
       for (std::size_t y = 0; y < d[1]; ++y)
         for (std::size_t x = 0; x < d[0]; ++x) {
           const std::size_t i = x + d[0] * (y + d[1] * z);
-          if (!is_scanned(i)) continue;
+          if (!near[i] || !is_scanned(i)) continue;
           const std::size_t c[3] = {x, y, z};
           double g[3];
           for (int k = 0; k < 3; ++k) {
