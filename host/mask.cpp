@@ -43,9 +43,9 @@ void for_face_neighbours(const Dims3& d, std::size_t i, F&& f) {
 }
 
 // Byte loops over a row, as functions whose pointers are restrict: written
-// inline in the lambdas of filter_axis, each byte store might alias the row length
-// they captured by reference, which was then loaded again per byte and
-// nothing vectorised.
+// inline in the lambdas of filter_axis, each byte store might alias the row
+// length they captured by reference, which was then loaded again per byte
+// and nothing vectorised.
 void breaks_of(std::uint8_t* __restrict out, const std::uint8_t* __restrict in, std::size_t n, std::uint8_t flip) {
   for (std::size_t x = 0; x < n; ++x) out[x] = std::uint8_t((in[x] != 0) ^ flip);
 }
@@ -992,6 +992,21 @@ int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int 
 
 namespace {
 
+// Whether every tap's mask bytes [at, at + bytes) are non-zero (bytes a
+// multiple of 8; each 8 read as one integer, a high bit left where a byte
+// is 0): a block of outputs that sees only scanned taps.
+bool every_tap_scanned(const std::uint8_t* const* mask, std::size_t taps, std::size_t at, std::size_t bytes) {
+  constexpr std::uint64_t kOnes = 0x0101010101010101ULL, kHighs = 0x8080808080808080ULL;
+  std::uint64_t zero_byte = 0;
+  for (std::size_t t = 0; t < taps; ++t)
+    for (std::size_t b = 0; b < bytes; b += 8) {
+      std::uint64_t m;
+      std::memcpy(&m, mask[t] + at + b, sizeof m);
+      zero_byte |= (m - kOnes) & ~m & kHighs;
+    }
+  return zero_byte == 0;
+}
+
 // One output row of a normalised lowpass whose taps are whole rows: out[x] =
 // sum_t w[t] src[t][x] over the scanned taps (mask[t][x] != 0; every tap when
 // mask is null) / the sum of their weights, or fallback[x] when none is
@@ -1016,24 +1031,14 @@ void normalised_taps_portable(float* out, const float* const* src, const std::ui
   typedef long long v4l __attribute__((vector_size(32)));
   typedef int v4i __attribute__((vector_size(16)));
   // Output x0 + j's mask byte within 8 bytes read as a little-endian integer.
+  static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the mask bytes are read as a little-endian integer");
   const v4l lanes_lo = {0xffLL, 0xffLL << 8, 0xffLL << 16, 0xffLL << 24},
             lanes_hi = {0xffLL << 32, 0xffLL << 40, 0xffLL << 48, (long long)(0xffULL << 56)};
   const v4d all_v = {all_taps, all_taps, all_taps, all_taps};
   for (; x0 + 8 <= width; x0 += 8) {
     v4d a0 = {0, 0, 0, 0}, a1 = a0, s0 = a0, s1 = a0;
     const v4d zero = a0;
-    bool every = true;
-    if (mask) {
-      constexpr std::uint64_t kOnes = 0x0101010101010101ULL, kHighs = 0x8080808080808080ULL;
-      std::uint64_t zero_byte = 0;  // a high bit where some tap's byte is 0
-      for (std::size_t t = 0; t < taps; ++t) {
-        std::uint64_t m;
-        std::memcpy(&m, mask[t] + x0, sizeof m);
-        zero_byte |= (m - kOnes) & ~m & kHighs;
-      }
-      every = zero_byte == 0;
-    }
-    if (every) {
+    if (!mask || every_tap_scanned(mask, taps, x0, 8)) {
       for (std::size_t t = 0; t < taps; ++t) {
         const float wk = w[t];
         v4f f0, f1;
@@ -1091,7 +1096,8 @@ void normalised_taps_portable(float* out, const float* const* src, const std::ui
 }
 
 // 8 outputs a0 / s0 (the first 4), a1 / s1, narrowed to float, or the
-// fallback where a weight sum is 0.
+// fallback where a weight sum is 0 (the comparison's all-ones lanes narrow
+// to a float with its sign bit set, which is what the blend tests).
 __attribute__((target("avx2"))) inline void store_quotients(float* out, const float* fallback, __m256d a0,
                                                             __m256d a1, __m256d s0, __m256d s1) {
   const __m256d zero = _mm256_setzero_pd();
@@ -1110,21 +1116,10 @@ __attribute__((target("avx2"))) std::size_t normalised_taps_avx2(float* out, con
   const __m256d zero = _mm256_setzero_pd(), all_v = _mm256_set1_pd(all_taps);
   const __m256i zero_i = _mm256_setzero_si256();
   std::size_t x0 = 0;
-  constexpr std::uint64_t kOnes = 0x0101010101010101ULL, kHighs = 0x8080808080808080ULL;
-  const auto every_of = [&](std::size_t at, std::size_t bytes) {
-    std::uint64_t zero_byte = 0;  // a high bit where some tap's byte is 0
-    for (std::size_t t = 0; t < taps; ++t)
-      for (std::size_t b = 0; b < bytes; b += 8) {
-        std::uint64_t m;
-        std::memcpy(&m, mask[t] + at + b, sizeof m);
-        zero_byte |= (m - kOnes) & ~m & kHighs;
-      }
-    return zero_byte == 0;
-  };
   while (x0 + 8 <= width) {
     // 16 outputs whose taps are all scanned: four sums per tap that do not
     // wait for each other.
-    if (x0 + 16 <= width && (!mask || every_of(x0, 16))) {
+    if (x0 + 16 <= width && (!mask || every_tap_scanned(mask, taps, x0, 16))) {
       __m256d a0 = zero, a1 = zero, a2 = zero, a3 = zero;
       for (std::size_t t = 0; t < taps; ++t) {
         const __m256 wk = _mm256_set1_ps(w[t]);
@@ -1142,7 +1137,7 @@ __attribute__((target("avx2"))) std::size_t normalised_taps_avx2(float* out, con
     }
     // 8 outputs, their taps all scanned or not.
     __m256d a0 = zero, a1 = zero, s0 = zero, s1 = zero;
-    if (!mask || every_of(x0, 8)) {
+    if (!mask || every_tap_scanned(mask, taps, x0, 8)) {
       for (std::size_t t = 0; t < taps; ++t) {
         const __m256 p = _mm256_mul_ps(_mm256_set1_ps(w[t]), _mm256_loadu_ps(src[t] + x0));
         a0 = _mm256_add_pd(a0, _mm256_cvtps_pd(_mm256_castps256_ps128(p)));
@@ -1225,6 +1220,13 @@ void filter_along_row(float* out, const float* src, const std::uint8_t* mask, st
 
 void mask_detail::use_portable_taps(bool on) { g_portable_taps.store(on); }
 
+namespace {
+
+// lowpass_across_beam of the planes [k0, k1) across the beam (indices along
+// ax) into out, a whole volume's array; the rest of out untouched. The
+// passes filter across the beam only, so a plane's values do not depend on
+// the others: the same bits as filtering the whole volume.
+//
 // Every pass filters whole rows at a time, vectorised across them: along y
 // (z) the rows of a z-plane (y-slice); along x each row along itself, its
 // taps the row shifted (it went through a transpose of each plane, of its
@@ -1232,12 +1234,6 @@ void mask_detail::use_portable_taps(bool on) { g_portable_taps.store(on); }
 // result does not depend on the thread count. (Along x it ran voxel by
 // voxel, with a branch per tap: 0.4 s of the near field's 1.3 s at 256^3;
 // now the same bits in a fraction.)
-namespace {
-
-// lowpass_across_beam of the planes [k0, k1) across the beam (indices along
-// ax) into out, a whole volume's array; the rest of out untouched. The
-// passes filter across the beam only, so a plane's values do not depend on
-// the others: the same bits as filtering the whole volume.
 void lowpass_planes(const Volume& v, const std::uint8_t* mask, int ax, double sigma_mm, int threads, float* out,
                     std::size_t k0, std::size_t k1) {
   const Dims3& d = v.dims;
@@ -2135,9 +2131,9 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
     // Lines over threads (each line's search is its own; the counts are
     // sums), each thread's lines walked a plane across the beam at a time
     // (in memory order where the beam is z; line by line down the beam it
-    // read a cache line per sample): per line the first scanned sample at
-    // or above `strong` (not below it), then the brightest scanned one up to crest_reach
-    // below it (the first of equals), as a search down each line finds them.
+    // read a cache line per sample): per line the first scanned sample not
+    // below `strong`, then the brightest scanned one up to crest_reach below
+    // it (the first of equals), as a search down each line finds them.
     const int parts = range_count(lines, threads);
     std::vector<std::size_t> pechoes(std::size_t(parts), 0), pdata(std::size_t(parts), 0);
     parallel_ranges_indexed(lines, threads, [&](int k, std::size_t l0, std::size_t l1) {
@@ -2321,7 +2317,6 @@ void mask_detail::relowpass_planes(const Volume& v, const std::vector<std::uint8
   lowpass_planes(v, scanned.data(), ax, sigma_mm, host_threads(threads), lp.data(), k0, k1);
 }
 
-
 NearFieldReport remove_near_field(const Volume& v, std::vector<std::uint8_t>& scanned, const NearFieldParams& params) {
   NearFieldReport rep;
   std::vector<std::uint8_t> band;
@@ -2329,11 +2324,11 @@ NearFieldReport remove_near_field(const Volume& v, std::vector<std::uint8_t>& sc
   // band, of the mask without the band. It never mixes depths along the
   // beam, so only the planes across the beam that hold band voxels change:
   // those are lowpassed again, in place (the same sums per voxel, the same
-  // bits), and the rest is the band's. Only with the same
-  // sigma. Without a mask (every voxel scanned) the lowpass adds the same
-  // terms in the same order as under a mask of ones (normalised_taps), so
-  // the band's lowpass serves there too, and a band found then makes the
-  // mask a plane at a time as before.
+  // bits), and the rest is the band's. Only with the same sigma. Without a
+  // mask (every voxel scanned) the lowpass adds the same terms in the same
+  // order as under a mask of ones (normalised_taps), so the band's lowpass
+  // serves there too, and a band found then makes the mask a plane at a
+  // time as before.
   HostVector<float> lp;
   const bool share = params.band && params.reverb && params.reverb_params.sigma_mm == params.sigma_mm;
   if (params.band)

@@ -141,14 +141,24 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
   const double h_ax = v.spacing[std::size_t(ax)];
   const FanBeams fan = params.fan && scanned ? fan_beams(*scanned, d, v.spacing, ax) : FanBeams{};
   // The beam through voxel c (unit, in mm): from the fan's apex, else along
-  // the axis.
-  // Its components before normalising, and their length.
+  // the axis. Its components before normalising, and their length; each
+  // component depends on its own coordinate alone, so it is kept per axis
+  // and coordinate (formed per voxel it cost the passes below a
+  // multiplication and a subtraction per axis).
+  std::array<std::vector<double>, 3> component;
+  for (int k = 0; k < 3; ++k) {
+    const double h = v.spacing[std::size_t(k)];
+    std::vector<double>& b = component[std::size_t(k)];
+    b.resize(d[std::size_t(k)]);
+    for (std::size_t t = 0; t < b.size(); ++t)
+      b[t] = k == ax ? (double(t) - (fan.found ? fan.apex[k] : -1.0)) * h
+             : fan.spreads[k] ? (double(t) - fan.apex[k]) * h
+                              : 0.0;
+  }
   const auto beam_unnormalised = [&](const std::size_t c[3], double b[3]) {
     double len = 0;
     for (int k = 0; k < 3; ++k) {
-      b[k] = k == ax ? (double(c[k]) - (fan.found ? fan.apex[k] : -1.0)) * v.spacing[std::size_t(k)]
-             : fan.spreads[k] ? (double(c[k]) - fan.apex[k]) * v.spacing[std::size_t(k)]
-                              : 0.0;
+      b[k] = component[std::size_t(k)][c[k]];
       len += b[k] * b[k];
     }
     return std::sqrt(len);
@@ -169,15 +179,13 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
     const std::size_t planes = d[std::size_t(ax)], per_plane = n / planes;
     const std::size_t la = ax == 0 ? 1 : 0, lb = ax == 2 ? 1 : 2;  // the plane's axes
     std::vector<long> prev(per_plane, -1), cur(per_plane, -1), prev_top(per_plane, -1), cur_top(per_plane, -1);
-    // Per plane, tables along each of the plane's two axes (a value depends
-    // on the plane and on that one coordinate, so the same expressions give
-    // the same values as per voxel, where they took a division and a
-    // rounding per axis and the beam's squared components per voxel): where
-    // the beam through coordinate t crosses the plane above (-1: outside
-    // the volume), and the beam's squared component b_k^2 (beam_unnormalised).
+    // Per plane, a table along each of the plane's two axes of where the
+    // beam through coordinate t crosses the plane above (-1: outside the
+    // volume): it depends on the plane and that one coordinate, so the same
+    // expression gives the same value as per voxel, where it took a
+    // division and a rounding per axis.
     std::vector<long> above[3];
-    std::vector<double> square[3];
-    for (const std::size_t k : {la, lb}) above[k].resize(d[k]), square[k].resize(d[k]);
+    for (const std::size_t k : {la, lb}) above[k].resize(d[k]);
     for (std::size_t depth = 0; depth < planes; ++depth) {
       const double dd = double(depth) - fan.apex[ax];
       const bool from_above = depth > 0 && dd > 1.0;
@@ -189,12 +197,7 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
             if (at < 0 || at >= long(d[k])) at = -1;
           }
           above[k][t] = at;
-          const double b = fan.spreads[k] ? (double(t) - fan.apex[k]) * v.spacing[k] : 0.0;
-          square[k][t] = b * b;
         }
-      // The beam's component along the axis, as beam_unnormalised forms it.
-      const double b_ax = (double(depth) - (fan.found ? fan.apex[ax] : -1.0)) * v.spacing[std::size_t(ax)];
-      const double square_ax = b_ax * b_ax;
       parallel_ranges(d[lb], per_plane >= 65536 ? threads : 1, [&](std::size_t q0, std::size_t q1) {
         for (std::size_t q = q0; q < q1; ++q)
           for (std::size_t p = 0; p < d[la]; ++p) {
@@ -215,13 +218,11 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
             cur_top[cell] = top;
             if (!is_scanned(i)) continue;
             if (top < 0) cur_top[cell] = top = long(depth);
-            // mm along the beam per plane: h_ax / |b_ax / |b||, |b|^2 summed
-            // over the axes in index order as beam_unnormalised does.
+            // mm along the beam per plane (formed only where a test needs it).
             const auto along = [&] {
-              double sq[3];
-              sq[ax] = square_ax, sq[la] = square[la][p], sq[lb] = square[lb][q];
-              const double len = std::sqrt(((0.0 + sq[0]) + sq[1]) + sq[2]);
-              return h_ax / std::fabs(b_ax / len);
+              double b[3];
+              const double len = beam_unnormalised(c, b);
+              return h_ax / std::fabs(b[ax] / len);
             };
             if (vs.data[i] > level) {
               if (double(long(depth) - top) * along() >= params.fan_skip_mm) cur[cell] = long(depth);
