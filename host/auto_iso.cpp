@@ -36,9 +36,17 @@ namespace {
 __attribute__((target_clones("avx2", "default"))) void row_gradients(
     const float* c, std::size_t len, std::size_t sy, std::size_t sz, double h2x, double h2y, double h2z, double lo,
     double width, int bins, float* g, int* bin) {
+  // bin null: the gradients only (the rules other than Edge bin nothing).
   // The six neighbours' rows (c is an interior voxel: all inside the array).
   const float *xm = c - 1, *xp = c + 1, *ym = c - sy, *yp = c + sy, *zm = c - sz, *zp = c + sz;
   const double ix = 1 / h2x, iy = 1 / h2y, iz = 1 / h2z, iw = 1 / width;
+  if (!bin) {
+    for (std::size_t x = 0; x < len; ++x) {
+      const double gx = (xp[x] - xm[x]) * ix, gy = (yp[x] - ym[x]) * iy, gz = (zp[x] - zm[x]) * iz;
+      g[x] = float(std::sqrt(gx * gx + gy * gy + gz * gz));
+    }
+    return;
+  }
   for (std::size_t x = 0; x < len; ++x) {
     const double gx = (xp[x] - xm[x]) * ix, gy = (yp[x] - ym[x]) * iy, gz = (zp[x] - zm[x]) * iz;
     g[x] = float(std::sqrt(gx * gx + gy * gy + gz * gz));
@@ -223,8 +231,11 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   const double width = (hi - lo) / bins;
   if (!(width > 0) || !std::isfinite(width))  // a range of a few denormals
     throw InputError("--iso auto: the volume is constant, it has no boundary to pick an isovalue at");
-  std::vector<double> sum(bins, 0.0);
-  std::vector<std::size_t> count(bins, 0);
+  // The histogram of |grad v~| over v~ serves the Edge rule alone (a
+  // quarter of this pass at 256^3 for the others).
+  const bool binned = params.rule == AutoIsoRule::Edge;
+  std::vector<double> sum(binned ? bins : 0, 0.0);
+  std::vector<std::size_t> count(binned ? bins : 0, 0);
   // |grad v~| per usable voxel (-1 elsewhere), for both rules.
   const double hx = v.spacing[0], hy = v.spacing[1], hz = v.spacing[2];
   // den is not needed any more: with a mask its storage holds gfield.
@@ -232,15 +243,15 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   float* const gfield = mask ? den.data() : own_gfield.data();
   {
     // Per plane: the histogram's sums and counts, added up in z order.
-    std::vector<double> psum(d[2] * std::size_t(bins), 0.0);
-    std::vector<std::size_t> pcount(d[2] * std::size_t(bins), 0);
+    std::vector<double> psum(binned ? d[2] * std::size_t(bins) : 0, 0.0);
+    std::vector<std::size_t> pcount(psum.size(), 0);
     // Each row's gradients and bins first, for all its voxels (a loop without
     // branches that vectorises), then the usable ones entered; gfield -1
     // where a voxel is not usable (the faces too).
     const std::size_t len = d[0] - 2;
     parallel_ranges(d[2], threads, [&](std::size_t z0, std::size_t z1) {
       std::vector<float> g(len);
-      std::vector<int> bin(len);
+      std::vector<int> bin(binned ? len : 0);
       for (std::size_t z = z0; z < z1; ++z) {
         float* const gplane = gfield + z * sz;
         if (z == 0 || z + 1 == d[2]) {
@@ -251,11 +262,13 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
         std::fill(gplane + sz - sy, gplane + sz, -1.0f);
         for (std::size_t y = 1; y + 1 < d[1]; ++y) {
           const std::size_t row = v.index(1, y, z);
-          row_gradients(num.data() + row, len, sy, sz, 2 * hx, 2 * hy, 2 * hz, lo, width, bins, g.data(), bin.data());
+          row_gradients(num.data() + row, len, sy, sz, 2 * hx, 2 * hy, 2 * hz, lo, width, bins, g.data(),
+                        binned ? bin.data() : nullptr);
           const std::uint8_t* const ur = usable + row;
           float* const gr = gfield + row;
           gr[-1] = -1.0f, gr[len] = -1.0f;
           for (std::size_t x = 0; x < len; ++x) gr[x] = ur[x] ? g[x] : -1.0f;
+          if (!binned) continue;
           double* const ps = psum.data() + z * std::size_t(bins);
           std::size_t* const pc = pcount.data() + z * std::size_t(bins);
           for (std::size_t x = 0; x < len; ++x) {
@@ -266,27 +279,27 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
         }
       }
     });
-    for (std::size_t z = 0; z < d[2]; ++z)
+    for (std::size_t z = 0; binned && z < d[2]; ++z)
       for (int b = 0; b < bins; ++b) sum[b] += psum[z * std::size_t(bins) + std::size_t(b)], count[b] += pcount[z * std::size_t(bins) + std::size_t(b)];
   }
   // Mean per bin where there are enough voxels, smoothed [1 2 1] over the
   // valid bins; the peak's centre is the isovalue.
   const auto min_count = std::max<std::size_t>(1, std::size_t(std::ceil(params.min_bin_share * double(used))));
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  std::vector<double> mean(bins, nan);
-  for (int b = 0; b < bins; ++b)
+  std::vector<double> mean(binned ? bins : 0, nan);
+  for (int b = 0; binned && b < bins; ++b)
     if (count[b] >= min_count) mean[b] = sum[b] / double(count[b]);
   int best = -1;
   double best_value = -1;
-  for (int b = 0; b < bins; ++b) {
+  for (int b = 0; binned && b < bins; ++b) {
     if (std::isnan(mean[b])) continue;
     double s = 2 * mean[b], w = 2;
     if (b > 0 && !std::isnan(mean[b - 1])) s += mean[b - 1], w += 1;
     if (b + 1 < bins && !std::isnan(mean[b + 1])) s += mean[b + 1], w += 1;
     if (s / w > best_value) best_value = s / w, best = b;
   }
-  if (best < 0) throw InputError("--iso auto: too few scanned voxels to take the isovalue from");
-  const double edge_iso = lo + (best + 0.5) * width;
+  if (binned && best < 0) throw InputError("--iso auto: too few scanned voxels to take the isovalue from");
+  const double edge_iso = binned ? lo + (best + 0.5) * width : nan;
 
   // The echo ridge: from every strong-edge voxel (|grad v~| in the top
   // edge_share of the usable voxels) climb v~ through the 26 neighbours to
@@ -340,27 +353,41 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   // first strictly greater maximum, down to the first strictly smaller
   // minimum, the choices of comparing sign * v~ (-c > -b is c < b for every
   // float but NaN, and false for NaN either way).
-  auto climb = [&](std::size_t x, std::size_t y, std::size_t z, float sign) {
+  //
+  // A climb is a chain of dependent loads (the step, then the neighbour's
+  // step): the climbs of a plane's edges advance together, one step each
+  // per round, so that their loads overlap (one at a time, the climbs were
+  // a fifth of the isovalue's time at 256^3). Each climb's steps are the
+  // ones it takes alone: `at` holds the start voxels and gets the voxels
+  // reached.
+  auto climb_all = [&](std::vector<std::size_t>& at, float sign, std::vector<std::uint32_t>& live) {
     std::uint8_t* steps = sign > 0 ? step_up.data() : step_down.data();
-    std::size_t i = v.index(x, y, z);
-    for (int step = 0; step < params.climb_steps; ++step) {
-      std::uint8_t k = __atomic_load_n(&steps[i], __ATOMIC_RELAXED);
-      if (k == kUnknown) {
-        std::uint8_t up = kStay, down = kStay;
-        float high = num[i], low = num[i];
-        for (std::uint8_t q = 0; q < 26; ++q) {
-          const float c = num[std::size_t(long(i) + around[q])];
-          if (c > high) up = q, high = c;
-          if (c < low) down = q, low = c;
+    live.resize(at.size());
+    for (std::size_t j = 0; j < at.size(); ++j) live[j] = std::uint32_t(j);
+    for (int step = 0; step < params.climb_steps && !live.empty(); ++step) {
+      std::size_t kept = 0;
+      for (std::size_t t = 0; t < live.size(); ++t) {
+        const std::uint32_t j = live[t];
+        const std::size_t i = at[j];
+        std::uint8_t k = __atomic_load_n(&steps[i], __ATOMIC_RELAXED);
+        if (k == kUnknown) {
+          std::uint8_t up = kStay, down = kStay;
+          float high = num[i], low = num[i];
+          for (std::uint8_t q = 0; q < 26; ++q) {
+            const float c = num[std::size_t(long(i) + around[q])];
+            if (c > high) up = q, high = c;
+            if (c < low) down = q, low = c;
+          }
+          __atomic_store_n(&step_up[i], up, __ATOMIC_RELAXED);
+          if (!step_down.empty()) __atomic_store_n(&step_down[i], down, __ATOMIC_RELAXED);
+          k = sign > 0 ? up : down;
         }
-        __atomic_store_n(&step_up[i], up, __ATOMIC_RELAXED);
-        if (!step_down.empty()) __atomic_store_n(&step_down[i], down, __ATOMIC_RELAXED);
-        k = sign > 0 ? up : down;
+        if (k == kStay) continue;
+        at[j] = std::size_t(long(i) + around[k]);
+        live[kept++] = j;
       }
-      if (k == kStay) break;
-      i = std::size_t(long(i) + around[k]);
+      live.resize(kept);
     }
-    return i;
   };
   {
     // An edge whose trough lies at the data's floor: its place in `locals`,
@@ -438,51 +465,73 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     std::vector<Found> found(std::size_t(range_count(inner_planes, chunks)));
     parallel_chunks(inner_planes, threads, chunks, [&](int k, std::size_t a, std::size_t b) {
       Found& f = found[std::size_t(k)];
-      for (std::size_t z = a + 1; z < b + 1; ++z)
+      // A plane's edges (in memory order), their crests and troughs.
+      std::vector<std::size_t> edges, crest_at, trough_at;
+      std::vector<std::uint32_t> live;
+      std::vector<std::uint8_t> cut;
+      for (std::size_t z = a + 1; z < b + 1; ++z) {
+        edges.clear();
         for (std::size_t y = 1; y + 1 < d[1]; ++y)
           for (std::size_t x = 1; x + 1 < d[0]; ++x) {
             const std::size_t i = v.index(x, y, z);
-            if (!(gfield[i] >= edge_threshold) || gfield[i] <= 0) continue;
-            const std::size_t at_crest = climb(x, y, z, 1.0f);
-            const float crest = num[at_crest];
-            f.crests.push_back(crest);
-            if (params.rule == AutoIsoRule::Local) {
-              if (cut_test && cut_up(at_crest)) {
-                f.cut.push_back(i);
-                continue;
-              }
-              const std::size_t at_trough = climb(x, y, z, -1.0f);
-              const float trough = num[at_trough];
-              const bool clipped = crest >= clip_level;
-              const bool at_floor = !clipped && trough <= floor_level;
-              f.clipped += clipped;
-              if (at_floor) {
-                // How far v~ falls floor_reach_mm past the crest, on from the
-                // trough, as a share of the edge's contrast (the volume's
-                // median decides below).
-                const std::array<std::size_t, 3> ct = voxel_of(at_crest), tt = voxel_of(at_trough);
-                double dir[3], len = 0;
-                for (int a = 0; a < 3; ++a)
-                  dir[a] = (double(ct[a]) - double(tt[a])) * v.spacing[std::size_t(a)], len += dir[a] * dir[a];
-                len = std::sqrt(len);
-                if (len > 0 && crest > trough) {
-                  std::size_t q[3];
-                  for (int a = 0; a < 3; ++a)
-                    q[a] = std::size_t(std::clamp(std::lround(double(ct[a]) + params.floor_reach_mm * dir[a] / len /
-                                                                              v.spacing[std::size_t(a)]),
-                                                  0L, long(d[std::size_t(a)]) - 1));
-                  const float beyond = num[v.index(q[0], q[1], q[2])];
-                  if (std::isfinite(beyond))
-                    f.floored.push_back({f.locals.size(), trough, crest, float((crest - beyond) / (crest - trough))});
-                }
-              }
-              const double fraction = clipped ? params.clip_fraction : params.local_fraction;
-              f.locals.push_back(float(trough + fraction * (crest - trough)));
-              f.local_at.push_back(i);
+            if (gfield[i] >= edge_threshold && gfield[i] > 0) edges.push_back(i);
+          }
+        crest_at = edges;
+        climb_all(crest_at, 1.0f, live);
+        for (const std::size_t at : crest_at) f.crests.push_back(num[at]);
+        if (params.rule != AutoIsoRule::Local) continue;
+        // The troughs of the edges whose crest is not cut up the beam.
+        cut.assign(edges.size(), 0);
+        trough_at.clear();
+        for (std::size_t e = 0; e < edges.size(); ++e) {
+          cut[e] = cut_test && cut_up(crest_at[e]);
+          if (!cut[e]) trough_at.push_back(edges[e]);
+        }
+        climb_all(trough_at, -1.0f, live);
+        for (std::size_t e = 0, t = 0; e < edges.size(); ++e) {
+          const std::size_t i = edges[e];
+          if (cut[e]) {
+            f.cut.push_back(i);
+            continue;
+          }
+          const std::size_t at_crest = crest_at[e], at_trough = trough_at[t++];
+          const float crest = num[at_crest];
+          const float trough = num[at_trough];
+          const bool clipped = crest >= clip_level;
+          const bool at_floor = !clipped && trough <= floor_level;
+          f.clipped += clipped;
+          if (at_floor) {
+            // How far v~ falls floor_reach_mm past the crest, on from the
+            // trough, as a share of the edge's contrast (the volume's
+            // median decides below).
+            const std::array<std::size_t, 3> ct = voxel_of(at_crest), tt = voxel_of(at_trough);
+            double dir[3], len = 0;
+            for (int a = 0; a < 3; ++a)
+              dir[a] = (double(ct[a]) - double(tt[a])) * v.spacing[std::size_t(a)], len += dir[a] * dir[a];
+            len = std::sqrt(len);
+            if (len > 0 && crest > trough) {
+              std::size_t q[3];
+              for (int a = 0; a < 3; ++a)
+                q[a] = std::size_t(std::clamp(
+                    std::lround(double(ct[a]) + params.floor_reach_mm * dir[a] / len / v.spacing[std::size_t(a)]),
+                    0L, long(d[std::size_t(a)]) - 1));
+              const float beyond = num[v.index(q[0], q[1], q[2])];
+              if (std::isfinite(beyond))
+                f.floored.push_back({f.locals.size(), trough, crest, float((crest - beyond) / (crest - trough))});
             }
           }
+          const double fraction = clipped ? params.clip_fraction : params.local_fraction;
+          f.locals.push_back(float(trough + fraction * (crest - trough)));
+          f.local_at.push_back(i);
+        }
+      }
     });
     std::vector<Floored> floored;
+    {
+      std::size_t edges = 0, kept = 0, cut = 0;
+      for (const Found& f : found) edges += f.crests.size(), kept += f.locals.size(), cut += f.cut.size();
+      crests.reserve(edges), locals.reserve(kept), local_at.reserve(kept), cut_edges.reserve(cut);
+    }
     for (const Found& f : found) {
       for (Floored e : f.floored) e.local += locals.size(), floored.push_back(e);
       cut_edges.insert(cut_edges.end(), f.cut.begin(), f.cut.end());
@@ -655,18 +704,28 @@ Bulk bulk_of(const Volume& v, const std::vector<std::uint8_t>* mask, double sigm
     const int parts = range_count(n, threads);
     std::vector<std::vector<std::size_t>> part(std::size_t(parts), std::vector<std::size_t>(std::size_t(bins), 0));
     const double scale = double(bins) / (hi - lo);
+    // Four counts per bin, a voxel's in the one of its index mod 4 (the
+    // lowpass is smooth: neighbours mostly share a bin, and one count made
+    // a chain of stores and reloads through memory), added up after.
+    constexpr std::size_t kWays = 4;
+    const std::size_t nb = std::size_t(bins);
+    for (auto& p : part) p.assign(kWays * nb, 0);
     parallel_ranges_indexed(n, parts, [&](int k, std::size_t i0, std::size_t i1) {
-      std::vector<std::size_t>& h = part[std::size_t(k)];
+      std::size_t* const h = part[std::size_t(k)].data();
       // The bin clamped in double and then truncated: for every finite value
       // the bin of clamping floor's (a call per voxel without SSE4.1's
       // rounding); no branch on the mask.
       const double top = double(bins - 1);
-      for (std::size_t i = i0; i < i1; ++i)
-        h[std::size_t(std::min(top, std::max(0.0, (double(low[i]) - lo) * scale)))] += in(i);
+      const auto bin = [&](std::size_t i) { return std::size_t(std::min(top, std::max(0.0, (double(low[i]) - lo) * scale))); };
+      std::size_t i = i0;
+      for (; i + kWays <= i1; i += kWays)
+        for (std::size_t w = 0; w < kWays; ++w) h[w * nb + bin(i + w)] += in(i + w);
+      for (; i < i1; ++i) h[bin(i)] += in(i);
     });
-    std::vector<std::size_t> h(std::size_t(bins), 0);
+    std::vector<std::size_t> h(nb, 0);
     for (const auto& p : part)
-      for (int k = 0; k < bins; ++k) h[std::size_t(k)] += p[std::size_t(k)];
+      for (std::size_t w = 0; w < kWays; ++w)
+        for (std::size_t k = 0; k < nb; ++k) h[k] += p[w * nb + k];
     return h;
   };
   // The extremes of the lowpass over the scanned voxels and their count, per

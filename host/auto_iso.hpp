@@ -113,11 +113,11 @@ struct AutoIsoParams {
 
 struct AutoIsoReport {
   double iso = 0;                     // file units, by the rule asked for
-  double edge_iso = 0, ridge_iso = 0; // both rules' values
+  double edge_iso = 0, ridge_iso = 0; // the Edge rule's (NaN under the others: not binned) and EchoRidge's
   std::size_t crests = 0;             // strong-edge voxels that climbed to a crest
-  double lo = 0, hi = 0;              // range of v~ binned
-  std::vector<double> mean_gradient;  // per bin, per mm (NaN where too few voxels)
-  std::vector<std::size_t> count;     // voxels per bin
+  double lo = 0, hi = 0;              // range of v~ (binned under the Edge rule)
+  std::vector<double> mean_gradient;  // Edge: per bin, per mm (NaN where too few voxels); else empty
+  std::vector<std::size_t> count;     // Edge: voxels per bin; else empty
   std::size_t voxels = 0;             // voxels that entered
   double local_iso = 0;               // the Local rule's global value (median of the edges' isovalues)
   double clipped_share = 0;           // Local: share of the scanned samples at the largest one

@@ -262,10 +262,36 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
     rep.zeros = 0;
     for (const std::size_t c : pzeros) rep.zeros += c;
   }
+  // Every step below starts from a solid zero region that touches one of
+  // the volume's faces (the flood fill's seeds; the rest waits on an
+  // unscanned region): without one, the mask is all scanned. (The cube's
+  // opening of no zeros, and the flood fill's state over 16 MB with no seed,
+  // took 0.1 s at 256^3.)
+  const auto all_scanned = [&] {
+    std::vector<std::uint8_t> mask(n);
+    parallel_ranges(n, threads, [&](std::size_t i0, std::size_t i1) {
+      std::fill(mask.data() + i0, mask.data() + i1, std::uint8_t{1});
+    });
+    if (report) *report = rep;
+    return mask;
+  };
+  if (rep.zeros == 0) return all_scanned();
   std::vector<std::uint8_t> solid = zero;
   if (params.solid > 0) {
     mask_detail::cube_filter(solid, d, params.solid, true, threads);
     mask_detail::cube_filter(solid, d, params.solid, false, threads);
+  }
+  {
+    bool seed = false;
+    for (std::size_t z = 0; z < d[2] && !seed; ++z)
+      for (std::size_t y = 0; y < d[1] && !seed; ++y) {
+        const std::uint8_t* const row = solid.data() + v.index(0, y, z);
+        if (z == 0 || y == 0 || z + 1 == d[2] || y + 1 == d[1])
+          seed = std::any_of(row, row + d[0], [](std::uint8_t b) { return b != 0; });
+        else
+          seed = row[0] != 0 || row[d[0] - 1] != 0;
+      }
+    if (!seed) return all_scanned();
   }
 
   // 2. Flood fill of the solid regions from the volume's faces. state: 0 not
@@ -273,21 +299,40 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
   enum : std::uint8_t { kFree = 0, kSeen = 1, kUnscanned = 2, kFluid = 3 };  // kFluid: 2c gave it back to the scan
   std::vector<std::uint8_t> state(n, kFree);
   std::vector<std::size_t> stack, region;
-  // Marks the solid free region around seed as seen; its voxels in `region`.
+  // Marks the solid free region around seed (its six-connected component)
+  // as seen; its voxels in `region`. A run along x at a time: a seed taken
+  // from the stack extends both ways over the free solid voxels of its row,
+  // and the four rows beside the run (y and z one off) are scanned under it,
+  // a seed pushed for each stretch of free solid voxels there (marked seen
+  // when pushed: a run stops at it, and it starts its own). The same region
+  // as a fill voxel by voxel (which took 0.07 s for a fan's fill at 256^3).
+  const std::size_t nx = d[0], nxy = d[0] * d[1];
   auto fill = [&](std::size_t seed) {
     stack.clear(), region.clear();
+    const auto open = [&](std::size_t j) { return state[j] == kFree && solid[j]; };
     stack.push_back(seed);
     state[seed] = kSeen;
     while (!stack.empty()) {
       const std::size_t i = stack.back();
       stack.pop_back();
-      region.push_back(i);
-      for_face_neighbours(d, i, [&](std::size_t j) {
-        if (state[j] == kFree && solid[j]) {
-          state[j] = kSeen;
-          stack.push_back(j);
+      const std::size_t row = i - i % nx;
+      std::size_t x0 = i - row, x1 = x0 + 1;  // the run [x0, x1)
+      while (x0 > 0 && open(row + x0 - 1)) state[row + --x0] = kSeen;
+      while (x1 < nx && open(row + x1)) state[row + x1++] = kSeen;
+      for (std::size_t x = x0; x < x1; ++x) region.push_back(row + x);
+      const std::size_t y = (row / nx) % d[1], z = row / nxy;
+      const auto scan = [&](std::size_t beside) {
+        bool in_stretch = false;
+        for (std::size_t x = x0; x < x1; ++x) {
+          const bool o = open(beside + x);
+          if (o && !in_stretch) state[beside + x] = kSeen, stack.push_back(beside + x);
+          in_stretch = o;
         }
-      });
+      };
+      if (y > 0) scan(row - nx);
+      if (y + 1 < d[1]) scan(row + nx);
+      if (z > 0) scan(row - nxy);
+      if (z + 1 < d[2]) scan(row + nxy);
     }
     return region.size();
   };
@@ -1596,50 +1641,70 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   // The scanned samples' range (the clipped rule below).
   double vmax = -std::numeric_limits<double>::infinity(), vmin = std::numeric_limits<double>::infinity();
   {
-    const int parts = range_count(d[w_ax], threads);
+    // The scanned voxels' count and range, in memory order (a pass of
+    // loops without branches: exact in any order).
+    const int parts = range_count(n, threads);
     std::vector<std::size_t> pall(static_cast<std::size_t>(parts), 0);
-    std::vector<std::vector<float>> presid(static_cast<std::size_t>(parts));
-    std::vector<double> pmax(static_cast<std::size_t>(parts), vmax), pmin(static_cast<std::size_t>(parts), vmin);
-    parallel_ranges_indexed(d[w_ax], threads, [&](int part, std::size_t b0, std::size_t b1) {
-      // Each thread's sums in locals, stored once at the end (updated in the
-      // shared vectors per voxel, the threads' cache lines ping-ponged: half
-      // a second at 256^3).
+    std::vector<float> phi(static_cast<std::size_t>(parts)), plo(static_cast<std::size_t>(parts));
+    parallel_ranges_indexed(n, threads, [&](int part, std::size_t i0, std::size_t i1) {
+      constexpr float inf = std::numeric_limits<float>::infinity();
+      const float* const data = v.data.data();
       std::size_t count = 0;
-      float hi = -std::numeric_limits<float>::infinity(), lo = std::numeric_limits<float>::infinity();
+      float hi = -inf, lo = inf;
+      if (scanned) {
+        const std::uint8_t* const in = scanned->data();
+        for (std::size_t i = i0; i < i1; ++i) {
+          const bool s = in[i] != 0;
+          count += s;
+          hi = std::max(hi, s ? data[i] : -inf), lo = std::min(lo, s ? data[i] : inf);
+        }
+      } else {
+        count = i1 - i0;
+        for (std::size_t i = i0; i < i1; ++i) hi = std::max(hi, data[i]), lo = std::min(lo, data[i]);
+      }
+      pall[std::size_t(part)] = count;
+      phi[std::size_t(part)] = hi, plo[std::size_t(part)] = lo;
+    });
+    for (int k = 0; k < parts; ++k) {
+      all += pall[std::size_t(k)];
+      if (pall[std::size_t(k)] > 0)
+        vmax = std::max(vmax, double(phi[std::size_t(k)])), vmin = std::min(vmin, double(plo[std::size_t(k)]));
+    }
+  }
+  {
+    const int parts = range_count(d[w_ax], threads);
+    std::vector<std::vector<float>> presid(static_cast<std::size_t>(parts));
+    parallel_ranges_indexed(d[w_ax], threads, [&](int part, std::size_t b0, std::size_t b1) {
       std::vector<float>& resid = presid[std::size_t(part)];
       // At most every line's samples in the window: reserved (not touched),
       // so the pushes below never move what they gathered.
       if (K_search > top_k) resid.reserve((b1 - b0) * d[u_ax] * (K_search - top_k));
-      std::fill(A.data() + b0 * d[u_ax] * K, A.data() + b1 * d[u_ax] * K, nan);
       const float* data = v.data.data();
       const float* low = lp.data();
       const std::uint8_t* in = scanned ? scanned->data() : nullptr;
-      // A row of lines (bb) at a time, down the beam: its lines' stretch of
-      // A stays in cache while the depths fill it (plane by plane over all
-      // the thread's lines, every sample's store went to another cache line
-      // of 17.6 MB). The counts, extremes and residuals' median do not
-      // depend on the order.
+      // Line by line, each down from its skin line to K below it: a line's
+      // stretch of A is written in order, and the neighbouring lines read
+      // the same cache lines of the volume while they are in cache (depth by
+      // depth across the lines, every store went to another cache line of
+      // A). The residuals' median does not depend on the order.
       for (std::size_t bb = b0; bb < b1; ++bb)
-        for (std::size_t z = 0; z < d[ax]; ++z)
-          for (std::size_t a = 0; a < d[u_ax]; ++a) {
-            const std::size_t l = a + bb * d[u_ax];
+        for (std::size_t a = 0; a < d[u_ax]; ++a) {
+          const std::size_t l = a + bb * d[u_ax];
+          float* const line = A.data() + l * K;
+          std::fill(line, line + K, nan);
+          const long s0 = skin[l];
+          if (s0 < 0) continue;  // no scanned voxel on the line
+          const auto z_end = std::size_t(std::min(long(d[ax]), s0 + long(K)));
+          for (std::size_t z = std::size_t(s0); z < z_end; ++z) {
             const std::size_t i = voxel(a, bb, z);
             if (in && !in[i]) continue;
-            ++count;
-            hi = std::max(hi, data[i]), lo = std::min(lo, data[i]);
-            const long k = long(z) - skin[l];
-            if (k < long(K)) {
-              A[l * K + std::size_t(k)] = low[i];
-              if (k >= long(top_k) && k < long(K_search)) resid.push_back(data[i] - low[i]);
-            }
+            const std::size_t k = z - std::size_t(s0);
+            line[k] = low[i];
+            if (k >= top_k && k < K_search) resid.push_back(data[i] - low[i]);
           }
-      pall[std::size_t(part)] = count;
-      pmax[std::size_t(part)] = double(hi), pmin[std::size_t(part)] = double(lo);
+        }
     });
-    for (std::size_t c : pall) all += c;
     for (const auto& pr : presid) R.insert(R.end(), pr.begin(), pr.end());
-    for (int k = 0; k < parts; ++k)
-      vmax = std::max(vmax, pmax[std::size_t(k)]), vmin = std::min(vmin, pmin[std::size_t(k)]);
   }
   if (all < 100) {
     if (report) *report = rep;

@@ -97,21 +97,47 @@ std::vector<float> kth_smallest_of_where(std::size_t n, const std::vector<std::s
   };
   threads = host_threads(threads);
   const int parts = range_count(n, threads);
-  std::vector<std::vector<std::size_t>> counts(std::size_t(parts), std::vector<std::size_t>(kBuckets, 0));
+  // Four 32-bit counts per bucket and thread, a value's into the one of its
+  // index mod 4 (neighbouring values mostly share a bucket: one count made a
+  // chain of stores and reloads through memory); a range of 2^32 values or
+  // more counts in 64 bits. count(t, b): thread t's values in bucket b.
+  constexpr std::size_t kWays = 4;
+  std::vector<std::vector<std::uint32_t>> counts(static_cast<std::size_t>(parts));
+  std::vector<std::vector<std::size_t>> wide(static_cast<std::size_t>(parts));
   parallel_ranges_indexed(n, threads, [&](int t, std::size_t i0, std::size_t i1) {
-    std::vector<std::size_t>& c = counts[std::size_t(t)];
     float f;
-    for (std::size_t i = i0; i < i1; ++i)
-      if (value(i, f)) ++c[bucket_of(f)];
+    if (i1 - i0 >= (std::size_t(1) << 32)) {
+      std::vector<std::size_t>& c = wide[std::size_t(t)];
+      c.assign(kBuckets, 0);
+      for (std::size_t i = i0; i < i1; ++i)
+        if (value(i, f)) ++c[bucket_of(f)];
+      return;
+    }
+    std::vector<std::uint32_t>& c = counts[std::size_t(t)];
+    c.assign(kWays * kBuckets, 0);
+    std::uint32_t* const c0 = c.data();
+    std::size_t i = i0;
+    for (; i + kWays <= i1; i += kWays)
+      for (std::size_t w = 0; w < kWays; ++w)
+        if (value(i + w, f)) ++c0[w * kBuckets + bucket_of(f)];
+    for (; i < i1; ++i)
+      if (value(i, f)) ++c0[bucket_of(f)];
   });
+  const auto count = [&](int t, std::size_t b) {
+    const auto& c = counts[std::size_t(t)];
+    std::size_t sum = wide[std::size_t(t)].empty() ? 0 : wide[std::size_t(t)][b];
+    if (!c.empty())
+      for (std::size_t w = 0; w < kWays; ++w) sum += c[w * kBuckets + b];
+    return sum;
+  };
   std::vector<std::size_t> total(kBuckets, 0);
-  for (const auto& part : counts)
-    for (std::size_t b = 0; b < kBuckets; ++b) total[b] += part[b];
+  for (int t = 0; t < parts; ++t)
+    for (std::size_t b = 0; b < kBuckets; ++b) total[b] += count(t, b);
   // Each rank's bucket, how many values lie in the buckets below it, and
-  // its slot: where its bucket's values are gathered (ranks in one bucket
-  // share the slot of the first of them; -1: a bucket no rank is in).
-  std::vector<std::size_t> below(ks.size());
-  std::vector<int> slot(ks.size()), slot_of(kBuckets, -1);
+  // its slot: which of the distinct buckets the ranks fall in (`target`)
+  // holds it, where that bucket's values are gathered.
+  std::vector<std::size_t> below(ks.size()), target;
+  std::vector<int> slot(ks.size());
   for (std::size_t j = 0; j < ks.size(); ++j) {
     std::size_t b = 0, under = 0;
     for (;; ++b) {
@@ -119,22 +145,59 @@ std::vector<float> kth_smallest_of_where(std::size_t n, const std::vector<std::s
       if (under + total[b] > ks[j]) break;
       under += total[b];
     }
-    if (slot_of[b] < 0) slot_of[b] = int(j);
-    below[j] = under, slot[j] = slot_of[b];
+    const auto at = std::find(target.begin(), target.end(), b);
+    slot[j] = int(at - target.begin());
+    if (at == target.end()) target.push_back(b);
+    below[j] = under;
   }
-  std::vector<std::vector<std::vector<float>>> found(std::size_t(parts), std::vector<std::vector<float>>(ks.size()));
+  // Gathered into arrays of the counted size (one slot spare), each value
+  // stored at every target's next slot and kept where its bucket is that
+  // one: no branch on the bucket (a table of every bucket's slot missed the
+  // cache where the buckets scatter, as |x - median|'s do over many
+  // exponents, and a push_back per kept value cost as much).
+  const std::size_t m = target.size();
+  std::vector<std::vector<float>> found(std::size_t(parts) * m);
+  for (int t = 0; t < parts; ++t)
+    for (std::size_t s = 0; s < m; ++s) found[std::size_t(t) * m + s].resize(count(t, target[s]) + 1);
   parallel_ranges_indexed(n, threads, [&](int t, std::size_t i0, std::size_t i1) {
     float f;
-    for (std::size_t i = i0; i < i1; ++i)
-      if (value(i, f)) {
-        const int s = slot_of[bucket_of(f)];
-        if (s >= 0) found[std::size_t(t)][std::size_t(s)].push_back(f);
-      }
+    std::vector<float*> out(m);
+    std::vector<std::size_t> kept(m, 0);
+    for (std::size_t s = 0; s < m; ++s) out[s] = found[std::size_t(t) * m + s].data();
+    if (m == 1) {
+      float* const o = out[0];
+      const std::size_t b0 = target[0];
+      std::size_t k = 0;
+      for (std::size_t i = i0; i < i1; ++i)
+        if (value(i, f)) o[k] = f, k += bucket_of(f) == b0;
+      kept[0] = k;
+    } else if (m == 2) {
+      float *const o0 = out[0], *const o1 = out[1];
+      const std::size_t b0 = target[0], b1 = target[1];
+      std::size_t k0 = 0, k1 = 0;
+      for (std::size_t i = i0; i < i1; ++i)
+        if (value(i, f)) {
+          const std::size_t b = bucket_of(f);
+          o0[k0] = f, o1[k1] = f;
+          k0 += b == b0, k1 += b == b1;
+        }
+      kept[0] = k0, kept[1] = k1;
+    } else {
+      for (std::size_t i = i0; i < i1; ++i)
+        if (value(i, f)) {
+          const std::size_t b = bucket_of(f);
+          for (std::size_t s = 0; s < m; ++s) out[s][kept[s]] = f, kept[s] += b == target[s];
+        }
+    }
+    for (std::size_t s = 0; s < m; ++s) found[std::size_t(t) * m + s].resize(kept[s]);
   });
   std::vector<float> out(ks.size());
   for (std::size_t j = 0; j < ks.size(); ++j) {
     std::vector<float> in_bucket;
-    for (const auto& part : found) in_bucket.insert(in_bucket.end(), part[std::size_t(slot[j])].begin(), part[std::size_t(slot[j])].end());
+    for (int t = 0; t < parts; ++t) {
+      const std::vector<float>& part = found[std::size_t(t) * m + std::size_t(slot[j])];
+      in_bucket.insert(in_bucket.end(), part.begin(), part.end());
+    }
     std::nth_element(in_bucket.begin(), in_bucket.begin() + long(ks[j] - below[j]), in_bucket.end());
     out[j] = in_bucket[ks[j] - below[j]];
   }

@@ -87,6 +87,51 @@ TEST(Mask, WedgeTouchingTheBorderIsUnscannedIsolatedZerosAreScanned) {
   EXPECT_GT(r.zeros, wedge_voxels + 1000);  // the isolated zeros were there
 }
 
+TEST(Mask, AVolumeWithoutZerosIsScannedEverywhereAsTheFullPathFindsIt) {
+  // No exact zero: the mask is all scanned at once. The same data with one
+  // zero in a corner (a region below min_fraction, through every step) gives
+  // the same mask but there, and the same report but the zero counts.
+  Volume v(Dims3{24, 20, 16}, {1, 1, 1}, ScalarType::UInt8);
+  std::mt19937 rng(test::seed());
+  std::uniform_real_distribution<float> uni(1.0f, 255.0f);
+  for (float& x : v.data) x = uni(rng);
+  MaskReport r;
+  const auto m = scanned_mask(v, MaskParams{}, &r);
+  ASSERT_EQ(m.size(), v.voxels());
+  EXPECT_EQ(std::count(m.begin(), m.end(), std::uint8_t{1}), long(v.voxels()));
+  EXPECT_EQ(r.zeros, 0u);
+  EXPECT_EQ(r.regions, 0u);
+  EXPECT_EQ(r.unscanned, 0u);
+  v.at(0, 0, 0) = 0;
+  MaskReport r1;
+  const auto m1 = scanned_mask(v, MaskParams{}, &r1);
+  EXPECT_EQ(m1, m);
+  EXPECT_EQ(r1.zeros, 1u);
+  EXPECT_EQ(r1.unscanned_regions, 0u);
+  EXPECT_EQ(r1.unscanned, r.unscanned);
+  EXPECT_EQ(r1.rejected, r.rejected);
+  EXPECT_EQ(r1.enclosed_share, r.enclosed_share);
+  // A solid block of zeros at a face (a flood fill's seed) too small to be
+  // an unscanned region: the full path, the same mask.
+  for (std::size_t z = 0; z < 5; ++z)
+    for (std::size_t y = 0; y < 5; ++y)
+      for (std::size_t x = 0; x < 5; ++x) v.at(x, y, z) = 0;
+  MaskParams small;
+  small.min_fraction = 0.1;
+  MaskReport r2;
+  const auto m2 = scanned_mask(v, small, &r2);
+  EXPECT_EQ(m2, m);
+  EXPECT_EQ(r2.regions, 1u);
+  EXPECT_EQ(r2.unscanned_regions, 0u);
+  EXPECT_EQ(r2.unscanned, 0u);
+  // Large enough, it is one.
+  small.min_fraction = 0.01;
+  MaskReport r3;
+  const auto m3 = scanned_mask(v, small, &r3);
+  EXPECT_EQ(r3.unscanned_regions, 1u);
+  EXPECT_GE(std::count(m3.begin(), m3.end(), std::uint8_t{0}), 125);
+}
+
 TEST(Mask, GrowthAddsTheRimAtSixNeighbourDistance) {
   const WedgeVolume w = wedge_volume();
   for (int grow : {1, 2}) {
@@ -2416,7 +2461,12 @@ TEST(HostThreads, KthNonNegativeIsNthElementOverTheNonNegativeValues) {
   }
   // Several ranks in one call (one count, one gather), two of them in one
   // bucket, in any order: each is what nth_element gives.
-  const std::vector<std::size_t> ks = {taken.size() * 99 / 100, taken.size() / 2, taken.size() / 2 + 1, 0};
+  // The gather has its own loops for ranks in one bucket, in two and in more.
+  const std::vector<std::vector<std::size_t>> rank_sets = {
+      {taken.size() * 99 / 100, taken.size() / 2, taken.size() / 2 + 1, 0},
+      {taken.size() / 2, taken.size() * 99 / 100},
+      {taken.size() / 2 + 1, taken.size() / 2}};
+  for (const std::vector<std::size_t>& ks : rank_sets)
   for (const int threads : {1, 2, 5}) {
     const std::vector<float> got = kth_smallest_of_where(h.size(), ks, threads, [&](std::size_t i, float& f) {
       f = h[i];
@@ -2548,7 +2598,7 @@ TEST(HostThreads, MaskNearFieldFillAndIsoAreTheSameForAnyThreadCount) {
     NearFieldReport nr;
     int beam = -1;
     Volume filled;
-    AutoIsoReport ir;
+    AutoIsoReport ir, er;  // the Local rule's, the Edge rule's (its histogram)
     double iso = 0;
     Volume levelled;
     // As classify: the filled volume is the isovalue's input and is
@@ -2574,6 +2624,10 @@ TEST(HostThreads, MaskNearFieldFillAndIsoAreTheSameForAnyThreadCount) {
     ap.want_field = true;
     ap.threads = threads;
     r.iso = auto_iso(v, &m, ap, &r.ir);
+    AutoIsoParams ep;
+    ep.rule = AutoIsoRule::Edge;
+    ep.threads = threads;
+    auto_iso(v, &m, ep, &r.er);
     r.levelled = level_isovalue(r.filled, r.ir.field, r.iso);
     r.fused = r.filled;
     AutoIsoReport fr;
@@ -2587,6 +2641,12 @@ TEST(HostThreads, MaskNearFieldFillAndIsoAreTheSameForAnyThreadCount) {
   ASSERT_TRUE(one.nr.found);
   ASSERT_GT(one.ir.crests, 0u);
   ASSERT_EQ(one.ir.field.size(), v.voxels());
+  // The Local rule bins nothing; the Edge rule's histogram and value.
+  EXPECT_TRUE(std::isnan(one.ir.edge_iso));
+  EXPECT_TRUE(one.ir.count.empty() && one.ir.mean_gradient.empty());
+  ASSERT_EQ(one.er.count.size(), 64u);
+  EXPECT_EQ(one.er.iso, one.er.edge_iso);
+  EXPECT_EQ(one.er.ridge_iso, one.ir.ridge_iso);
   auto same_floats = [](const auto& a, const auto& b) {
     return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
   };
@@ -2608,13 +2668,13 @@ TEST(HostThreads, MaskNearFieldFillAndIsoAreTheSameForAnyThreadCount) {
     EXPECT_EQ(r.nr.depth_mm, one.nr.depth_mm);
     EXPECT_TRUE(same_floats(r.filled.data, one.filled.data));
     EXPECT_EQ(r.iso, one.iso);  // bit for bit
-    EXPECT_EQ(r.ir.edge_iso, one.ir.edge_iso);
+    EXPECT_EQ(r.er.edge_iso, one.er.edge_iso);
     EXPECT_EQ(r.ir.ridge_iso, one.ir.ridge_iso);
     EXPECT_EQ(r.ir.crests, one.ir.crests);
-    EXPECT_EQ(r.ir.count, one.ir.count);
-    EXPECT_TRUE(r.ir.mean_gradient.size() == one.ir.mean_gradient.size() &&
-                std::memcmp(r.ir.mean_gradient.data(), one.ir.mean_gradient.data(),
-                            one.ir.mean_gradient.size() * sizeof(double)) == 0);
+    EXPECT_EQ(r.er.count, one.er.count);
+    EXPECT_TRUE(r.er.mean_gradient.size() == one.er.mean_gradient.size() &&
+                std::memcmp(r.er.mean_gradient.data(), one.er.mean_gradient.data(),
+                            one.er.mean_gradient.size() * sizeof(double)) == 0);
     EXPECT_TRUE(same_floats(r.ir.field, one.ir.field));
     EXPECT_TRUE(same_floats(r.levelled.data, one.levelled.data));
     EXPECT_TRUE(same_floats(r.fused.data, one.fused.data));
