@@ -987,28 +987,44 @@ int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int 
   std::vector<double> psum(3 * d[2], 0.0);
   std::vector<std::size_t> pcount(3 * d[2], 0);
   parallel_ranges(d[2], host_threads(threads), [&](std::size_t z0, std::size_t z1) {
-    std::vector<double> sq(d[0]);
-    for (std::size_t z = z0; z < z1; ++z)
-      for (int a = 0; a < 3; ++a) {
-        if (d[a] < 2 || z % std::max<std::size_t>(1, plane_step) != 0) continue;
-        double sum = 0;
-        std::size_t count = 0;
-        if (a == 2 && z + 1 >= d[2]) continue;
-        for (std::size_t y = 0; y < d[1]; ++y) {
-          if (a == 1 && y + 1 >= d[1]) continue;
-          const std::size_t x_end = a == 0 ? d[0] - 1 : d[0];
-          // The row's squares first (without branches: the zeros of dark
-          // speckle made them unpredictable; a skipped pair's square is 0),
-          // then their sum in ascending i, as before.
+    std::array<std::vector<double>, 3> sq;
+    for (auto& s : sq) s.assign(d[0], 0.0);
+    for (std::size_t z = z0; z < z1; ++z) {
+      if (z % std::max<std::size_t>(1, plane_step) != 0) continue;
+      // The axes taken: along each one with a neighbour in this plane's
+      // rows (z: not the last plane).
+      bool take[3];
+      for (int a = 0; a < 3; ++a) take[a] = d[a] >= 2 && !(a == 2 && z + 1 >= d[2]);
+      double sum[3] = {0, 0, 0};
+      std::size_t count[3] = {0, 0, 0};
+      for (std::size_t y = 0; y < d[1]; ++y) {
+        // A row's squares along each axis first (without branches: the
+        // zeros of dark speckle made them unpredictable; a skipped pair's
+        // square is 0, as is every square of an axis not taken here), then
+        // the three sums side by side, each in ascending i as before (one
+        // axis after the other, each sum a chain of dependent additions).
+        std::size_t x_end[3] = {0, 0, 0};
+        for (int a = 0; a < 3; ++a) {
+          if (!take[a] || (a == 1 && y + 1 >= d[1])) {
+            std::fill(sq[std::size_t(a)].begin(), sq[std::size_t(a)].end(), 0.0);
+            continue;
+          }
+          x_end[a] = a == 0 ? d[0] - 1 : d[0];
           const float* p = v.data.data() + z * plane + y * d[0];
           const float* q = p + stride[a];
           const std::uint8_t* m = scanned ? scanned->data() + z * plane + y * d[0] : nullptr;
-          const double h = v.spacing[a];
-          count += neighbour_squares(p, q, m, stride[a], h, x_end, sq.data());
-          for (std::size_t x = 0; x < x_end; ++x) sum += sq[x];
+          count[a] += neighbour_squares(p, q, m, stride[a], v.spacing[a], x_end[a], sq[std::size_t(a)].data());
         }
-        psum[3 * z + std::size_t(a)] = sum, pcount[3 * z + std::size_t(a)] = count;
+        // Adding 0.0 to a sum leaves it as it is (it cannot be -0: it
+        // starts at +0 and adds squares), so the axes not taken and x's
+        // last voxel add nothing.
+        const double *s0 = sq[0].data(), *s1 = sq[1].data(), *s2 = sq[2].data();
+        if (x_end[0] < d[0]) sq[0][d[0] - 1] = 0.0;
+        for (std::size_t x = 0; x < d[0]; ++x) sum[0] += s0[x], sum[1] += s1[x], sum[2] += s2[x];
       }
+      for (int a = 0; a < 3; ++a)
+        if (take[a]) psum[3 * z + std::size_t(a)] = sum[a], pcount[3 * z + std::size_t(a)] = count[a];
+    }
   });
   for (int a = 0; a < 3; ++a) {
     double sum = 0;
@@ -1773,30 +1789,46 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   // profile_mm either way (a separable box over the lines, per depth): one
   // line's maximum over a few speckle samples is biased bright, and the
   // local mean is not.
+  // The two passes share a scratch array: the second writes into the first's
+  // input, whose pages are touched already (a fresh 17.6 MB array's first
+  // touch at 256^3 cost a quarter of a pass).
+  HostVector<float> box_out;
   const auto box_across = [&](int lat, double h_lat) {
     const std::size_t n_along = lat == 0 ? d[u_ax] : d[w_ax], n_other = lat == 0 ? d[w_ax] : d[u_ax];
     const long r = std::max(0L, long(std::lround(params.profile_mm / h_lat)));
-    HostVector<float> out(A.size());
-    parallel_ranges(out.size(), threads, [&](std::size_t i0, std::size_t i1) {
-      std::fill(out.data() + i0, out.data() + i1, nan);
-    });
+    HostVector<float>& out = box_out;
+    out.resize(A.size());
+    // Each line's depths side by side: per depth k the same additions and
+    // subtractions in the same order as one depth at a time (which read a
+    // cache line per sample and divided one at a time), in loops over k that
+    // vectorise. A NaN sample adds +0.0 to the sum and 0 to the count: the
+    // same values (a sum that starts at +0 is never -0).
     parallel_ranges(n_other, threads, [&](std::size_t o0, std::size_t o1) {
+      std::vector<double> sum(K_search), count(K_search);
       for (std::size_t o = o0; o < o1; ++o) {
         const auto line = [&](long t) { return lat == 0 ? std::size_t(t) + o * d[u_ax] : o + std::size_t(t) * d[u_ax]; };
-        for (std::size_t k = 0; k < K_search; ++k) {
-          double sum = 0;
-          long count = 0;
-          const auto add = [&](long t, int sign) {
-            if (t < 0 || t >= long(n_along)) return;
-            const float x = A[line(t) * K + k];
-            if (!std::isnan(x)) sum += sign * double(x), count += sign;
-          };
-          for (long t = 0; t < r && t < long(n_along); ++t) add(t, 1);
-          for (long t = 0; t < long(n_along); ++t) {
-            add(t + r, 1);
-            add(t - r - 1, -1);
-            if (!std::isnan(A[line(t) * K + k]) && count > 0) out[line(t) * K + k] = float(sum / double(count));
+        std::fill(sum.begin(), sum.end(), 0.0);
+        std::fill(count.begin(), count.end(), 0.0);
+        double* const sm = sum.data();
+        double* const cn = count.data();
+        const auto add = [&](long t, double sign) {
+          if (t < 0 || t >= long(n_along)) return;
+          const float* const x = A.data() + line(t) * K;
+          for (std::size_t k = 0; k < K_search; ++k) {
+            const bool ok = !std::isnan(x[k]);
+            sm[k] += ok ? sign * double(x[k]) : 0.0;
+            cn[k] += ok ? sign : 0.0;
           }
+        };
+        for (long t = 0; t < r && t < long(n_along); ++t) add(t, 1.0);
+        for (long t = 0; t < long(n_along); ++t) {
+          add(t + r, 1.0);
+          add(t - r - 1, -1.0);
+          const float* const x = A.data() + line(t) * K;
+          float* const y = out.data() + line(t) * K;
+          for (std::size_t k = 0; k < K_search; ++k)
+            y[k] = !std::isnan(x[k]) && cn[k] > 0 ? float(sm[k] / cn[k]) : nan;
+          std::fill(y + K_search, y + K, nan);
         }
       }
     });
