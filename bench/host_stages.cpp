@@ -5,9 +5,11 @@
 // classification, in one run, as shares of the whole (docs/benchmarks.md,
 // "Host stages").
 //
-//   softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep] [--bulk-spread X]
+//   softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep] [--bulk-spread X] [--host-only]
 //
 // --bulk-spread 0 times the automatic isovalue without its bulk rule (host/auto_iso.hpp).
+// --host-only skips the device classification (its row 0, the shares of the
+// host stages alone): quick rounds for comparing two builds' host stages.
 //
 // T (0: every core) is passed to the multi-threaded host stages; 1 gives
 // the single-threaded baseline. Each stage's time is the minimum of R runs,
@@ -43,9 +45,10 @@ double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::
 
 int main(int argc, char** argv) {
   const char* const kUsage =
-      "usage: softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep] [--bulk-spread X]\n";
+      "usage: softshell_host_stages VOLUME [--reps R] [--threads T] [--device D] [--reverb keep] [--bulk-spread X] [--host-only]\n";
   std::string in, device;
   int reps = 3, threads = 0;
+  bool host_only = false;
   bool reverb = true;
   double bulk_spread = AutoIsoParams().bulk_spread;
   for (int i = 1; i < argc; ++i) {
@@ -55,6 +58,7 @@ int main(int argc, char** argv) {
     else if (a == "--device" && i + 1 < argc) device = argv[++i];
     else if (a == "--reverb" && i + 1 < argc) reverb = std::string(argv[++i]) != "keep";
     else if (a == "--bulk-spread" && i + 1 < argc) bulk_spread = std::atof(argv[++i]);
+    else if (a == "--host-only") host_only = true;
     else if (in.empty() && a[0] != '-') in = a;
     else {
       std::cerr << kUsage;
@@ -107,6 +111,11 @@ int main(int argc, char** argv) {
       p.grad_sigma_mm = auto_grad_sigma(v, mask.empty() ? nullptr : &mask, 2, 1.0, threads).sigma_mm;
       t[4] = since(t0);
       keep_freed.reset();
+      if (host_only) {
+        for (int k = 0; k < kStages; ++k) best[k] = std::min(best[k], t[k]);
+        if (r == 0) first = t;
+        continue;
+      }
       t0 = Clock::now();
       p.v_iso = v.intensity_map().to_unit(iso);
       SolveReport sr;
@@ -120,9 +129,14 @@ int main(int argc, char** argv) {
     for (double f : first) first_total += f;
     std::printf("%s: %zux%zux%zu, threads %d (0: every core), min of %d runs | the first run\n", in.c_str(),
                 v0.dims[0], v0.dims[1], v0.dims[2], threads, reps);
-    for (int k = 0; k < kStages; ++k)
+    for (int k = 0; k < kStages; ++k) {
+      if (host_only && k == kStages - 1) {
+        std::printf("  %-18s   skipped (--host-only)\n", names[k]);
+        continue;
+      }
       std::printf("  %-18s %8.3f s  %5.1f %%  | %8.3f s  %5.1f %%\n", names[k], best[k], 100 * best[k] / total, first[k],
                   100 * first[k] / first_total);
+    }
     std::printf("  %-18s %8.3f s          | %8.3f s\n", "total", total, first_total);
   } catch (const std::exception& e) {
     std::cerr << "softshell_host_stages: " << e.what() << "\n";
