@@ -84,8 +84,9 @@ void parallel_ranges(std::size_t n, int parts, F&& f) {
 // their key on every thread, find the bucket that holds each rank, gather
 // those buckets' values in one more pass and select within each (a serial
 // gather and nth_element of 8 M values took 0.06-0.08 s at 256^3; two ranks
-// in one call count and gather once). Throws std::invalid_argument when a k
-// is not below their count.
+// in one call count and gather once). value is called twice per i and must
+// give the same both times (the gather fills arrays of the counted sizes).
+// Throws std::invalid_argument when a k is not below their count.
 template <class Value>
 std::vector<float> kth_smallest_of_where(std::size_t n, const std::vector<std::size_t>& ks, int threads, Value value) {
   constexpr std::size_t kBuckets = 1u << 16;
