@@ -1613,8 +1613,9 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     return a * stride[u_ax] + b * stride[w_ax] + z * stride[ax];
   };
   const std::size_t lines = d[u_ax] * d[w_ax];
-  std::vector<long> skin(lines, -1);
-  {
+  // Without a mask every line starts at depth 0.
+  std::vector<long> skin(lines, scanned ? -1 : 0);
+  if (scanned) {
     // In memory order (z-planes over threads): the skin line of every beam
     // line (its first scanned voxel, the minimum depth: exact).
     const std::size_t nx = d[0], ny = d[1], nz = d[2];
@@ -1622,11 +1623,25 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     std::vector<std::vector<long>> pskin(static_cast<std::size_t>(parts), std::vector<long>(lines, -1));
     parallel_ranges_indexed(nz, threads, [&](int k, std::size_t z0, std::size_t z1) {
       std::vector<long>& sk = pskin[std::size_t(k)];
+      const std::uint8_t* const in = scanned->data();
+      if (ax == 2) {
+        // The beam along z: a line is (x, y), and a thread's planes come in
+        // ascending z, so a line's first scanned voxel is its first depth
+        // (row loops without branches).
+        long* const s = sk.data();
+        for (std::size_t z = z0; z < z1; ++z)
+          for (std::size_t y = 0; y < ny; ++y) {
+            const std::uint8_t* const m = in + (z * ny + y) * nx;
+            long* const sr = s + y * nx;
+            for (std::size_t x = 0; x < nx; ++x) sr[x] = sr[x] < 0 && m[x] ? long(z) : sr[x];
+          }
+        return;
+      }
       for (std::size_t z = z0; z < z1; ++z)
         for (std::size_t y = 0; y < ny; ++y)
           for (std::size_t x = 0; x < nx; ++x) {
             const std::size_t i = (z * ny + y) * nx + x;
-            if (scanned && !(*scanned)[i]) continue;
+            if (!in[i]) continue;
             const std::size_t c[3] = {x, y, z};
             const std::size_t l = c[u_ax] + c[w_ax] * d[u_ax];
             if (sk[l] < 0 || long(c[ax]) < sk[l]) sk[l] = long(c[ax]);
