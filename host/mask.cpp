@@ -1759,6 +1759,9 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
       std::vector<std::vector<float>> at_depth(b1 - b0);
       // k in [k0, k1) lies in exactly the bins [b0, b1).
       const std::size_t k0 = k_of_bin[b0], k1 = k_of_bin[b1];
+      // Each bin's bound reserved (its depths' samples on every line): no
+      // copies as they grow.
+      for (std::size_t b = b0; b < b1; ++b) at_depth[b - b0].reserve(lines * (k_of_bin[b + 1] - k_of_bin[b]));
       for (std::size_t l = 0; l < lines; ++l)
         for (std::size_t k = k0; k < k1; ++k)
           if (!std::isnan(A[l * K + k])) at_depth[bin_of(k) - b0].push_back(A[l * K + k]);
@@ -2302,6 +2305,7 @@ std::vector<std::uint8_t> reverberation_region(const Volume& v, const std::vecto
   std::vector<std::size_t> lines_at(S, 0);
   parallel_ranges(S, threads, [&](std::size_t s0, std::size_t s1) {
     std::vector<std::vector<float>> at_s(s1 - s0);
+    for (auto& x : at_s) x.reserve(rep.lines);  // at most a sample per line with an echo
     for (std::size_t l = 0; l < lines; ++l) {
       if (echo[l] < 0) continue;
       for (std::size_t s = s0; s < s1 && std::size_t(echo[l]) + s < d[ax]; ++s) {
