@@ -36,27 +36,21 @@ namespace {
 __attribute__((target_clones("avx2", "default"))) void row_gradients(
     const float* c, std::size_t len, std::size_t sy, std::size_t sz, double h2x, double h2y, double h2z, double lo,
     double width, int bins, float* g, int* bin) {
-  // bin null: the gradients only (the rules other than Edge bin nothing).
   // The six neighbours' rows (c is an interior voxel: all inside the array).
   const float *xm = c - 1, *xp = c + 1, *ym = c - sy, *yp = c + sy, *zm = c - sz, *zp = c + sz;
   const double ix = 1 / h2x, iy = 1 / h2y, iz = 1 / h2z, iw = 1 / width;
-  if (!bin) {
-    for (std::size_t x = 0; x < len; ++x) {
-      const double gx = (xp[x] - xm[x]) * ix, gy = (yp[x] - ym[x]) * iy, gz = (zp[x] - zm[x]) * iz;
-      g[x] = float(std::sqrt(gx * gx + gy * gy + gz * gz));
-    }
-    return;
-  }
   for (std::size_t x = 0; x < len; ++x) {
     const double gx = (xp[x] - xm[x]) * ix, gy = (yp[x] - ym[x]) * iy, gz = (zp[x] - zm[x]) * iz;
     g[x] = float(std::sqrt(gx * gx + gy * gy + gz * gz));
-    // Clamped before the conversion: the row's unusable voxels (outside the
-    // mask) may lie far outside [lo, hi], and a float beyond int's range
-    // converted to int is undefined (found by fuzz_classify). fmax/fmin take
-    // a NaN to the other operand. For every finite value the same bin as
-    // clamping the converted int.
-    bin[x] = int(std::fmax(0.0, std::fmin(double(bins - 1), (c[x] - lo) * iw)));
   }
+  // bin null: the gradients only (the rules other than Edge bin nothing).
+  if (!bin) return;
+  // Clamped before the conversion: the row's unusable voxels (outside the
+  // mask) may lie far outside [lo, hi], and a float beyond int's range
+  // converted to int is undefined (found by fuzz_classify). fmax/fmin take
+  // a NaN to the other operand. For every finite value the same bin as
+  // clamping the converted int.
+  for (std::size_t x = 0; x < len; ++x) bin[x] = int(std::fmax(0.0, std::fmin(double(bins - 1), (c[x] - lo) * iw)));
 }
 
 // One row of the isovalue field, trilinear from the four coarse rows around

@@ -1808,8 +1808,8 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   // line's maximum over a few speckle samples is biased bright, and the
   // local mean is not.
   // The two passes share a scratch array: the second writes into the first's
-  // input, whose pages are touched already (a fresh 17.6 MB array's first
-  // touch at 256^3 cost a quarter of a pass).
+  // input, whose pages are touched already (not a second fresh 17.6 MB
+  // array at 256^3).
   HostVector<float> box_out;
   const auto box_across = [&](int lat, double h_lat) {
     const std::size_t n_along = lat == 0 ? d[u_ax] : d[w_ax], n_other = lat == 0 ? d[w_ax] : d[u_ax];

@@ -91,10 +91,7 @@ TEST(Mask, AVolumeWithoutZerosIsScannedEverywhereAsTheFullPathFindsIt) {
   // No exact zero: the mask is all scanned at once. The same data with one
   // zero in a corner (a region below min_fraction, through every step) gives
   // the same mask but there, and the same report but the zero counts.
-  Volume v(Dims3{24, 20, 16}, {1, 1, 1}, ScalarType::UInt8);
-  std::mt19937 rng(test::seed());
-  std::uniform_real_distribution<float> uni(1.0f, 255.0f);
-  for (float& x : v.data) x = uni(rng);
+  Volume v = speckle_volume({24, 20, 16}, test::seed());  // 1..255: no zeros
   MaskReport r;
   const auto m = scanned_mask(v, MaskParams{}, &r);
   ASSERT_EQ(m.size(), v.voxels());
