@@ -203,6 +203,38 @@ TEST_F(CliArgs, EvaluateRefusesATruthThatIsNoSignedDistance) {
   EXPECT_EQ(run({"evaluate", file("u.nrrd"), sphere_sdf("sdf06.nrrd", 0.6)}).status, 0);
 }
 
+TEST_F(CliArgs, EvaluateTakesAnAnisotropicTruthInUnitsOfTheSmallestSpacing) {
+  // A cylinder along z on a grid of 0.8 x 0.8 x 0.35 mm: every surface faces
+  // across x and y, where the distance in units of the smallest spacing
+  // (0.35 mm) changes by 0.8 / 0.35 = 2.29 per voxel index. It is a signed
+  // distance (docs/metrics.md, "Units and anisotropic voxels"): accepted. The
+  // same distance in millimetres changes by 0.35 per smallest spacing, a
+  // distance in other units: refused.
+  const std::size_t nx = 24, ny = 24, nz = 20;
+  const auto cylinder = [&](const std::string& name, double unit_mm) {
+    Volume v({nx, ny, nz});
+    v.spacing = {0.8, 0.8, 0.35};
+    const double c = 0.5 * double(nx - 1), r_mm = 6.0;
+    for (std::size_t z = 0; z < nz; ++z)
+      for (std::size_t y = 0; y < ny; ++y)
+        for (std::size_t x = 0; x < nx; ++x) {
+          const double dx = (double(x) - c) * 0.8, dy = (double(y) - c) * 0.8;
+          v.at(x, y, z) = float((std::sqrt(dx * dx + dy * dy) - r_mm) / unit_mm);
+        }
+    write_volume(file(name), v);
+    return file(name);
+  };
+  const std::string sdf = cylinder("cyl.nrrd", 0.35);
+  Volume u = read_volume(sdf);
+  for (float& f : u.data) f = float(std::max(0.0, 1.0 - std::abs(f) / 1.5));
+  write_volume(file("u.nrrd"), u);
+  const RunResult r = run({"evaluate", file("u.nrrd"), sdf, "--json"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.out.find("\"precision\": 1"), std::string::npos) << r.out;
+  expect_one_line_error(run({"evaluate", file("u.nrrd"), cylinder("cyl_mm.nrrd", 1.0)}),
+                        {"the median |grad| next to its zero set is 0.34", "not near 1"});
+}
+
 TEST_F(CliArgs, InitMustBeAnOpacityVolume) {
   const std::string in = small_volume();
   ASSERT_EQ(run({"classify", in, "--iso", "100", "-q", "-o", file("u0.nrrd")}).status, 0);

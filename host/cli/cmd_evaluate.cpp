@@ -85,9 +85,13 @@ std::string fixed(double v, int digits) {
 
 // The truth must look like a signed distance in voxels: both signs (a zero
 // set inside the volume), and |grad d| near 1 on the voxels next to that
-// zero set (central differences per voxel index, one-sided at the border).
-// A B-mode volume, an opacity volume or a distance in other units fails one
-// of these; its metrics would be meaningless, so it is refused.
+// zero set (central differences, one-sided at the border). On an anisotropic
+// grid the distance is in units of the smallest spacing (docs/metrics.md,
+// "Units and anisotropic voxels"), so each axis's difference per index is
+// divided by its spacing over the smallest one: a true distance's |grad| is
+// 1 whichever way its surfaces face. A B-mode volume, an opacity volume or a
+// distance in other units fails one of these; its metrics would be
+// meaningless, so it is refused.
 void check_signed_distance(const Volume& d, const std::string& path) {
   const auto bad = [&](const std::string& why) {
     return input_error(path, "TRUTH_SDF does not look like a signed distance in voxels: " + why +
@@ -98,6 +102,9 @@ void check_signed_distance(const Volume& d, const std::string& path) {
   if (!(lo < 0 && hi > 0))
     throw bad("its values lie in [" + fixed(lo, 3) + ", " + fixed(hi, 3) + "], with no sign change");
   const Dims3 n = d.dims;
+  const double h_min = std::min({d.spacing[0], d.spacing[1], d.spacing[2]});
+  double index_per_unit[3];
+  for (int a = 0; a < 3; ++a) index_per_unit[a] = h_min > 0 ? h_min / d.spacing[std::size_t(a)] : 1.0;
   std::vector<double> grads;
   for (std::size_t z = 0; z < n[2]; ++z)
     for (std::size_t y = 0; y < n[1]; ++y)
@@ -110,7 +117,7 @@ void check_signed_distance(const Volume& d, const std::string& path) {
           if (lo_i[a] > 0) --lo_i[a];
           if (hi_i[a] + 1 < n[a]) ++hi_i[a];
           const double g = double(d.at(hi_i[0], hi_i[1], hi_i[2]) - d.at(lo_i[0], lo_i[1], lo_i[2])) /
-                           double(hi_i[a] - lo_i[a]);
+                           double(hi_i[a] - lo_i[a]) * index_per_unit[a];
           g2 += g * g;
         }
         grads.push_back(std::sqrt(g2));
