@@ -276,7 +276,12 @@ def form(scatter, atten, imped, bone_mask, Zb, hz, hy, hx):
 
     # PSF: asymmetric axial pulse (fast rise, slow ring-down), lateral Gaussian whose width grows away
     # from the focus, plus side lobes (a wider, weaker Gaussian)
-    kz = np.arange(-int(4 * ax_sigma / hz) - 1, int(6 * ax_sigma / hz) + 2) * hz
+    # The kernel symmetric in extent, kz = 0 at its middle sample: convolve1d centres a kernel at
+    # len // 2, and the first version's kernel (4 sigma before, 6 after) put the pulse's peak 1-2
+    # samples toward the probe from its interface (version 3, docs/crosscheck.md).
+    nk = int(6 * ax_sigma / hz) + 1
+    kz = np.arange(-nk, nk + 1) * hz
+    assert kz[len(kz) // 2] == 0, 'the pulse must be centred where convolve1d puts the origin'
     pulse = np.where(kz < 0, np.exp(-kz**2 / (2 * (0.6 * ax_sigma)**2)), np.exp(-kz**2 / (2 * (1.5 * ax_sigma)**2)))
     pulse = pulse * np.exp(1j * 2 * np.pi * kz / lam * 0.15)   # residual phase across the pulse
     amp = ndimage.convolve1d(amp.real, pulse.real, axis=0, mode='nearest') - ndimage.convolve1d(amp.imag, pulse.imag, axis=0, mode='nearest') \
