@@ -54,6 +54,10 @@ elif mode == 'table':
             name = ('lowpass 1 mm + Levoy at %s (chosen on the training seeds)' % lv[sh]) if t.startswith('lv') else t
             print('| %s (%d) | %s | %s |' % (sh, len(ds), name, ' | '.join(cells)))
     print('\nEach cell: worst case over the cases (mean in brackets).')
+    missing = ['%s (%s)' % (os.path.basename(d), t) for sh in SHAPES for d in dirs(sh) for t in sys.argv[4:]
+               if ev(d, t) is None]
+    if missing:
+        print('No evaluation (classify or evaluate failed; scored as nothing drawn): ' + ', '.join(missing))
 elif mode == 'cases':
     a, b = sys.argv[4], sys.argv[5]
     for sh in SHAPES:

@@ -20,7 +20,8 @@ echo "simulating (once) ..." >&2
 cases | xargs -P2 -n2 sh -c '[ -f "'"$O"'/$0$1/volume.nrrd" ] || "'"$PY"'" "'"$H"'/indsim.py" $0 $1 "'"$O"'/$0$1" > /dev/null'
 echo "classifying and evaluating ($TAG) ..." >&2
 ARGS="$*"
-cases | xargs -P2 -n2 sh -c 'd="'"$O"'/$0$1"; "'"$S"'" classify "$d/volume.nrrd" -o "$d/u_'"$TAG"'.nrrd" --iso auto -q '"$ARGS"' && "'"$S"'" evaluate --json "$d/u_'"$TAG"'.nrrd" "$d/truth_sdf.nrrd" > "$d/ev_'"$TAG"'.json"'
+# A case that fails (classify or evaluate) is named and scored as nothing drawn; the others go on.
+cases | xargs -P2 -n2 sh -c 'd="'"$O"'/$0$1"; rm -f "$d/ev_'"$TAG"'.json"; { "'"$S"'" classify "$d/volume.nrrd" -o "$d/u_'"$TAG"'.nrrd" --iso auto -q '"$ARGS"' && "'"$S"'" evaluate --json "$d/u_'"$TAG"'.nrrd" "$d/truth_sdf.nrrd" > "$d/ev_'"$TAG"'.json.part" && mv "$d/ev_'"$TAG"'.json.part" "$d/ev_'"$TAG"'.json"; } || echo "$0$1 failed ('"$TAG"'): scored as nothing drawn" >&2'
 LV=$(seq -s, 0.15 0.05 0.80)
 if [ ! -f "$O/baseline.done" ]; then
   echo "baseline: lowpass 1 mm + Levoy at $LV on the training seeds ..." >&2
