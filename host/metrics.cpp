@@ -177,6 +177,7 @@ struct ProfileResult {
   double width_mm = 0;      // full width at half that maximum (a lower bound when censored)
   bool measured = false;    // peak above the floor: width_mm enters the thickness median
   bool censored = false;    // ... but a crossing lies beyond the window, which then stands in for it
+  double centre_mm = 0;     // the middle of the half-maximum interval, mm along the outward normal
 };
 
 // foot: the surface point in mm; n: the unit outward normal (per mm). Samples
@@ -234,6 +235,7 @@ ProfileResult profile(const float* u, const Grid& g, const ProfileGeometry& pg, 
   r.measured = true;
   r.censored = !(hi && lo);
   r.width_mm = t_hi - t_lo;
+  r.centre_mm = 0.5 * (t_hi + t_lo);
   return r;
 }
 
@@ -251,6 +253,7 @@ struct SliceSums {
   double drawn_u = 0, near_u = 0, normal_w = 0, normal_wangle = 0, mass = 0, near_mass = 0, max_u = 0;
   std::vector<double> peaks, widths;  // facing surface voxels in index order; widths of the measured ones
   std::vector<double> visible_peaks;  // the peaks of the visible ones (with a shadow volume)
+  std::vector<double> centres;        // the half-maximum intervals' centres of the measured, uncensored ones
 };
 
 void validate(const Volume& opacity, const Volume& truth, const MetricsParams& p) {
@@ -458,6 +461,7 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
             s.peaks.push_back(r.peak);
             if (p.shadow_db && p.shadow_db->data[i] < float(p.visible_db)) s.visible_peaks.push_back(r.peak);
             if (r.measured) s.widths.push_back(r.width_mm);
+            if (r.measured && !r.censored) s.centres.push_back(r.centre_mm);
             if (r.censored) ++s.censored;
           }
         }
@@ -474,7 +478,8 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
     t.peaks.insert(t.peaks.end(), s.peaks.begin(), s.peaks.end());
     t.visible_peaks.insert(t.visible_peaks.end(), s.visible_peaks.begin(), s.visible_peaks.end());
     t.widths.insert(t.widths.end(), s.widths.begin(), s.widths.end());
-    s.peaks = {}, s.widths = {}, s.visible_peaks = {};
+    t.centres.insert(t.centres.end(), s.centres.begin(), s.centres.end());
+    s.peaks = {}, s.widths = {}, s.visible_peaks = {}, s.centres = {};
     t.splats += s.splats;
     t.opaque += s.opaque;
     t.facing += s.facing;
@@ -508,6 +513,8 @@ Metrics evaluate_opacity(const Volume& opacity, const Volume& truth_sdf, const M
   m.thickness_points = t.widths.size();
   m.thickness_censored = t.censored;
   m.shell_thickness_mm = median(std::move(t.widths));
+  m.offset_points = t.centres.size();
+  m.shell_offset_mm = t.centres.empty() ? std::numeric_limits<double>::quiet_NaN() : median(std::move(t.centres));
 
   // ---- recall: distance from each facing surface voxel to the drawn set --
   if (m.splats > 0 && m.facing_surface_voxels > 0) {
@@ -639,6 +646,7 @@ std::string metrics_json(const Metrics& m, const MetricsParams& p) {
     << ", \"f1_visible\": " << json_number(m.f1_visible)
     << ", \"shell_thickness_mm\": " << json_number(m.shell_thickness_mm)
     << ", \"thickness_points\": " << m.thickness_points << ", \"thickness_censored\": " << m.thickness_censored
+    << ", \"shell_offset_mm\": " << json_number(m.shell_offset_mm) << ", \"offset_points\": " << m.offset_points
     << ", \"blobs6\": " << m.blobs6 << ", \"components6\": " << m.components6
     << ", \"blob6_voxel_share\": " << json_number(m.blob6_voxel_share)
     << ", \"threshold\": " << json_number(p.threshold)

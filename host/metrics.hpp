@@ -76,6 +76,12 @@ struct Metrics {
   std::size_t thickness_points = 0;    // facing surface voxels whose width entered the median
   std::size_t thickness_censored = 0;  // of those, with a half-maximum crossing beyond the window:
                                        // their width entered as the lower bound the window gives
+  // Where across the surface the shell lies: the median over the uncensored
+  // thickness points of the middle of their half-maximum interval, mm along
+  // the true outward normal (toward positive SDF; + outside, - inside).
+  // NaN (JSON null) when no point has an uncensored interval.
+  double shell_offset_mm = std::numeric_limits<double>::quiet_NaN();
+  std::size_t offset_points = 0;   // the points that entered it
   std::size_t blobs6 = 0;          // 6-connected components of u > blob_threshold never near a true surface
   std::size_t components6 = 0;     // all 6-connected components of u > blob_threshold
   double blob6_voxel_share = 0;    // voxels in those blobs / voxels with u > blob_threshold

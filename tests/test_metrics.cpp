@@ -433,6 +433,37 @@ TEST(MetricsShell, GaussianShellHasItsFullWidthAtHalfMaximumAndPeak) {
   EXPECT_NEAR(w3 / w15, 2.0, 0.1);
 }
 
+TEST(MetricsShell, ShellOffsetIsWhereAcrossTheSurfaceTheShellLies) {
+  // u = exp(-(sdf - c)^2 / 2 s^2): the shell's middle lies c voxels outside the truth (c < 0:
+  // inside), whatever its width; at 1 mm per voxel that is c mm. Trilinear sampling and the
+  // sphere's curvature move it by a few hundredths.
+  const Volume sdf = sphere_sdf();
+  for (const double c : {0.0, 1.5, -1.0, 2.5}) {
+    for (const double sigma : {1.5, 2.5}) {
+      SCOPED_TRACE("c " + std::to_string(c) + ", sigma " + std::to_string(sigma));
+      Volume u = sdf;
+      for (float& f : u.data) f = float(std::exp(-(double(f) - c) * (double(f) - c) / (2 * sigma * sigma)));
+      const Metrics m = evaluate_opacity(u, sdf);
+      EXPECT_NEAR(m.shell_offset_mm, c, 0.1);
+      EXPECT_GT(m.offset_points, m.facing_surface_voxels / 2);
+      EXPECT_LE(m.offset_points, m.thickness_points);
+    }
+  }
+  // In millimetres: the same voxels at 0.5 mm halve it.
+  Volume u = sdf;
+  for (float& f : u.data) f = float(std::exp(-(double(f) - 1.5) * (double(f) - 1.5) / 8.0));
+  const double one = evaluate_opacity(u, sdf).shell_offset_mm;
+  EXPECT_NEAR(evaluate_opacity(with_spacing(u, {0.5, 0.5, 0.5}), with_spacing(sdf, {0.5, 0.5, 0.5})).shell_offset_mm,
+              0.5 * one, 1e-9);
+  // Nothing drawn: no interval, no offset (null in the JSON).
+  Volume empty = sdf;
+  for (float& f : empty.data) f = 0.0f;
+  const Metrics e = evaluate_opacity(empty, sdf);
+  EXPECT_TRUE(std::isnan(e.shell_offset_mm));
+  EXPECT_EQ(e.offset_points, 0u);
+  EXPECT_NE(metrics_json(e, MetricsParams{}).find("\"shell_offset_mm\": null"), std::string::npos);
+}
+
 TEST(MetricsShell, ThicknessIsInMillimetres) {
   // The same voxels at 0.5 mm: every length halves exactly (the profile steps 0.1 voxel either way).
   const Volume sdf = sphere_sdf();
@@ -870,7 +901,8 @@ TEST_F(CliEvaluate, JsonForAPerfectShell) {
   for (const char* key : {"precision", "recall", "spurious_blobs", "components", "normal_error_deg",
                           "percent_opaque", "splats", "facing_surface_voxels", "threshold", "tolerance",
                           "facing_cos", "beam", "mass_precision", "f1", "f1_mass", "surface_peak",
-                          "shell_thickness_mm", "thickness_points", "thickness_censored", "blobs6", "components6",
+                          "shell_thickness_mm", "thickness_points", "thickness_censored", "shell_offset_mm", "offset_points",
+                          "blobs6", "components6",
                           "blob6_voxel_share", "blob_threshold", "tolerance_mm", "u_ind", "blob_rel", "opaque",
                           "profile_radius_mm"})
     EXPECT_EQ(j.count(key), 1u) << key << " missing in " << r.out;
@@ -882,6 +914,8 @@ TEST_F(CliEvaluate, JsonForAPerfectShell) {
   EXPECT_NEAR(j["normal_error_deg"].at(0), m.normal_error_deg, 1e-6);
   EXPECT_EQ(j["splats"], std::vector<double>{double(m.splats)});
   EXPECT_EQ(j["facing_surface_voxels"], std::vector<double>{double(m.facing_surface_voxels)});
+  EXPECT_NEAR(j["shell_offset_mm"].at(0), m.shell_offset_mm, 1e-6);
+  EXPECT_EQ(j["offset_points"], std::vector<double>{double(m.offset_points)});
   EXPECT_NEAR(j["percent_opaque"].at(0), m.percent_opaque, 1e-6);
   EXPECT_EQ(j["threshold"], std::vector<double>{0.2});
   EXPECT_EQ(j["tolerance"], std::vector<double>{2.0});

@@ -39,7 +39,8 @@ elif mode == 'table':
     keys = [('f1_visible', 'F1 visible', min), ('precision', 'precision', min),
             ('recall_visible', 'recall visible', min), ('blobs6', 'blobs6', max),
             ('normal_error_deg', 'normal (deg)', max), ('surface_peak_visible', 'peak visible', min),
-            ('percent_opaque', '% opaque', max)]
+            ('percent_opaque', '% opaque', max),
+            ('shell_offset_mm', 'offset (mm)', lambda xs: xs[np.argmax(np.abs(xs))])]
     print('| anatomy (cases) | method | ' + ' | '.join(k[1] for k in keys) + ' |')
     print('|' + '---|' * (len(keys) + 2))
     for sh in SHAPES:
@@ -49,11 +50,11 @@ elif mode == 'table':
             for k, _, worst in keys:
                 x = np.array([(ev(d, t) or {}).get(k) for d in ds], dtype=float)
                 # A null (nothing drawn, no visible surface) counts as 0 for the scores.
-                xs = x[~np.isnan(x)] if k == 'normal_error_deg' else np.nan_to_num(x, nan=0.0)
+                xs = x[~np.isnan(x)] if k in ('normal_error_deg', 'shell_offset_mm') else np.nan_to_num(x, nan=0.0)
                 cells.append('%.3g (%.3g)' % (worst(xs), np.mean(xs)) if len(xs) else '-')
             name = ('lowpass 1 mm + Levoy at %s (chosen on the training seeds)' % lv[sh]) if t.startswith('lv') else t
             print('| %s (%d) | %s | %s |' % (sh, len(ds), name, ' | '.join(cells)))
-    print('\nEach cell: worst case over the cases (mean in brackets).')
+    print('\nEach cell: worst case over the cases (mean in brackets); offset: the largest |shell_offset_mm|.')
     missing = ['%s (%s)' % (os.path.basename(d), t) for sh in SHAPES for d in dirs(sh) for t in sys.argv[4:]
                if ev(d, t) is None]
     if missing:

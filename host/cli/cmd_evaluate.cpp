@@ -228,6 +228,9 @@ int run_evaluate(EvaluateOptions o) {
        "median full width at half maximum of u along the true normal, over " + std::to_string(m.thickness_points) +
            " points (" + std::to_string(m.thickness_censored) + " wider than the +-" + fixed(m.profile_radius_mm, 1) +
            " mm window, counted at that)"},
+      {"shell_offset_mm", m.offset_points ? fixed(m.shell_offset_mm, 3) : std::string("-"),
+       "median middle of the half-maximum interval along the true outward normal (+ outside the truth, - inside), "
+       "over " + std::to_string(m.offset_points) + " uncensored points"},
       {"blobs6", std::to_string(m.blobs6),
        "6-connected blobs of u > " + fixed(m.blob_threshold, 4) + " (" + fixed(p.blob_rel, 2) +
            " max u) nowhere within " + tol + " of a true surface"},
