@@ -119,7 +119,9 @@ bool g_no_cut_hold = false;
 // The band's underside held when drawn as a sheet (host/mask.hpp,
 // hold_band_sheet): --set band_sheet=0 turns it off, band_sheet_mm and
 // band_sheet_patch set its window and cover, band_sheet_deep_mm (0: off)
-// and band_sheet_flat_mm the deep window's reach and flatness.
+// and band_sheet_flat_mm the deep window's reach and flatness,
+// band_sheet_skin_mm (0: off) and band_sheet_skin_patch the skin window's
+// reach and cover.
 bool g_band_sheet = true;
 BandSheetParams g_band_sheet_params;
 // --set data_normals=1: the normal error scores the splats' orientation by
@@ -182,6 +184,8 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "band_sheet_patch") g_band_sheet_params.min_patch = x;
   else if (k == "band_sheet_deep_mm") g_band_sheet_params.deep_mm = x;
   else if (k == "band_sheet_flat_mm") g_band_sheet_params.flat_mm = x;
+  else if (k == "band_sheet_skin_mm") g_band_sheet_params.skin_mm = x;
+  else if (k == "band_sheet_skin_patch") g_band_sheet_params.skin_patch = x;
   else if (k == "iso_offset") {}  // added to the classifier's v_iso after the levelling (classify_default)
   else if (k == "grad_sigma_auto") {}  // 0: the fixed VariationalParams default instead of the speckle's (classify_default)
   else return set_variational_param(p, k, x);
@@ -269,14 +273,17 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   }
   *iso_out = lv.iso;
   Volume u = classify_variational(rt, lv.data, p, SolverParams{}, rep, nullptr, mp);
-  if (g_band_sheet && nf.found && mp) {
+  if (g_band_sheet && np.band && (nf.found || g_band_sheet_params.skin_mm > 0)) {
     const std::vector<std::uint8_t> window =
-        band_underside(in, nf, before, mask, g_band_sheet_params.window_mm, g_band_sheet_params.deep_mm);
+        band_underside(in, nf, before, mask, g_band_sheet_params.window_mm, g_band_sheet_params.deep_mm,
+                       scale < 1.0 ? 0.0 : g_band_sheet_params.skin_mm);  // not in a small volume, as classify
     const BandSheetReport bs = hold_band_sheet(u, window, nf.axis, mask, g_band_sheet_params);
     std::fprintf(stderr,
-                 "  band sheet: drawn on %zu of %zu lines, largest patch %.3f; deep: largest patch %.3f spread %.2f mm%s\n",
-                 bs.drawn, bs.lines, bs.largest, bs.deep_largest, bs.deep_spread_mm, bs.held ? ", held" : "");
-    if (bs.held) u = classify_variational(rt, lv.data, p, SolverParams{}, rep, nullptr, mp);
+                 "  band sheet: drawn on %zu of %zu lines, largest patch %.3f; deep: largest patch %.3f spread %.2f mm; "
+                 "skin window: %d sheets on %zu of %zu lines%s\n",
+                 bs.drawn, bs.lines, bs.largest, bs.deep_largest, bs.deep_spread_mm, bs.skin_sheets,
+                 bs.skin_sheet_lines, bs.skin_lines, bs.held ? ", held" : "");
+    if (bs.held) u = classify_variational(rt, lv.data, p, SolverParams{}, rep, nullptr, &mask);
   }
   return u;
 }
@@ -428,7 +435,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "usage: softshell_study_shells [--train S,S..] [--test S,S..] [--shapes face,spine] "
                            "[--size N] [--physics NAME] [--tolerance-mm MM] [--variational-only] [--defaults-only] "
                            "[--set iso_fraction=..,iso_clip_fraction=..,iso_floor_fraction=..,iso_floor_share=..,iso_field_sigma=..,iso_field_depth_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
-                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,iso_offset=..,iso_cut_crest_votes=..,cut_hold=..,band_sheet=..,data_normals=..,band_sheet_mm=..,band_sheet_patch=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,near_skin_step=..,near_step_sds=..,near_echo_bounded=..,reverb_second_peak=..,near_fill_layered=..,near_fill_crossing=..,"
+                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,iso_offset=..,iso_cut_crest_votes=..,cut_hold=..,band_sheet=..,data_normals=..,band_sheet_mm=..,band_sheet_patch=..,band_sheet_deep_mm=..,band_sheet_flat_mm=..,band_sheet_skin_mm=..,band_sheet_skin_patch=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,near_skin_step=..,near_step_sds=..,near_echo_bounded=..,reverb_second_peak=..,near_fill_layered=..,near_fill_crossing=..,"
                            "mask_grow=..,mask_max_enclosed=..,mask_fluid_enclosed=..,mask_fluid_inside=..] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..] "
                            "[--shadow-walls on|off] [--walls beam_cos=..,reach=..,smooth=..,sigma=..,gap=..,bright=..,fan=0|1,fan_skip=..] [--wall-ref weighted|data]\n");
       return 2;

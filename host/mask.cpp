@@ -730,25 +730,157 @@ struct BeamLines {
   std::size_t start(std::size_t l) const { return (l % nu) * su + (l / nu) * sw; }
 };
 
+// The skin window's sheets (label 3 of band_underside's window;
+// BandSheetParams::skin_mm): the drawn runs (u > threshold) that start in
+// it on the lines under the probe (the skin line deepening by at most 1 mm
+// per mm across the beam), joined from line to 4-neighbouring line where
+// their starts lie within one voxel of the same depth under the skin line.
+// A joined set on at least skin_patch of those lines whose starts'
+// quartiles lie within flat_mm (or a voxel) follows the skin line, and so
+// do the flat sets on skin_piece or more at its median depth (within a
+// voxel): each held from above_mm over its runs to margin_mm under them (a
+// run cut at the window's end). The same for any order of the lines: the
+// sets are the connected components.
+void hold_skin_sheets(const Volume& u, const std::vector<std::uint8_t>& window, const BeamLines& lines,
+                      double along, double hu, double hw, const BandSheetParams& params,
+                      std::vector<std::uint8_t>& scanned, BandSheetReport& rep) {
+  struct Run {
+    std::size_t line, k0, k1;  // [k0, k1) along the line
+    long depth;                // k0 under the line's skin line
+  };
+  std::vector<Run> runs;
+  const std::size_t none = lines.len;
+  std::vector<std::size_t> first(lines.count() + 1, 0), top(lines.count(), none), end(lines.count(), 0);
+  for (std::size_t l = 0; l < lines.count(); ++l) {
+    const std::size_t base = lines.start(l), stride = lines.stride;
+    for (std::size_t k = 0; k < lines.len; ++k)
+      if (window[base + k * stride] == 3) top[l] = std::min(top[l], k), end[l] = k + 1;
+  }
+  // The lines under the probe: where the skin line deepens by at most 1 mm
+  // per mm across the beam to its neighbours with a window (as the near
+  // field's; not the lines that enter a sector down its side, whose first
+  // voxel is the sector's edge, no skin).
+  const auto steep = [&](std::size_t l, std::size_t m, double h) {
+    return top[m] != none && std::fabs(double(top[l]) - double(top[m])) * along > h + 1e-9;
+  };
+  for (std::size_t l = 0; l < lines.count(); ++l) {
+    first[l] = runs.size();
+    const std::size_t s = top[l], e = end[l];
+    if (s >= e) continue;
+    const std::size_t q = l % lines.nu, w = l / lines.nu;
+    if ((q > 0 && steep(l, l - 1, hu)) || (q + 1 < lines.nu && steep(l, l + 1, hu)) ||
+        (w > 0 && steep(l, l - lines.nu, hw)) || (w + 1 < lines.nw && steep(l, l + lines.nu, hw)))
+      continue;
+    ++rep.skin_lines;
+    const std::size_t base = lines.start(l), stride = lines.stride;
+    for (std::size_t k = s; k < e;) {
+      if (!(u.data[base + k * stride] > params.threshold)) {
+        ++k;
+        continue;
+      }
+      std::size_t k1 = k;
+      while (k1 < e && u.data[base + k1 * stride] > params.threshold) ++k1;
+      runs.push_back({l, k, k1, long(k - s)});
+      k = k1;
+    }
+  }
+  first[lines.count()] = runs.size();
+  if (runs.empty()) return;
+  std::vector<std::size_t> parent(runs.size());
+  std::iota(parent.begin(), parent.end(), std::size_t{0});
+  const auto root = [&](std::size_t a) {
+    while (parent[a] != a) a = parent[a] = parent[parent[a]];
+    return a;
+  };
+  const auto join = [&](std::size_t l, std::size_t m) {
+    for (std::size_t a = first[l]; a < first[l + 1]; ++a)
+      for (std::size_t b = first[m]; b < first[m + 1]; ++b)
+        if (std::labs(runs[a].depth - runs[b].depth) <= 1) {
+          const std::size_t ra = root(a), rb = root(b);
+          if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+        }
+  };
+  for (std::size_t l = 0; l < lines.count(); ++l) {
+    if (l % lines.nu + 1 < lines.nu) join(l, l + 1);
+    if (l / lines.nu + 1 < lines.nw) join(l, l + lines.nu);
+  }
+  std::vector<std::vector<std::size_t>> sets(runs.size());
+  for (std::size_t a = 0; a < runs.size(); ++a) sets[root(a)].push_back(a);
+  const auto above = std::size_t(std::ceil(params.above_mm / along - 1e-9));
+  const auto below = std::size_t(std::ceil(params.margin_mm / along - 1e-9));
+  std::vector<std::size_t> ls;
+  std::vector<long> at;
+  std::vector<std::uint8_t> on(lines.count(), 0);  // lines with a sheet held
+  // Each set's lines, median depth and whether it is flat; then the sheets
+  // (skin_patch of the lines or more), then the pieces of them: smaller flat
+  // sets (skin_piece or more) at a sheet's median depth, within a voxel (a
+  // layer cut into pieces by the lines where a band was removed).
+  struct Set {
+    std::size_t lines = 0;
+    long depth = 0;
+    bool flat = false, held = false;
+  };
+  std::vector<Set> info(sets.size());
+  for (std::size_t j = 0; j < sets.size(); ++j) {
+    const std::vector<std::size_t>& set = sets[j];
+    if (set.empty()) continue;
+    ls.clear(), at.clear();
+    for (std::size_t a : set) ls.push_back(runs[a].line), at.push_back(runs[a].depth);
+    std::sort(ls.begin(), ls.end());
+    info[j].lines = std::size_t(std::unique(ls.begin(), ls.end()) - ls.begin());
+    std::sort(at.begin(), at.end());
+    info[j].depth = at[at.size() / 2];
+    info[j].flat = double(at[at.size() * 3 / 4] - at[at.size() / 4]) * along <= std::max(params.flat_mm, along) + 1e-9;
+  }
+  const auto hold = [&](std::size_t j) {
+    info[j].held = true;
+    for (std::size_t a : sets[j]) {
+      const Run& r = runs[a];
+      rep.skin_sheet_lines += !on[r.line], on[r.line] = 1;
+      const std::size_t k0 = r.k0 > top[r.line] + above ? r.k0 - above : top[r.line];
+      const std::size_t k1 = std::min(lines.len, r.k1 + below);
+      for (std::size_t k = k0; k < k1; ++k) {
+        const std::size_t i = lines.start(r.line) + k * lines.stride;
+        if (scanned[i]) scanned[i] = 0, ++rep.voxels;
+      }
+    }
+  };
+  std::vector<long> depths;
+  for (std::size_t j = 0; j < sets.size(); ++j)
+    if (info[j].flat && double(info[j].lines) >= params.skin_patch * double(rep.skin_lines))
+      ++rep.skin_sheets, depths.push_back(info[j].depth), hold(j);
+  for (std::size_t j = 0; j < sets.size(); ++j) {
+    if (info[j].held || !info[j].flat || double(info[j].lines) < params.skin_piece * double(rep.skin_lines)) continue;
+    for (long dd : depths)
+      if (std::labs(dd - info[j].depth) <= 1) {
+        ++rep.skin_pieces, hold(j);
+        break;
+      }
+  }
+}
+
 }  // namespace
 
 std::vector<std::uint8_t> band_underside(const Volume& v, const NearFieldReport& nf,
                                          const std::vector<std::uint8_t>& before,
                                          const std::vector<std::uint8_t>& after, double window_mm,
-                                         double deep_mm) {
-  if (!nf.found) return {};
-  return band_underside(v.dims, v.spacing[std::size_t(nf.axis)], nf.axis, before, after, window_mm, deep_mm);
+                                         double deep_mm, double skin_mm) {
+  if (!nf.found && !(skin_mm > 0)) return {};
+  return band_underside(v.dims, v.spacing[std::size_t(nf.axis)], nf.axis, before, after, window_mm, deep_mm,
+                        skin_mm);
 }
 
 std::vector<std::uint8_t> band_underside(const Dims3& dims, double spacing_mm, int axis,
                                          const std::vector<std::uint8_t>& before,
                                          const std::vector<std::uint8_t>& after, double window_mm,
-                                         double deep_mm) {
+                                         double deep_mm, double skin_mm) {
   const std::size_t n = dims[0] * dims[1] * dims[2];
   if (axis < 0 || axis > 2) throw std::invalid_argument("band_underside: beam axis must be 0, 1 or 2");
   if ((!before.empty() && before.size() != n) || (!after.empty() && after.size() != n))
     throw std::invalid_argument("band_underside: mask size differs from the volume");
-  if (after.empty() || !(spacing_mm > 0) || !(window_mm > 0)) return {};
+  const bool skin = skin_mm > 0;
+  if (!(spacing_mm > 0) || (!skin && (after.empty() || !(window_mm > 0)))) return {};
+  const auto scanned_after = [&](std::size_t i) { return after.empty() || after[i] != 0; };
   const BeamLines lines(dims, std::size_t(axis));
   std::vector<std::uint8_t> window(n, 0);
   bool any = false;
@@ -756,7 +888,14 @@ std::vector<std::uint8_t> band_underside(const Dims3& dims, double spacing_mm, i
     const std::size_t base = lines.start(l), stride = lines.stride, len = lines.len;
     std::size_t k = 0;
     while (k < len && !before.empty() && !before[base + k * stride]) ++k;  // the skin line
-    if (k == len || after[base + k * stride]) continue;                       // no band on this line
+    if (k == len) continue;
+    if (scanned_after(base + k * stride)) {  // no band on this line: the skin window
+      if (!skin) continue;
+      for (const std::size_t s = k; k < len && double(k - s) * spacing_mm < skin_mm - 1e-9; ++k)
+        if (scanned_after(base + k * stride)) window[base + k * stride] = 3, any = true;
+      continue;
+    }
+    if (!(window_mm > 0)) continue;
     while (k < len && !after[base + k * stride]) ++k;                         // the band
     const std::size_t b = k;
     for (; k < len && double(k - b) * spacing_mm < window_mm - 1e-9; ++k)
@@ -773,9 +912,13 @@ BandSheetReport hold_band_sheet(const Volume& u, const std::vector<std::uint8_t>
   BandSheetReport rep;
   const std::size_t n = u.voxels();
   if (window.empty()) return rep;
-  if (window.size() != n || scanned.size() != n)
+  if (window.size() != n || (!scanned.empty() && scanned.size() != n))
     throw std::invalid_argument("hold_band_sheet: window or mask size differs from the volume");
   if (axis < 0 || axis > 2) throw std::invalid_argument("hold_band_sheet: beam axis must be 0, 1 or 2");
+  // An empty mask: every voxel scanned; made explicit while deciding, and
+  // emptied again if nothing is held.
+  const bool was_empty = scanned.empty();
+  if (was_empty) scanned.assign(n, 1);
   const BeamLines lines(u.dims, std::size_t(axis));
   const std::size_t nu = lines.nu, nw = lines.nw;
   const double along = u.spacing[std::size_t(axis)];
@@ -795,7 +938,6 @@ BandSheetReport hold_band_sheet(const Volume& u, const std::vector<std::uint8_t>
     }
     rep.lines += line[l] > 0, rep.drawn += line[l] == 2;
   }
-  if (rep.lines == 0) return rep;
   // The drawn lines' patches: 4-connected across the beam. `decide` takes a
   // patch's share of the band's lines (its lines in `members`) and says
   // whether it is held; `label` is the window's part held.
@@ -837,7 +979,7 @@ BandSheetReport hold_band_sheet(const Volume& u, const std::vector<std::uint8_t>
       }
     }
   };
-  patches(line, 1, [&](double share) {
+  if (rep.lines > 0) patches(line, 1, [&](double share) {
     rep.largest = std::max(rep.largest, share);
     if (share < params.min_patch) return false;
     ++rep.patches, rep.held_lines += members.size();
@@ -846,7 +988,7 @@ BandSheetReport hold_band_sheet(const Volume& u, const std::vector<std::uint8_t>
   // The deep window: a patch that is a flat sheet (its first drawn voxels'
   // quartiles within flat_mm of each other).
   std::vector<std::size_t> at;
-  patches(deep, 2, [&](double share) {
+  if (rep.lines > 0) patches(deep, 2, [&](double share) {
     at.clear();
     for (std::size_t c : members) at.push_back(deep_at[c]);
     std::sort(at.begin(), at.end());
@@ -856,7 +998,10 @@ BandSheetReport hold_band_sheet(const Volume& u, const std::vector<std::uint8_t>
     ++rep.deep_patches, rep.deep_lines += members.size();
     return true;
   });
-  rep.held = rep.patches > 0 || rep.deep_patches > 0;
+  hold_skin_sheets(u, window, lines, along, u.spacing[axis == 0 ? 1 : 0], u.spacing[axis == 2 ? 1 : 2], params,
+                   scanned, rep);
+  rep.held = rep.patches > 0 || rep.deep_patches > 0 || rep.skin_sheets > 0;
+  if (was_empty && !rep.held) scanned.clear();
   return rep;
 }
 

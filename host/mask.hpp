@@ -407,6 +407,22 @@ struct BandSheetParams {
   // A deep sheet is held on down its drawn run and this far more (a shell's
   // width: the layer's lower flank).
   double margin_mm = 2.0;
+  // The skin window: on the beam lines that have no band held (every line
+  // when none was found), the first skin_mm under the skin line. A sheet
+  // drawn there that follows the skin line (its drawn runs' starts within
+  // one voxel of each other's depth under the skin line from line to
+  // neighbouring line, on at least skin_patch of those lines, their
+  // quartiles within flat_mm) is a layer under the probe -- the skin's lower
+  // edge, a fascia, across the probe -- not the object: held from above_mm
+  // over the run to margin_mm under it. An object near the probe follows its
+  // own shape, not the skin's, and lies under part of it. 0: off.
+  double skin_mm = 12.0;
+  double skin_patch = 0.3;
+  // ... and its pieces: flat sets on skin_piece of those lines or more
+  // whose median depth is within a voxel of a held sheet's (a layer cut into
+  // pieces by the lines where a band was removed).
+  double skin_piece = 0.01;
+  double above_mm = 1.0;
 };
 // The window under the band (1; 0 elsewhere): on each beam line along `axis`
 // (depth growing with the index) whose first voxel scanned in `before` (the
@@ -415,17 +431,23 @@ struct BandSheetParams {
 // that unscanned run down to window_mm below it; with deep_mm > window_mm,
 // the voxels from there down to deep_mm below it are the deep window (2).
 // Empty when no line has a band.
+// With skin_mm > 0, on each line with no band (its skin line scanned in
+// `after`, or `after` empty: every voxel scanned), the voxels scanned in
+// `after` from the skin line down to skin_mm below it are the skin window
+// (3).
 std::vector<std::uint8_t> band_underside(const Dims3& dims, double spacing_mm, int axis,
                                          const std::vector<std::uint8_t>& before,
                                          const std::vector<std::uint8_t>& after, double window_mm,
-                                         double deep_mm = 0);
+                                         double deep_mm = 0, double skin_mm = 0);
 // The same for the band `nf` found in volume `v` (along nf.axis, at its
-// spacing); empty when none was found.
+// spacing); with skin_mm > 0 also when none was found (then the skin window
+// alone); else empty when none was found.
 std::vector<std::uint8_t> band_underside(const Volume& v, const NearFieldReport& nf,
                                          const std::vector<std::uint8_t>& before,
                                          const std::vector<std::uint8_t>& after,
                                          double window_mm = BandSheetParams().window_mm,
-                                         double deep_mm = BandSheetParams().deep_mm);
+                                         double deep_mm = BandSheetParams().deep_mm,
+                                         double skin_mm = BandSheetParams().skin_mm);
 struct BandSheetReport {
   std::size_t lines = 0;       // beam lines with a window
   std::size_t drawn = 0;       // ... on which u > threshold in the window
@@ -437,12 +459,18 @@ struct BandSheetReport {
   int deep_patches = 0;
   std::size_t deep_lines = 0;
   double deep_largest = 0, deep_spread_mm = 0;
-  bool held = false;           // patches + deep_patches > 0
+  // The skin window (BandSheetParams::skin_mm): its lines, the sheets held
+  // there and the lines with one or more of them.
+  std::size_t skin_lines = 0;
+  int skin_sheets = 0, skin_pieces = 0;
+  std::size_t skin_sheet_lines = 0;
+  bool held = false;           // patches + deep_patches + skin_sheets > 0
   std::size_t voxels = 0;      // voxels held
 };
 // Decides on `u` (a solved opacity) and sets the sheets' windows unscanned
-// in `scanned` (of the volume's size). `window` from band_underside(); an
-// empty one decides nothing. The same for any order of the lines.
+// in `scanned` (of the volume's size; empty: every voxel scanned, filled
+// with 1 when something is held). `window` from band_underside(); an empty
+// one decides nothing. The same for any order of the lines.
 BandSheetReport hold_band_sheet(const Volume& u, const std::vector<std::uint8_t>& window, int axis,
                                 std::vector<std::uint8_t>& scanned, const BandSheetParams& params = {});
 

@@ -2036,9 +2036,9 @@ TEST(BandSheet, TheUndersideIsTheWindowUnderEachLinesBand) {
   NearFieldReport nf;
   nf.found = true;
   nf.axis = 2;
-  EXPECT_EQ(band_underside(v, nf, before, after, 2.0, 0.0), w);
+  EXPECT_EQ(band_underside(v, nf, before, after, 2.0, 0.0, 0.0), w);
   nf.found = false;
-  EXPECT_TRUE(band_underside(v, nf, before, after, 2.0).empty());
+  EXPECT_TRUE(band_underside(v, nf, before, after, 2.0, 8.0, 0.0).empty());
   // The deep window (label 2): from the window's end down to deep_mm under
   // the band, the unscanned voxel skipped as in the window.
   after[at(2, 2, 11)] = 0;
@@ -2053,7 +2053,108 @@ TEST(BandSheet, TheUndersideIsTheWindowUnderEachLinesBand) {
         ASSERT_EQ(int(wd[at(x, y, z)]), want) << x << " " << y << " " << z;
       }
   nf.found = true;
-  EXPECT_EQ(band_underside(v, nf, before, after, 2.0, 4.0), wd);
+  EXPECT_EQ(band_underside(v, nf, before, after, 2.0, 4.0, 0.0), wd);
+  // The skin window (label 3) on the lines with no band (x = 5): from the
+  // skin line (z = 2) down to skin_mm (1.5 mm: 3 voxels); the band's lines
+  // as before. With no band found, the same on those lines alone.
+  const std::vector<std::uint8_t> ws = band_underside(v, nf, before, after, 2.0, 4.0, 1.5);
+  nf.found = false;
+  const std::vector<std::uint8_t> ws_none = band_underside(v, nf, before, after, 2.0, 4.0, 1.5);
+  for (std::size_t y = 0; y < 5; ++y)
+    for (std::size_t z = 0; z < 20; ++z) {
+      ASSERT_EQ(int(ws[at(5, y, z)]), z >= 2 && z < 5 ? 3 : 0) << y << " " << z;
+      ASSERT_EQ(ws[at(1, y, z)], wd[at(1, y, z)]) << y << " " << z;
+      ASSERT_EQ(ws_none[at(5, y, z)], ws[at(5, y, z)]) << y << " " << z;
+    }
+  // No mask at all (every voxel scanned): every line's skin line at z = 0.
+  const std::vector<std::uint8_t> wn = band_underside(v, nf, {}, {}, 2.0, 4.0, 1.0);
+  ASSERT_EQ(wn.size(), after.size());
+  for (std::size_t z = 0; z < 20; ++z) EXPECT_EQ(int(wn[at(3, 2, z)]), z < 2 ? 3 : 0) << "z " << z;
+}
+
+TEST(BandSheet, ASheetThatFollowsTheSkinLineIsHeldWhereNoBandWasRemoved) {
+  // 12 x 10 lines along z (0.5 mm), no band; the skin line (the first
+  // scanned voxel) deepens across x, at z = s(x) = x / 2. Skin window 8 mm
+  // (16 voxels). Drawn: a sheet 3-4 voxels under the skin line on every
+  // line but x = 9 (cut in two: x < 9 less five lines at x = 5, y < 5, 85
+  // lines; x = 10-11, 20 lines: a piece at its depth); a sheet that does
+  // not follow it (10 and 12 voxels under it at x = 0 and 1: 2 voxels
+  // deeper per line across x, flat along y); a flat piece on 12 lines (x
+  // 8-11, y 0-2: 10 % of the lines) 15 voxels under it.
+  const Dims3 d{12, 10, 40};
+  const auto at = [](std::size_t x, std::size_t y, std::size_t z) { return x + 12 * (y + 10 * z); };
+  const auto s = [](std::size_t x) { return x / 2; };
+  const auto sheet_line = [](std::size_t x, std::size_t y) { return !(x == 5 && y < 5) && x != 9; };
+  std::vector<std::uint8_t> before(d[0] * d[1] * d[2], 1);
+  Volume u(d, {1, 1, 0.5}, ScalarType::Float32);
+  for (std::size_t y = 0; y < 10; ++y)
+    for (std::size_t x = 0; x < 12; ++x) {
+      for (std::size_t z = 0; z < s(x); ++z) before[at(x, y, z)] = 0;
+      if (sheet_line(x, y)) u.at(x, y, s(x) + 3) = u.at(x, y, s(x) + 4) = 0.6f;
+      if (x < 2) u.at(x, y, s(x) + 10 + 2 * x) = 0.6f;
+      if (x >= 8 && y < 3) u.at(x, y, s(x) + 15) = 0.6f;
+    }
+  const Volume v(d, {1, 1, 0.5});
+  NearFieldReport nf;  // none found
+  nf.axis = 2;
+  const std::vector<std::uint8_t> window = band_underside(v, nf, before, before, 3.0, 8.0, 8.0);
+  ASSERT_EQ(window.size(), before.size());
+  EXPECT_EQ(int(window[at(4, 4, 2)]), 3);
+  EXPECT_EQ(int(window[at(4, 4, 17)]), 3);
+  EXPECT_EQ(int(window[at(4, 4, 18)]), 0);
+  EXPECT_EQ(int(window[at(4, 4, 1)]), 0);
+  BandSheetParams p;
+  p.skin_mm = 8.0;
+  std::vector<std::uint8_t> held = before;
+  const BandSheetReport r = hold_band_sheet(u, window, 2, held, p);
+  EXPECT_EQ(r.lines, 0u);
+  EXPECT_EQ(r.skin_lines, 120u);
+  EXPECT_EQ(r.skin_sheets, 1);
+  EXPECT_EQ(r.skin_pieces, 1);
+  EXPECT_EQ(r.skin_sheet_lines, 105u);
+  EXPECT_TRUE(r.held);
+  // Held from 1 mm (2 voxels) over each run to 2 mm (4 voxels) under it: s + 1 ... s + 8.
+  EXPECT_EQ(r.voxels, 105u * 8u);
+  for (std::size_t y = 0; y < 10; ++y)
+    for (std::size_t x = 0; x < 12; ++x)
+      for (std::size_t z = 0; z < 40; ++z) {
+        const bool sheet = sheet_line(x, y) && z >= s(x) + 1 && z <= s(x) + 8;
+        ASSERT_EQ(held[at(x, y, z)], z >= s(x) && !sheet ? 1 : 0) << x << " " << y << " " << z;
+      }
+  // Without the piece rule (skin_piece above its 17 %) the piece stays.
+  BandSheetParams no_piece = p;
+  no_piece.skin_piece = 0.2;
+  held = before;
+  const BandSheetReport rn = hold_band_sheet(u, window, 2, held, no_piece);
+  EXPECT_EQ(rn.skin_pieces, 0);
+  EXPECT_EQ(held[at(10, 4, s(10) + 3)], 1);
+  EXPECT_EQ(held[at(8, 4, s(8) + 3)], 0);
+  // A smaller cover (skin_patch, 0.3 by default) holds the flat piece at 15
+  // too, never the sheet that does not follow the skin line (each of its
+  // columns is flat along y, 10 lines: 8 % of them, and no sheet's depth).
+  p.skin_patch = 0.09;
+  held = before;
+  const BandSheetReport r2 = hold_band_sheet(u, window, 2, held, p);
+  EXPECT_EQ(r2.skin_sheets, 3);
+  EXPECT_EQ(held[at(9, 1, s(9) + 15)], 0);
+  EXPECT_EQ(held[at(1, 4, s(1) + 12)], 1);
+  EXPECT_EQ(held[at(0, 4, s(0) + 10)], 1);
+  // No mask (every voxel scanned): the mask is made and held; nothing
+  // drawn in the window: it stays empty.
+  const std::vector<std::uint8_t> wn = band_underside(v, nf, {}, {}, 3.0, 8.0, 8.0);
+  std::vector<std::uint8_t> none;
+  Volume flat(d, {1, 1, 0.5}, ScalarType::Float32);
+  for (std::size_t y = 0; y < 10; ++y)
+    for (std::size_t x = 0; x < 12; ++x) flat.at(x, y, 6) = 0.6f;
+  const BandSheetReport r3 = hold_band_sheet(flat, wn, 2, none, p);
+  EXPECT_EQ(r3.skin_sheets, 1);
+  ASSERT_EQ(none.size(), before.size());
+  EXPECT_EQ(none[at(3, 3, 6)], 0);
+  EXPECT_EQ(none[at(3, 3, 3)], 1);
+  std::vector<std::uint8_t> still;
+  const BandSheetReport r4 = hold_band_sheet(Volume(d, {1, 1, 0.5}, ScalarType::Float32), wn, 2, still, p);
+  EXPECT_FALSE(r4.held);
+  EXPECT_TRUE(still.empty());
 }
 
 TEST(BandSheet, DeeperOnlyAFlatSheetIsHeld) {
@@ -2888,6 +2989,42 @@ TEST_F(CliMask, AFlatSheetDeeperUnderTheBandIsHeld) {
   EXPECT_EQ(lines_drawn(u, 14, 26), 0u) << "held: no sheet at the fascia";
   EXPECT_GT(centre_max(u, 36, 44), 0.5f) << "the block's top is drawn";
   EXPECT_GT(centre_max(uk, 36, 44), 0.5f);
+}
+
+TEST_F(CliMask, ASheetThatFollowsTheSkinLineIsHeldWithNoBand) {
+  // Tissue (80, 3 mm) over a fascia (220, 2 mm) over tissue (80): no bright
+  // band at the top, so no near field is removed; at the isovalue 140 the
+  // fascia is a sheet 3-5 mm under the skin line on every line, in the skin
+  // window (host/mask.hpp, BandSheetParams::skin_mm): held by default,
+  // drawn with --band-sheet keep. A bright block deeper down (20-23 mm, past
+  // the window) and a smaller one near the probe (8-11 mm, under a tenth of
+  // the lines: no layer) are drawn either way.
+  // 20 mm across: not a small volume (the skin window is off in one).
+  Volume v = layered_scan({40, 40, 64}, {0.5, 0.5, 0.5}, 2, {{3.0, 80}, {2.0, 220}}, 80, test::seed() + 17);
+  for (std::size_t z = 40; z < 46; ++z)
+    for (std::size_t y = 10; y < 22; ++y)
+      for (std::size_t x = 10; x < 22; ++x) v.at(x, y, z) = 220;
+  for (std::size_t z = 16; z < 22; ++z)
+    for (std::size_t y = 4; y < 14; ++y)
+      for (std::size_t x = 4; x < 14; ++x) v.at(x, y, z) = 220;
+  write_volume(file("skinsheet.nrrd"), v);
+  const test::RunResult r = run({"classify", file("skinsheet.nrrd"), "--iso", "140", "-o", file("u.nrrd")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(r.out.find("near field removed"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("a layer under the probe drawn as a sheet: "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("following the skin line in its first 12.0 mm"), std::string::npos) << r.out;
+  const test::RunResult k =
+      run({"classify", file("skinsheet.nrrd"), "--iso", "140", "--band-sheet", "keep", "-o", file("k.nrrd")});
+  ASSERT_EQ(k.status, 0) << k.err;
+  EXPECT_EQ(k.out.find("drawn as a sheet"), std::string::npos) << k.out;
+  const Volume u = read_volume(file("u.nrrd")), uk = read_volume(file("k.nrrd"));
+  EXPECT_GT(lines_drawn(uk, 4, 12), 24u * 24u * 3 / 4) << "kept: the fascia is a sheet";
+  EXPECT_LT(lines_drawn(u, 4, 12), 24u * 24u / 10) << "held: no sheet at the fascia";
+  EXPECT_GT(centre_max(u, 36, 44), 0.5f) << "the deep block's top is drawn";
+  EXPECT_GT(centre_max(uk, 36, 44), 0.5f);
+  float near = 0;
+  for (std::size_t z = 13; z < 19; ++z) near = std::max(near, u.at(8, 8, z));
+  EXPECT_GT(near, 0.5f) << "the block near the probe is drawn";
 }
 
 TEST_F(CliMask, FluidAtTheFloorIsOptIn) {

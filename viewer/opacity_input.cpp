@@ -96,7 +96,11 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   np.axis = beam_axis;  // the near field is an occluder (docs/real-data.md)
   const NearFieldReport nf = remove_near_field(v, in.mask, np);
   // The window under the band, held when the shell draws a sheet there (as classify does; host/mask.hpp).
-  const std::vector<std::uint8_t> underside = band_underside(v, nf, before, in.mask);
+  // With the skin window, but not in a small volume (as classify).
+  BandSheetParams bsp;
+  if (small_volume_scale(v.dims, v.spacing, kSmallVolumeMm) < 1.0) bsp.skin_mm = 0;
+  const std::vector<std::uint8_t> underside =
+      band_underside(v, nf, before, in.mask, bsp.window_mm, bsp.deep_mm, bsp.skin_mm);
   const std::vector<std::uint8_t>* mask = in.mask.empty() ? nullptr : &in.mask;
   // In place: the isovalue reads the scanned samples only, as classify does.
   if (mask) fill_unscanned_in_place(v, in.mask);
@@ -171,7 +175,7 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   if (grad_choice)
     note << ", gradient lowpass " << std::fixed << std::setprecision(2) << grad_choice->sigma_mm << " mm ("
          << (grad_choice->echoes ? "from the speckle" : "the strong edges are no echoes") << ")";
-  if (sheet.held) {
+  if (sheet.patches > 0 || sheet.deep_patches > 0) {
     const auto share = [&](std::size_t lines) { return 100.0 * double(lines) / double(sheet.lines); };
     note << ", the band's underside held (" << std::fixed << std::setprecision(0);
     if (sheet.patches > 0) note << "a sheet on " << share(sheet.held_lines) << " % of its lines";
@@ -179,6 +183,11 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
     if (sheet.deep_patches > 0) note << "a flat sheet deeper under it on " << share(sheet.deep_lines) << " % of its lines";
     note << ")";
   }
+  if (sheet.skin_sheets > 0)
+    note << ", " << sheet.skin_sheets << (sheet.skin_sheets == 1 ? " layer" : " layers")
+         << " under the probe held (a sheet following the skin line on " << std::fixed << std::setprecision(0)
+         << 100.0 * double(sheet.skin_sheet_lines) / double(std::max<std::size_t>(sheet.skin_lines, 1))
+         << " % of the lines without a band)";
   in.note = note.str();
   return in;
 }

@@ -297,7 +297,9 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
       timing.setup += first.setup, timing.solve += first.solve;
       std::ostringstream t;
       const BandSheetParams bp;
-      t << std::fixed << std::setprecision(0) << "; the band's underside drawn as a sheet: ";
+      t << std::fixed << std::setprecision(0)
+        << (bs.patches > 0 || bs.deep_patches > 0 ? "; the band's underside drawn as a sheet: "
+                                                  : "; a layer under the probe drawn as a sheet: ");
       if (bs.patches > 0)
         t << bs.patches << (bs.patches == 1 ? " patch" : " patches") << " on "
           << 100.0 * double(bs.held_lines) / double(bs.lines) << " % of its lines, the " << std::setprecision(1)
@@ -307,6 +309,16 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
         t << std::setprecision(0) << bs.deep_patches << (bs.deep_patches == 1 ? " flat sheet" : " flat sheets")
           << " deeper on " << 100.0 * double(bs.deep_lines) / double(bs.lines) << " % of its lines, "
           << std::setprecision(1) << bp.window_mm << "-" << bp.deep_mm << " mm under it, held there";
+      if ((bs.patches > 0 || bs.deep_patches > 0) && bs.skin_sheets > 0) t << ", and ";
+      if (bs.skin_sheets > 0)
+        t << std::setprecision(0) << bs.skin_sheets << (bs.skin_sheets == 1 ? " sheet" : " sheets")
+          << (bs.skin_pieces > 0 ? " (and " + std::to_string(bs.skin_pieces) +
+                                       (bs.skin_pieces == 1 ? " piece" : " pieces") + " at their depth)"
+                                 : std::string())
+          << " following the skin line in its first " << std::setprecision(1) << bp.skin_mm << " mm"
+          << (bs.lines > 0 ? " where no band was removed" : "") << std::setprecision(0) << " ("
+          << 100.0 * double(bs.skin_sheet_lines) / double(std::max<std::size_t>(bs.skin_lines, 1))
+          << " % of those lines), held there";
       t << " (" << bs.voxels << " voxels) and solved again (--band-sheet keep to keep it)";
       sheet_text = t.str();
     }
@@ -657,8 +669,15 @@ int run_classify(const ClassifyOptions& given_options) {
                                                                                              : std::vector<std::uint8_t>();
     const NearFieldReport nf = remove_near_field(in, mask.scanned, np);
     beam_axis = nf.axis;
-    if (nf.found && variational && o.band_sheet == "hold") {
-      mask.underside = band_underside(in, nf, before, mask.scanned);
+    if (variational && np.band && o.band_sheet == "hold") {
+      // Also with no band: the skin window (host/mask.hpp,
+      // BandSheetParams::skin_mm), but not under a --depth-clip (the clipped
+      // region's first voxel is no skin line) nor in a small volume (a crop
+      // thinner than --small-volume: the layers under the probe need not
+      // lie in it, and the window would span most of it).
+      BandSheetParams bp;
+      if (depth_clip || o.length_scale < 1.0) bp.skin_mm = 0;
+      mask.underside = band_underside(in, nf, before, mask.scanned, bp.window_mm, bp.deep_mm, bp.skin_mm);
       mask.axis = nf.axis;
     }
     std::ostringstream t;
@@ -963,8 +982,11 @@ void add_classify_command(CLI::App& app, Action& action) {
                   "3 mm under it, one patch on at least 15 % of its beam lines: the band's fading copies, not anatomy), "
                   "those 3 mm are held at u = 0 like the band and the volume solved again; the same, 3-8 mm under it, "
                   "for a flat sheet (at one depth under the band across its lines: a fascia under the fat, not an "
-                  "object near the probe), held down its drawn run; keep: left as drawn (docs/parameters.md, \"The "
-                  "band's underside\")")
+                  "object near the probe), held down its drawn run; and where no band was removed (or none found), "
+                  "a sheet in the first 12 mm under the skin line that follows it on at least 30 % of the lines under "
+                  "the probe (the skin's lower edge, a fascia: a layer under the probe), with its pieces at the same "
+                  "depth; not with --depth-clip or in a small volume; keep: left as drawn (docs/parameters.md, \"The "
+                  "band's underside\", \"Layers under the probe where no band was removed\")")
       ->capture_default_str()
       ->type_name("hold|keep")
       ->check(one_of({"hold", "keep"}));
