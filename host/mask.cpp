@@ -804,8 +804,19 @@ void hold_skin_sheets(const Volume& u, const std::vector<std::uint8_t>& window, 
     if (l % lines.nu + 1 < lines.nu) join(l, l + 1);
     if (l / lines.nu + 1 < lines.nw) join(l, l + lines.nu);
   }
-  std::vector<std::vector<std::size_t>> sets(runs.size());
-  for (std::size_t a = 0; a < runs.size(); ++a) sets[root(a)].push_back(a);
+  // The sets: the runs ordered by their root (then by index), each set a
+  // stretch [from[j], from[j + 1]) of `order`.
+  std::vector<std::size_t> order(runs.size()), from;
+  for (std::size_t a = 0; a < runs.size(); ++a) parent[a] = root(a);
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return parent[a] < parent[b]; });
+  for (std::size_t t = 0; t < order.size(); ++t)
+    if (t == 0 || parent[order[t]] != parent[order[t - 1]]) from.push_back(t);
+  from.push_back(order.size());
+  const std::size_t nsets = from.size() - 1;
+  const auto members = [&](std::size_t j) {
+    return std::pair<const std::size_t*, const std::size_t*>(order.data() + from[j], order.data() + from[j + 1]);
+  };
   const auto above = std::size_t(std::ceil(params.above_mm / along - 1e-9));
   const auto below = std::size_t(std::ceil(params.margin_mm / along - 1e-9));
   std::vector<std::size_t> ls;
@@ -820,12 +831,10 @@ void hold_skin_sheets(const Volume& u, const std::vector<std::uint8_t>& window, 
     long depth = 0;
     bool flat = false, held = false;
   };
-  std::vector<Set> info(sets.size());
-  for (std::size_t j = 0; j < sets.size(); ++j) {
-    const std::vector<std::size_t>& set = sets[j];
-    if (set.empty()) continue;
+  std::vector<Set> info(nsets);
+  for (std::size_t j = 0; j < nsets; ++j) {
     ls.clear(), at.clear();
-    for (std::size_t a : set) ls.push_back(runs[a].line), at.push_back(runs[a].depth);
+    for (auto [a, e] = members(j); a != e; ++a) ls.push_back(runs[*a].line), at.push_back(runs[*a].depth);
     std::sort(ls.begin(), ls.end());
     info[j].lines = std::size_t(std::unique(ls.begin(), ls.end()) - ls.begin());
     std::sort(at.begin(), at.end());
@@ -834,8 +843,8 @@ void hold_skin_sheets(const Volume& u, const std::vector<std::uint8_t>& window, 
   }
   const auto hold = [&](std::size_t j) {
     info[j].held = true;
-    for (std::size_t a : sets[j]) {
-      const Run& r = runs[a];
+    for (auto [a, e] = members(j); a != e; ++a) {
+      const Run& r = runs[*a];
       rep.skin_sheet_lines += !on[r.line], on[r.line] = 1;
       const std::size_t k0 = r.k0 > top[r.line] + above ? r.k0 - above : top[r.line];
       const std::size_t k1 = std::min(lines.len, r.k1 + below);
@@ -846,10 +855,10 @@ void hold_skin_sheets(const Volume& u, const std::vector<std::uint8_t>& window, 
     }
   };
   std::vector<long> depths;
-  for (std::size_t j = 0; j < sets.size(); ++j)
+  for (std::size_t j = 0; j < nsets; ++j)
     if (info[j].flat && double(info[j].lines) >= params.skin_patch * double(rep.skin_lines))
       ++rep.skin_sheets, depths.push_back(info[j].depth), hold(j);
-  for (std::size_t j = 0; j < sets.size(); ++j) {
+  for (std::size_t j = 0; j < nsets; ++j) {
     if (info[j].held || !info[j].flat || double(info[j].lines) < params.skin_piece * double(rep.skin_lines)) continue;
     for (long dd : depths)
       if (std::labs(dd - info[j].depth) <= 1) {
