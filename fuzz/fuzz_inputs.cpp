@@ -395,8 +395,12 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
     if (!(field_sigma >= 0.5 && field_sigma <= 1000)) throw InputError("--iso-field-sigma must be in [0.5, 1000]");
     if (!(field_depth_sigma >= 0.5 && field_depth_sigma <= 1000))
       throw InputError("--iso-field-depth-sigma must be in [0.5, 1000]");
+    // The mask before the near field's removal: the band sheet's skin line (below).
+    std::vector<std::uint8_t> before_near;
+    NearFieldReport nf;
     if (near_field) {
-      const NearFieldReport nf = remove_near_field(v, mask);
+      before_near = mask;
+      nf = remove_near_field(v, mask);
       if (nf.found && !mask.empty() && mask.size() != v.voxels()) fail("near-field mask of the wrong size");
     }
     const std::vector<std::uint8_t>* m = mask.empty() ? nullptr : &mask;
@@ -470,6 +474,28 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
       const Volume u = classify_variational(runtime(), v, p, sp, &rep, nullptr, m);
       if (rep.converged) check_opacity(u, v);  // not converged: the CLI writes nothing (exit 3)
       solved = rep.converged;
+      if (rep.converged && near_field && !p.literal()) {
+        // classify's band sheet (host/mask.hpp): the windows under the band
+        // and the skin window, and what is held there; only scanned voxels
+        // are held, and nothing changes when nothing is.
+        const std::vector<std::uint8_t> window = band_underside(v, nf, before_near, mask);
+        if (!window.empty() && window.size() != v.voxels()) fail("band sheet window of the wrong size");
+        for (std::uint8_t w : window)
+          if (w > 3) fail("band sheet window label out of range");
+        std::vector<std::uint8_t> held = mask;
+        const BandSheetReport bs = hold_band_sheet(u, window, nf.axis, held);
+        if (bs.held) {
+          if (held.size() != v.voxels()) fail("band sheet mask of the wrong size");
+          std::size_t newly = 0;
+          for (std::size_t i = 0; i < held.size(); ++i) {
+            if (held[i] && !mask.empty() && !mask[i]) fail("band sheet scans a voxel the mask did not");
+            newly += !held[i] && (mask.empty() || mask[i]);
+          }
+          if (newly != bs.voxels) fail("band sheet's held count differs from its mask");
+        } else if (held != mask) {
+          fail("band sheet held nothing but changed the mask");
+        }
+      }
     }
   });
   return ok && solved;
