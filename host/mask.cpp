@@ -730,6 +730,28 @@ struct BeamLines {
   std::size_t start(std::size_t l) const { return (l % nu) * su + (l / nu) * sw; }
 };
 
+// Whether beam line l (lines ordered as BeamLines orders them: nu across,
+// then nw rows of those) lies under the probe: its skin line (skin[l], the
+// index along the beam of its first scanned sample; < 0: none) deepens by
+// at most 1 mm per mm across the beam to each 4-neighbour that has one.
+// Not a line that enters a sector down its side (a volume probe's fan cut
+// by the top face), whose first sample is the sector's edge, no skin.
+// h_along: the spacing along the beam; hu, hw: across it.
+bool under_probe(const std::vector<long>& skin, std::size_t l, std::size_t nu, std::size_t nw, double h_along,
+                 double hu, double hw) {
+  const std::size_t a = l % nu, b = l / nu;
+  const auto slope = [&](std::size_t l0, std::size_t l1, double h) {
+    if (skin[l0] < 0 || skin[l1] < 0) return 0.0;
+    return std::fabs(double(skin[l1] - skin[l0])) * h_along / h;
+  };
+  double s = 0;
+  if (a > 0) s = std::max(s, slope(l - 1, l, hu));
+  if (a + 1 < nu) s = std::max(s, slope(l, l + 1, hu));
+  if (b > 0) s = std::max(s, slope(l - nu, l, hw));
+  if (b + 1 < nw) s = std::max(s, slope(l, l + nu, hw));
+  return s <= 1.0;
+}
+
 // The skin window's sheets (label 3 of band_underside's window;
 // BandSheetParams::skin_mm): the drawn runs (u > threshold) that start in
 // it on the lines under the probe (the skin line deepening by at most 1 mm
@@ -749,28 +771,21 @@ void hold_skin_sheets(const Volume& u, const std::vector<std::uint8_t>& window, 
     long depth;                // k0 under the line's skin line
   };
   std::vector<Run> runs;
-  const std::size_t none = lines.len;
-  std::vector<std::size_t> first(lines.count() + 1, 0), top(lines.count(), none), end(lines.count(), 0);
+  // Each line's window: from its skin line (top, -1: no window) to end.
+  std::vector<std::size_t> first(lines.count() + 1, 0), end(lines.count(), 0);
+  std::vector<long> top(lines.count(), -1);
   for (std::size_t l = 0; l < lines.count(); ++l) {
     const std::size_t base = lines.start(l), stride = lines.stride;
     for (std::size_t k = 0; k < lines.len; ++k)
-      if (window[base + k * stride] == 3) top[l] = std::min(top[l], k), end[l] = k + 1;
+      if (window[base + k * stride] == 3) {
+        if (top[l] < 0) top[l] = long(k);
+        end[l] = k + 1;
+      }
   }
-  // The lines under the probe: where the skin line deepens by at most 1 mm
-  // per mm across the beam to its neighbours with a window (as the near
-  // field's; not the lines that enter a sector down its side, whose first
-  // voxel is the sector's edge, no skin).
-  const auto steep = [&](std::size_t l, std::size_t m, double h) {
-    return top[m] != none && std::fabs(double(top[l]) - double(top[m])) * along > h + 1e-9;
-  };
   for (std::size_t l = 0; l < lines.count(); ++l) {
     first[l] = runs.size();
-    const std::size_t s = top[l], e = end[l];
-    if (s >= e) continue;
-    const std::size_t q = l % lines.nu, w = l / lines.nu;
-    if ((q > 0 && steep(l, l - 1, hu)) || (q + 1 < lines.nu && steep(l, l + 1, hu)) ||
-        (w > 0 && steep(l, l - lines.nu, hw)) || (w + 1 < lines.nw && steep(l, l + lines.nu, hw)))
-      continue;
+    if (top[l] < 0 || !under_probe(top, l, lines.nu, lines.nw, along, hu, hw)) continue;
+    const std::size_t s = std::size_t(top[l]), e = end[l];
     ++rep.skin_lines;
     const std::size_t base = lines.start(l), stride = lines.stride;
     for (std::size_t k = s; k < e;) {
@@ -846,7 +861,8 @@ void hold_skin_sheets(const Volume& u, const std::vector<std::uint8_t>& window, 
     for (auto [a, e] = members(j); a != e; ++a) {
       const Run& r = runs[*a];
       rep.skin_sheet_lines += !on[r.line], on[r.line] = 1;
-      const std::size_t k0 = r.k0 > top[r.line] + above ? r.k0 - above : top[r.line];
+      const auto t = std::size_t(top[r.line]);
+      const std::size_t k0 = r.k0 > t + above ? r.k0 - above : t;
       const std::size_t k1 = std::min(lines.len, r.k1 + below);
       for (std::size_t k = k0; k < k1; ++k) {
         const std::size_t i = lines.start(r.line) + k * lines.stride;
@@ -2095,25 +2111,14 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   // deepens by at most 1 mm per mm across it), not down the side of a
   // sector, whose lines enter the scan below the band (a volume probe's fan
   // cut by the top face: two thirds of the lines).
-  const double h_u = v.spacing[u_ax], h_w = v.spacing[w_ax];
-  const auto under_probe = [&](std::size_t l) {
-    const std::size_t a = l % d[u_ax], b = l / d[u_ax];
-    const auto slope = [&](std::size_t l0, std::size_t l1, double h) {
-      if (skin[l0] < 0 || skin[l1] < 0) return 0.0;
-      return std::fabs(double(skin[l1] - skin[l0])) * hz / h;
-    };
-    double s = 0;
-    if (a > 0) s = std::max(s, slope(l - 1, l, h_u));
-    if (a + 1 < d[u_ax]) s = std::max(s, slope(l, l + 1, h_u));
-    if (b > 0) s = std::max(s, slope(l - d[u_ax], l, h_w));
-    if (b + 1 < d[w_ax]) s = std::max(s, slope(l, l + d[u_ax], h_w));
-    return s <= 1.0;
+  const auto under_probe_line = [&](std::size_t l) {
+    return under_probe(skin, l, d[u_ax], d[w_ax], hz, v.spacing[u_ax], v.spacing[w_ax]);
   };
   if (params.faint_ratio < params.min_ratio) {
     faint = true;  // count the lines that pass with the faint rule in force, then keep it only if enough do
     std::size_t faint_lines = 0, probe_lines = 0;
     for (std::size_t l = 0; l < lines; ++l)
-      if (skin[l] >= 0 && under_probe(l)) ++probe_lines, faint_lines += candidate(l);
+      if (skin[l] >= 0 && under_probe_line(l)) ++probe_lines, faint_lines += candidate(l);
     faint = probe_lines > 0 && double(faint_lines) >= params.faint_lines * double(probe_lines);
   }
   // A layered band (skin, a dark fat layer up to a few mm thick, then bright
@@ -2309,7 +2314,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
         for (std::size_t a = 0; a < d[u_ax]; ++a) {
           const std::size_t l = a + bb * d[u_ax];
           const long s0 = skin[l];
-          if (s0 < 0 || !under_probe(l)) continue;
+          if (s0 < 0 || !under_probe_line(l)) continue;
           ++rep.lines;
           for (std::size_t z = std::size_t(s0); z < d[ax] && double(long(z) - s0) * hz < rep.depth_mm; ++z) {
             band[voxel(a, bb, z)] = 1;

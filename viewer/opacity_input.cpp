@@ -96,18 +96,18 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   np.axis = beam_axis;  // the near field is an occluder (docs/real-data.md)
   const NearFieldReport nf = remove_near_field(v, in.mask, np);
   // The window under the band, held when the shell draws a sheet there (as classify does; host/mask.hpp).
-  // With the skin window, but not in a small volume (as classify).
+  // A small volume's length scales shrink with it, as classify's do
+  // (host/variational.hpp, small_volume_scale); and it has no skin window
+  // (as classify).
+  const double scale = small_volume_scale(v.dims, v.spacing, kSmallVolumeMm);
   BandSheetParams bsp;
-  if (small_volume_scale(v.dims, v.spacing, kSmallVolumeMm) < 1.0) bsp.skin_mm = 0;
+  if (scale < 1.0) bsp.skin_mm = 0;
   const std::vector<std::uint8_t> underside =
       band_underside(v, nf, before, in.mask, bsp.window_mm, bsp.deep_mm, bsp.skin_mm);
   const std::vector<std::uint8_t>* mask = in.mask.empty() ? nullptr : &in.mask;
   // In place: the isovalue reads the scanned samples only, as classify does.
   if (mask) fill_unscanned_in_place(v, in.mask);
-  // A small volume's length scales shrink with it, as classify's do
-  // (host/variational.hpp, small_volume_scale).
   // Given weights are the user's and stay as they are.
-  const double scale = small_volume_scale(v.dims, v.spacing, kSmallVolumeMm);
   if (!weights) scale_length_scales(defaults, scale);
   // The shadow walls' isovalue: with auto, shadow_test_iso's, as classify's
   // (host/auto_iso.hpp); else the isovalue.
