@@ -1705,7 +1705,7 @@ void echo_layer(const HostVector<float>& lp, const std::vector<long>& skin,
 // profile in 0.5 mm bins below the skin line: the depth (mm) where a thin
 // bright layer at the top ends in a sharp step, or 0. Fills rep.step and
 // rep.roughness for the step it looked at.
-double skin_step(const std::vector<double>& P, const NearFieldParams& params, NearFieldReport& rep) {
+double skin_step(const std::vector<double>& P, const NearFieldParams& params, double floor, NearFieldReport& rep) {
   const std::size_t bins = P.size();
   const auto top_bins = std::size_t(std::ceil(params.top_mm / 0.5));
   const auto stay_bins = std::max<std::size_t>(1, std::size_t(std::ceil(params.stay_mm / 0.5)));
@@ -1746,7 +1746,7 @@ double skin_step(const std::vector<double>& P, const NearFieldParams& params, Ne
   const bool sharp = drop >= 0.75 * fall;  // most of the fall is the drop
   bool brightest = true;  // nothing deeper within the search is as bright as the layer
   for (std::size_t b = best; b < bins; ++b) brightest &= std::isnan(P[b]) || P[b] < level;
-  const bool found = sharp && brightest && fall >= params.faint_ratio * std::fabs(level) &&
+  const bool found = sharp && brightest && fall >= params.faint_ratio * (level - floor) &&
                      fall >= params.step_sds * roughness;
   if (!found) return 0.0;
   // The band ends where the fall is three quarters done.
@@ -1756,6 +1756,10 @@ double skin_step(const std::vector<double>& P, const NearFieldParams& params, Ne
 }
 
 }  // namespace
+
+double brightness_floor(const Volume& v) {
+  return scalar_type_is_integer(v.source_type) ? 0.0 : v.intensity_map().lo;
+}
 
 std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std::uint8_t>* scanned,
                                           const NearFieldParams& params, NearFieldReport* report,
@@ -1778,6 +1782,9 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   HostVector<float> own_lp;
   HostVector<float>& lp = lowpass_out ? *lowpass_out : own_lp;
   lp = lowpass_across_beam(v, scanned, ax, params.sigma_mm, threads);
+  // Brightness in the ratio tests below counts from the data's black
+  // (brightness_floor): the same band for data offset by a constant.
+  const double floor = brightness_floor(v);
   // Skin line per beam line (its first scanned voxel).
   auto voxel = [&](std::size_t a, std::size_t b, std::size_t z) {
     return a * stride[u_ax] + b * stride[w_ax] + z * stride[ax];
@@ -2046,7 +2053,8 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   // an object near the skin) are no near field unless min_ratio brighter.
   bool faint = false;
   const auto bright = [&](double t) {
-    return t - below > params.min_ratio * t || (faint && t - below > params.faint_ratio * t && rep.speckle_sd > 0 &&
+    return t - below > params.min_ratio * (t - floor) ||
+           (faint && t - below > params.faint_ratio * (t - floor) && rep.speckle_sd > 0 &&
                                                 t - below > params.speckle_sds * rep.speckle_sd);
   };
   // ... or a clipped one (its own top at the data's maximum: a slab
@@ -2094,7 +2102,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
         clipped_top[l] = top_count[l] > 0 && double(top_at_max[l]) >= clip_share * double(top_count[l]);
   }
   const auto clipped = [&](std::size_t l) {
-    return clipped_top[l] && double(ltop[l]) - below > params.faint_ratio * double(ltop[l]);
+    return clipped_top[l] && double(ltop[l]) - below > params.faint_ratio * (double(ltop[l]) - floor);
   };
   const auto candidate = [&](std::size_t l) {
     return ltop_at[l] >= 0 && ((bright(double(ltop[l])) && !std::isnan(own_top[l]) && bright(double(own_top[l]))) ||
@@ -2170,12 +2178,12 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
       k = 0;
       while (k < Pc.size() && top_k > k && Pc[k] < half) ++k;
       const double keep = 1.0 - params.layer_dip;  // a dip is at most this share of a layer beside it
-      double peak = -1;
+      double peak = -std::numeric_limits<double>::infinity();
       for (; k < Pc.size() && Pc[k] >= half; ++k) {
         peak = std::max(peak, Pc[k]);
-        if (Pc[k] > keep * peak) continue;
+        if (Pc[k] - floor > keep * (peak - floor)) continue;
         std::size_t j = k + 1;  // the next layer: the first sample the dip is that far under
-        while (j < Pc.size() && j <= k + gap_k && Pc[j] >= half && Pc[k] > keep * Pc[j]) ++j;
+        while (j < Pc.size() && j <= k + gap_k && Pc[j] >= half && Pc[k] - floor > keep * (Pc[j] - floor)) ++j;
         if (j < Pc.size() && j <= k + gap_k && Pc[j] >= half) {
           gap = true;
           k = j;
@@ -2286,7 +2294,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
     rep.lines = band_lines;
     rep.depth_mm = median(depths);
     if (!tops.empty()) rep.top = median(tops);
-    rep.faint = faint && !(rep.top - below > params.min_ratio * rep.top);
+    rep.faint = faint && !(rep.top - below > params.min_ratio * (rep.top - floor));
     // Clipped: the faint rule's speckle test fails, so its lines came in by
     // their clipped tops.
     rep.clipped = rep.faint && !(rep.speckle_sd > 0 && rep.top - below > params.speckle_sds * rep.speckle_sd);
@@ -2306,7 +2314,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   } else if (params.skin_step) {
     // The skin line (NearFieldParams::skin_step): a thin layer at the skin
     // line ended by a sharp step in P.
-    const double step_mm = skin_step(P, params, rep);
+    const double step_mm = skin_step(P, params, floor, rep);
     if (step_mm > 0) {
       rep.found = rep.skin = true;
       rep.depth_mm = step_mm + params.margin_mm;

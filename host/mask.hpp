@@ -318,6 +318,14 @@ struct NearFieldReport {
     std::size_t voxels = 0;             // voxels it added to the band
   } echo;                       // the band's echo layer (params.echo_layer)
 };
+// The data's black, from which the near field's ratio tests (min_ratio,
+// faint_ratio, layer_dip) measure brightness: 0 for integer data (the
+// display's grey levels), the robust minimum (the 0.5th percentile, where
+// the intensity normalisation puts 0) for float data, whose zero is
+// arbitrary: log-compressed brightness in dB or with any offset (a gain
+// change in the log domain). The band is then the same for v and v + c.
+double brightness_floor(const Volume& v);
+
 // `lowpass_out` (optional) receives the data lowpassed across the beam that
 // the band was read from (lowpass_across_beam(v, scanned, the axis,
 // params.sigma_mm)); empty where the volume is too thin along the beam.

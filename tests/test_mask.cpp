@@ -371,6 +371,38 @@ TEST(NearField, AThinSkinLineOverTissueNearlyAsBrightIsABand) {
   EXPECT_FALSE(r.found);
 }
 
+TEST(NearField, FloatDataOffsetByAConstantGiveTheSameBand) {
+  // Log-compressed float data (dB, or with any offset) have no natural zero:
+  // a gain change in the log domain adds a constant. The ratio tests measure
+  // brightness from brightness_floor (the robust minimum for float data, 0
+  // for integer grey levels), so the band is the same for v and v + c: the
+  // layered band and the thin skin line above, as floats, shifted up and
+  // down (before, +500 lost the layered band and -300 found bands by the
+  // sign of negative levels).
+  const Volume layered = layered_scan({40, 40, 60}, {0.5, 0.5, 0.5}, 2, {{2.0, 220}, {2.0, 150}, {4.0, 210}}, 40,
+                                      test::seed() + 21);
+  const Volume skin = layered_scan({96, 96, 48}, {0.5, 0.5, 0.5}, 2, {{2.0, 120}}, 100, test::seed() + 22);
+  EXPECT_EQ(brightness_floor(layered), 0.0);  // integer grey levels: black is 0
+  for (const Volume* base : {&layered, &skin}) {
+    Volume f = base->with_data(base->data, ScalarType::Float32);
+    EXPECT_DOUBLE_EQ(brightness_floor(f), f.intensity_map().lo);
+    NearFieldReport r0;
+    const auto band0 = near_field_band(f, nullptr, NearFieldParams{}, &r0);
+    ASSERT_TRUE(r0.found);
+    for (const float c : {500.0f, -300.0f}) {
+      Volume g = f;
+      for (float& x : g.data) x += c;
+      EXPECT_NEAR(brightness_floor(g), brightness_floor(f) + c, 1e-3);
+      NearFieldReport r;
+      const auto band = near_field_band(g, nullptr, NearFieldParams{}, &r);
+      EXPECT_TRUE(r.found) << "offset " << c;
+      EXPECT_EQ(r.skin, r0.skin) << "offset " << c;
+      EXPECT_NEAR(r.depth_mm, r0.depth_mm, 1e-9) << "offset " << c;
+      EXPECT_EQ(band, band0) << "offset " << c;
+    }
+  }
+}
+
 TEST(NearField, GainFallingWithDepthIsNoSkinLine) {
   // Brightness falling 2 grey levels per 0.5 mm from 130 to 100 and then
   // level: brighter at the top by as much as the skin above, but no step.
@@ -2989,6 +3021,42 @@ TEST_F(CliMask, AFlatSheetDeeperUnderTheBandIsHeld) {
   EXPECT_EQ(lines_drawn(u, 14, 26), 0u) << "held: no sheet at the fascia";
   EXPECT_GT(centre_max(u, 36, 44), 0.5f) << "the block's top is drawn";
   EXPECT_GT(centre_max(uk, 36, 44), 0.5f);
+}
+
+TEST_F(CliMask, FloatDataOffsetByAConstantClassifyTheSame) {
+  // The whole `classify --iso auto` on float data and on the same data
+  // plus a constant (a gain change of log-compressed data): the same near
+  // field removed and the same opacity (the float data's normalisation is by
+  // robust min/max, the near field's ratio tests count from its floor:
+  // brightness_floor). A layered band over fluid with a bright block deeper.
+  Volume v = layered_scan({40, 40, 64}, {0.5, 0.5, 0.5}, 2, {{2.0, 220}, {2.0, 150}, {4.0, 210}}, 40,
+                          test::seed() + 23);
+  for (std::size_t z = 36; z < 46; ++z)
+    for (std::size_t y = 12; y < 28; ++y)
+      for (std::size_t x = 12; x < 28; ++x) v.at(x, y, z) = 200;
+  std::vector<Volume> u;
+  std::string band;
+  for (const float c : {0.0f, 500.0f, -300.0f}) {
+    Volume f = v.with_data(v.data, ScalarType::Float32);
+    for (float& x : f.data) x += c;
+    const std::string in = file("off" + std::to_string(u.size()) + ".nrrd"), out = file("u" + std::to_string(u.size()) + ".nrrd");
+    write_volume(in, f);
+    const test::RunResult r = run({"classify", in, "--iso", "auto", "-o", out});
+    ASSERT_EQ(r.status, 0) << r.err;
+    const std::size_t at = r.out.find("near field removed: ");
+    ASSERT_NE(at, std::string::npos) << "offset " << c << ": " << r.out;
+    const std::string found = r.out.substr(at, r.out.find(" voxels", at) - at);  // its depth and voxels
+    if (band.empty()) band = found;
+    EXPECT_EQ(found, band) << "offset " << c;
+    u.push_back(read_volume(out));
+  }
+  for (std::size_t k = 1; k < u.size(); ++k) {
+    ASSERT_EQ(u[k].data.size(), u[0].data.size());
+    float worst = 0;
+    for (std::size_t i = 0; i < u[0].data.size(); ++i) worst = std::max(worst, std::fabs(u[k].data[i] - u[0].data[i]));
+    EXPECT_LT(worst, 1e-3f) << "run " << k;
+  }
+  EXPECT_GT(centre_max(u[0], 34, 40), 0.5f) << "the block's top is drawn";
 }
 
 TEST_F(CliMask, ASheetThatFollowsTheSkinLineIsHeldWithNoBand) {
