@@ -1758,7 +1758,13 @@ double skin_step(const std::vector<double>& P, const NearFieldParams& params, do
 }  // namespace
 
 double brightness_floor(const Volume& v) {
-  return scalar_type_is_integer(v.source_type) ? 0.0 : v.intensity_map().lo;
+  if (scalar_type_is_integer(v.source_type)) {
+    // Grey levels (no sample below 0): black is 0. Signed data holding
+    // negative samples (dB) have no natural zero either: as float data.
+    if (std::none_of(v.data.begin(), v.data.end(), [](float x) { return x < 0.0f; })) return 0.0;
+    return v.with_data(v.data, ScalarType::Float32).intensity_map().lo;
+  }
+  return v.intensity_map().lo;
 }
 
 std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std::uint8_t>* scanned,

@@ -319,11 +319,12 @@ struct NearFieldReport {
   } echo;                       // the band's echo layer (params.echo_layer)
 };
 // The data's black, from which the near field's ratio tests (min_ratio,
-// faint_ratio, layer_dip) measure brightness: 0 for integer data (the
-// display's grey levels), the robust minimum (the 0.5th percentile, where
-// the intensity normalisation puts 0) for float data, whose zero is
-// arbitrary: log-compressed brightness in dB or with any offset (a gain
-// change in the log domain). The band is then the same for v and v + c.
+// faint_ratio, layer_dip) measure brightness: 0 for integer data with no
+// sample below 0 (the display's grey levels), else the robust minimum (the
+// 0.5th percentile, where the float data's intensity normalisation puts 0):
+// float data, and signed data holding negative samples, carry
+// log-compressed brightness whose zero is arbitrary (dB, or any offset: a
+// gain change in the log domain). The band is then the same for v and v + c.
 double brightness_floor(const Volume& v);
 
 // `lowpass_out` (optional) receives the data lowpassed across the beam that

@@ -400,6 +400,14 @@ TEST(NearField, FloatDataOffsetByAConstantGiveTheSameBand) {
       EXPECT_NEAR(r.depth_mm, r0.depth_mm, 1e-9) << "offset " << c;
       EXPECT_EQ(band, band0) << "offset " << c;
     }
+    // Signed integer data holding negative samples (dB in int16): counted
+    // from their robust minimum too, the same band as the float data's.
+    Volume s = base->with_data(base->data, ScalarType::Int16);
+    for (float& x : s.data) x -= 300.0f;
+    EXPECT_NEAR(brightness_floor(s), brightness_floor(f) - 300.0, 1e-3);
+    NearFieldReport rs;
+    EXPECT_EQ(near_field_band(s, nullptr, NearFieldParams{}, &rs), band0);
+    EXPECT_TRUE(rs.found);
   }
 }
 
