@@ -2061,7 +2061,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   const auto bright = [&](double t) {
     return t - below > params.min_ratio * (t - floor) ||
            (faint && t - below > params.faint_ratio * (t - floor) && rep.speckle_sd > 0 &&
-                                                t - below > params.speckle_sds * rep.speckle_sd);
+            t - below > params.speckle_sds * rep.speckle_sd);
   };
   // ... or a clipped one (its own top at the data's maximum: a slab
   // saturated at the top of the range over bright, coarse speckle, which can
