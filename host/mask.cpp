@@ -1090,7 +1090,22 @@ std::pair<double, double> brightness_variation(const Volume& v, const std::vecto
     all += zsum[z], n_all += zcount[z];
     for (std::size_t k = 0; k < na; ++k) as[k] += asum[z * na + k], ac[k] += acount[z * na + k];
   }
-  const double mean = n_all ? all / double(n_all) : 0;
+  // The mean brightness counted from the data's black (brightness_floor
+  // over the same samples: 0 for integer grey levels), so that float data
+  // offset by a constant give the same answer.
+  double floor = 0;
+  if (!scalar_type_is_integer(v.source_type) || std::any_of(v.data.begin(), v.data.end(), [](float x) { return x < 0.0f; })) {
+    std::vector<float> samples;
+    for (std::size_t z = 0; z < d[2]; z += step)
+      for (std::size_t i = z * plane; i < (z + 1) * plane; ++i)
+        if (v.data[i] != 0.0f && (!scanned || (*scanned)[i])) samples.push_back(v.data[i]);
+    if (!samples.empty()) {
+      Volume s({samples.size(), 1, 1}, v.spacing, ScalarType::Float32);
+      s.data = std::move(samples);
+      floor = s.intensity_map().lo;
+    }
+  }
+  const double mean = n_all ? all / double(n_all) - floor : 0;
   return {profile_variation(as, ac, v.spacing[std::size_t(axis)], mean),
           profile_variation(zs, zc, v.spacing[2] * double(step), mean)};
 }
@@ -1757,14 +1772,95 @@ double skin_step(const std::vector<double>& P, const NearFieldParams& params, do
 
 }  // namespace
 
-double brightness_floor(const Volume& v) {
-  if (scalar_type_is_integer(v.source_type)) {
-    // Grey levels (no sample below 0): black is 0. Signed data holding
-    // negative samples (dB) have no natural zero either: as float data.
-    if (std::none_of(v.data.begin(), v.data.end(), [](float x) { return x < 0.0f; })) return 0.0;
-    return v.with_data(v.data, ScalarType::Float32).intensity_map().lo;
+double unscanned_fill_value(const Volume& v, double min_fraction, int threads) {
+  if (scalar_type_is_integer(v.source_type) || v.data.empty()) return 0.0;
+  const std::size_t n = v.data.size();
+  const Dims3& d = v.dims;
+  threads = host_threads(threads);
+  // The candidates: the data's minimum and the eight corners' samples (a
+  // fill the mask takes touches the volume's border; a fan's or a sweep's
+  // reaches its corners).
+  const int parts = range_count(n, threads);
+  std::vector<float> mins(std::size_t(parts), INFINITY);
+  parallel_ranges_indexed(n, threads, [&](int k, std::size_t i0, std::size_t i1) {
+    float m = INFINITY;
+    for (std::size_t i = i0; i < i1; ++i) m = std::min(m, v.data[i]);
+    mins[std::size_t(k)] = m;
+  });
+  std::vector<float> cand{0.0f, *std::min_element(mins.begin(), mins.end())};
+  for (int c = 0; c < 8; ++c) {
+    const std::size_t x = c & 1 ? d[0] - 1 : 0, y = c & 2 ? d[1] - 1 : 0, z = c & 4 ? d[2] - 1 : 0;
+    cand.push_back(v.data[x + d[0] * (y + d[1] * z)]);
   }
-  return v.intensity_map().lo;
+  std::sort(cand.begin() + 1, cand.end());
+  cand.erase(std::unique(cand.begin() + 1, cand.end()), cand.end());
+  cand.erase(std::remove_if(cand.begin() + 1, cand.end(), [](float x) { return x == 0.0f || !std::isfinite(x); }),
+             cand.end());
+  if (cand.size() < 2) return 0.0;
+  // Exact samples at each (cand[0] is 0), over threads (the same for any split).
+  const std::size_t nc = cand.size();
+  std::vector<std::size_t> counts(std::size_t(parts) * nc, 0);
+  parallel_ranges_indexed(n, threads, [&](int k, std::size_t i0, std::size_t i1) {
+    std::size_t* const c = counts.data() + std::size_t(k) * nc;
+    for (std::size_t i = i0; i < i1; ++i)
+      for (std::size_t j = 0; j < nc; ++j) c[j] += v.data[i] == cand[j];
+  });
+  std::vector<std::size_t> total(nc, 0);
+  for (int k = 0; k < parts; ++k)
+    for (std::size_t j = 0; j < nc; ++j) total[j] += counts[std::size_t(k) * nc + j];
+  const double need = min_fraction * double(n);
+  if (double(total[0]) >= need) return 0.0;  // a zero fill: as always
+  std::size_t best = 0;
+  for (std::size_t j = 1; j < nc; ++j)
+    if (double(total[j]) >= need && (best == 0 || total[j] > total[best])) best = j;
+  if (best == 0) return 0.0;
+  // A fill is dark: at most the median of the other samples (a clipped
+  // ceiling, repeated as often, is not one). From every stride-th sample.
+  const float f = cand[best];
+  const std::size_t stride = std::max<std::size_t>(1, n / 1000000);
+  std::vector<float> rest;
+  rest.reserve(n / stride + 1);
+  for (std::size_t i = 0; i < n; i += stride)
+    if (v.data[i] != f) rest.push_back(v.data[i]);
+  if (rest.empty()) return 0.0;
+  std::nth_element(rest.begin(), rest.begin() + long(rest.size() / 2), rest.end());
+  return f <= rest[rest.size() / 2] ? double(f) : 0.0;
+}
+
+void move_fill_to_zero(Volume& v, double fill, int threads) {
+  if (fill == 0.0) return;
+  const float f = float(fill);
+  parallel_ranges(v.data.size(), host_threads(threads), [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) v.data[i] -= f;
+  });
+}
+
+void darken_scanned_fill(Volume& v, const std::vector<std::uint8_t>& scanned) {
+  const std::size_t n = v.data.size();
+  const bool all = scanned.size() != n;
+  float lo = INFINITY;
+  for (std::size_t i = 0; i < n; ++i)
+    if ((all || scanned[i]) && v.data[i] != 0.0f) lo = std::min(lo, v.data[i]);
+  if (!std::isfinite(lo)) return;
+  for (std::size_t i = 0; i < n; ++i)
+    if ((all || scanned[i]) && v.data[i] == 0.0f) v.data[i] = lo;
+}
+
+double brightness_floor(const Volume& v, const std::vector<std::uint8_t>* scanned) {
+  if (scalar_type_is_integer(v.source_type) &&
+      std::none_of(v.data.begin(), v.data.end(), [](float x) { return x < 0.0f; }))
+    return 0.0;  // grey levels (no sample below 0): black is 0
+  // Float data, and signed data holding negative samples (dB): the robust
+  // minimum of the scanned samples (the fill is no brightness of the data).
+  std::vector<float> samples;
+  if (scanned && scanned->size() == v.data.size()) {
+    for (std::size_t i = 0; i < v.data.size(); ++i)
+      if ((*scanned)[i]) samples.push_back(v.data[i]);
+  }
+  if (samples.empty()) return v.with_data(v.data, ScalarType::Float32).intensity_map().lo;
+  Volume s({samples.size(), 1, 1}, v.spacing, ScalarType::Float32);
+  s.data = std::move(samples);
+  return s.intensity_map().lo;
 }
 
 std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std::uint8_t>* scanned,
@@ -1790,7 +1886,7 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   lp = lowpass_across_beam(v, scanned, ax, params.sigma_mm, threads);
   // Brightness in the ratio tests below counts from the data's black
   // (brightness_floor): the same band for data offset by a constant.
-  const double floor = brightness_floor(v);
+  const double floor = brightness_floor(v, scanned);
   // Skin line per beam line (its first scanned voxel).
   auto voxel = [&](std::size_t a, std::size_t b, std::size_t z) {
     return a * stride[u_ax] + b * stride[w_ax] + z * stride[ax];

@@ -93,6 +93,30 @@ struct MaskReport {
 // recursion), O(voxels) time and a few bytes per voxel.
 std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params = {}, MaskReport* report = nullptr);
 
+// Float data's unscanned fill (docs/real-data.md, "A fill other than 0"):
+// the mask, the near field and the beam axis take exact zeros for what the
+// probe never swept. Float data carry brightness whose zero is arbitrary
+// (dB, or any offset), and their fill is often another value (-80 dB, the
+// data's minimum, or data shifted by a constant, fill and all).
+// unscanned_fill_value(v): for float data with fewer than min_fraction of
+// the samples exactly 0 (a zero fill wins, as before), the value, among the
+// data's minimum and the eight corners' samples, that the most samples hold
+// exactly, when at least min_fraction do and it is no brighter than the
+// median of the rest (a fill is dark; a clipped ceiling is not one); else 0.
+// Integer data: 0 (grey levels' black). classify and the viewer subtract it
+// from the data before the mask (an exact 0 where the fill was; the
+// classification of float data does not change with an added constant
+// otherwise) and report isovalues in the file's units.
+double unscanned_fill_value(const Volume& v, double min_fraction = MaskParams{}.min_fraction, int threads = 0);
+// v's samples less `fill` (in place; nothing when fill is 0).
+void move_fill_to_zero(Volume& v, double fill, int threads = 0);
+// After move_fill_to_zero and the mask: the samples at 0 that `scanned`
+// (1 = scanned; empty: every voxel) still counts as scanned -- the fill's
+// ragged edge that the mask's rule does not reach -- set to the smallest
+// other scanned sample. A zero fill lies at the data's black; a fill moved
+// from -1000 dB would lie far below it and read as a strong edge.
+void darken_scanned_fill(Volume& v, const std::vector<std::uint8_t>& scanned);
+
 // beam_axis_of: an axis other than z wins only by this factor over z.
 constexpr double kBeamAxisMargin = 1.1;
 // ... and only when the data's brightness profile along z (the mean per
@@ -321,11 +345,13 @@ struct NearFieldReport {
 // The data's black, from which the near field's ratio tests (min_ratio,
 // faint_ratio, layer_dip) measure brightness: 0 for integer data with no
 // sample below 0 (the display's grey levels), else the robust minimum (the
-// 0.5th percentile, where the float data's intensity normalisation puts 0):
-// float data, and signed data holding negative samples, carry
-// log-compressed brightness whose zero is arbitrary (dB, or any offset: a
-// gain change in the log domain). The band is then the same for v and v + c.
-double brightness_floor(const Volume& v);
+// 0.5th percentile, where the float data's intensity normalisation puts 0)
+// of the scanned samples (`scanned`, 1 = scanned; null or none scanned:
+// every sample): float data, and signed data holding negative samples,
+// carry log-compressed brightness whose zero is arbitrary (dB, or any
+// offset: a gain change in the log domain), and their unscanned fill is no
+// brightness of theirs. The band is then the same for v and v + c.
+double brightness_floor(const Volume& v, const std::vector<std::uint8_t>* scanned = nullptr);
 
 // `lowpass_out` (optional) receives the data lowpassed across the beam that
 // the band was read from (lowpass_across_beam(v, scanned, the axis,

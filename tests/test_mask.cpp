@@ -315,6 +315,49 @@ Volume layered_scan(Dims3 dims, Vec3d spacing, int beam, const std::vector<std::
   return v;
 }
 
+TEST(UnscannedFill, FloatDataWhoseFillIsNotZero) {
+  // Float samples in [10, 20] with a solid fill in a corner (a wedge 8 x 8 x
+  // 32 of 32^3: 6 % of the voxels): the fill's value is found whatever it
+  // is, the data's minimum or not, as long as it is no brighter than the
+  // median of the rest; a zero fill, integer data, a bright clipped block
+  // and too few samples give 0.
+  const Dims3 d{32, 32, 32};
+  std::mt19937_64 rng(test::seed() + 31);
+  std::uniform_real_distribution<float> U(10.0f, 20.0f);
+  Volume base(d, {0.5, 0.5, 0.5}, ScalarType::Float32);
+  for (float& x : base.data) x = U(rng);
+  const auto with_corner = [&](const Volume& v, float value, std::size_t side) {
+    Volume out = v;
+    for (std::size_t z = 0; z < 32; ++z)
+      for (std::size_t y = 0; y < side; ++y)
+        for (std::size_t x = 0; x < side; ++x) out.at(x, y, z) = value;
+    return out;
+  };
+  EXPECT_EQ(unscanned_fill_value(with_corner(base, -80.0f, 8)), -80.0) << "the minimum";
+  EXPECT_EQ(unscanned_fill_value(with_corner(base, 12.5f, 8)), 12.5) << "not the minimum, but dark";
+  EXPECT_EQ(unscanned_fill_value(with_corner(base, 0.0f, 8)), 0.0) << "a zero fill";
+  EXPECT_EQ(unscanned_fill_value(with_corner(base, 30.0f, 8)), 0.0) << "a bright clipped block is no fill";
+  EXPECT_EQ(unscanned_fill_value(base), 0.0) << "no repeated value";
+  // 1 x 1 x 32 voxels: under 0.1 % of the 32768.
+  EXPECT_EQ(unscanned_fill_value(with_corner(base, -80.0f, 1)), 0.0) << "too few";
+  // Zeros as common as the fill elsewhere: the zero fill wins, as before.
+  Volume both = with_corner(base, -80.0f, 8);
+  for (std::size_t z = 0; z < 32; ++z)
+    for (std::size_t y = 24; y < 32; ++y)
+      for (std::size_t x = 24; x < 32; ++x) both.at(x, y, z) = 0.0f;
+  EXPECT_EQ(unscanned_fill_value(both), 0.0);
+  Volume ints = with_corner(base, 5.0f, 8);
+  for (float& x : ints.data) x = std::round(x);
+  EXPECT_EQ(unscanned_fill_value(ints.with_data(ints.data, ScalarType::UInt16)), 0.0) << "integer data: 0";
+  // move_fill_to_zero: the fill becomes exactly 0, the rest shifts.
+  Volume moved = with_corner(base, -80.0f, 8);
+  move_fill_to_zero(moved, -80.0);
+  EXPECT_EQ(moved.at(3, 3, 3), 0.0f);
+  EXPECT_FLOAT_EQ(moved.at(20, 20, 20), base.at(20, 20, 20) + 80.0f);
+  // The same for any thread count.
+  for (int t : {1, 2, 3}) EXPECT_EQ(unscanned_fill_value(with_corner(base, -80.0f, 8), 0.001, t), -80.0);
+}
+
 TEST(NearField, ABrightLayeredBandUnderTheProbeIsFoundToItsBottom) {
   // Skin (bright), fat (dimmer), muscle (bright) over 8 mm, then dark fluid:
   // the band ends below the muscle, not at the fat's dip.
@@ -496,6 +539,12 @@ TEST(NearField, BeamAxisTiesGoToTheDefaultZ) {
         }
       }
     EXPECT_EQ(beam_axis_of(v, nullptr), drift) << "the brightness drifting along " << "xyz"[drift];
+    // The profile's variation counts from the data's black: float data plus
+    // 1000 drift as much (before, against the mean from 0, z's drift was
+    // noise and y won).
+    Volume f = v.with_data(v.data, ScalarType::Float32);
+    for (float& x : f.data) x += 1000.0f;
+    EXPECT_EQ(beam_axis_of(f, nullptr), drift) << "as float data plus 1000, drifting along " << "xyz"[drift];
   }
 }
 
@@ -3065,6 +3114,78 @@ TEST_F(CliMask, FloatDataOffsetByAConstantClassifyTheSame) {
     EXPECT_LT(worst, 1e-3f) << "run " << k;
   }
   EXPECT_GT(centre_max(u[0], 34, 40), 0.5f) << "the block's top is drawn";
+}
+
+TEST_F(CliMask, FloatDataWhoseFillIsNotZeroKeepTheirMask) {
+  // Float data with an unswept wedge filled with 0, then the same data (fill
+  // and all) plus 500 and less 300, and with the fill alone at -1000 (dB
+  // data's "no signal"): the fill is found in each (host/mask.hpp,
+  // unscanned_fill_value), the mask and the near field are the same, and so
+  // is the opacity; the report speaks the file's units (isovalue and the
+  // fill), and a given isovalue is taken in them. Before, the shifted fill
+  // was scanned tissue: no mask, and the wedge's side drawn as a surface.
+  Volume v = layered_scan({40, 40, 64}, {0.5, 0.5, 0.5}, 2, {{2.0, 220}, {2.0, 150}, {4.0, 210}}, 40,
+                          test::seed() + 29);
+  for (std::size_t z = 36; z < 46; ++z)
+    for (std::size_t y = 12; y < 28; ++y)
+      for (std::size_t x = 12; x < 28; ++x) v.at(x, y, z) = 200;
+  // The wedge: x below 12 - z / 8 on every y (a fan's side).
+  for (std::size_t z = 0; z < 64; ++z)
+    for (std::size_t y = 0; y < 40; ++y)
+      for (std::size_t x = 0; x + z / 8 < 12; ++x) v.at(x, y, z) = 0;
+  // The fill's ragged edge: single samples at the fill's value beside the
+  // wedge and in the fluid, which the mask's rule leaves scanned (darkened
+  // to the data's black when the fill is moved: darken_scanned_fill).
+  for (std::size_t k = 0; k < 24; ++k) v.at(13 + k % 3, 4 + k, 50 + k % 5) = 0;
+  const Volume f0 = v.with_data(v.data, ScalarType::Float32);
+  struct Case {
+    float offset, fill;  // data + offset; the fill at `fill`
+  };
+  std::vector<Volume> u, ug;
+  std::string mask_text;
+  for (const Case c : {Case{0, 0}, Case{500, 500}, Case{-300, -300}, Case{0, -1000}}) {
+    Volume f = f0;
+    for (float& x : f.data) x = x == 0.0f ? c.fill : x + c.offset;
+    const std::string k = std::to_string(u.size());
+    const std::string in = file("fill" + k + ".nrrd"), out = file("u" + k + ".nrrd"), given = file("g" + k + ".nrrd");
+    write_volume(in, f);
+    const test::RunResult r = run({"classify", in, "--iso", "auto", "-o", out});
+    ASSERT_EQ(r.status, 0) << r.err;
+    const std::size_t at = r.out.find(" voxels unscanned");
+    ASSERT_NE(at, std::string::npos) << "fill " << c.fill << ": " << r.out;
+    const std::size_t nf = r.out.find("near field removed: ");
+    ASSERT_NE(nf, std::string::npos) << r.out;
+    const std::size_t count = r.out.rfind(' ', at - 1) + 1;  // "N voxels unscanned"
+    const std::string found = r.out.substr(count, at - count) + "; " + r.out.substr(nf, r.out.find(" voxels", nf) - nf);
+    if (mask_text.empty()) mask_text = found;
+    EXPECT_EQ(found, mask_text) << "fill " << c.fill;
+    if (c.fill != 0)
+      EXPECT_NE(r.out.find("(float data: their fill, " + std::to_string(int(c.fill)) + ", counted as 0)"),
+                std::string::npos)
+          << r.out;
+    else
+      EXPECT_EQ(r.out.find("their fill"), std::string::npos) << r.out;
+    // The isovalue in the file's units: 130 above the data's 0.
+    const std::size_t iso_at = r.out.find(", iso ");
+    ASSERT_NE(iso_at, std::string::npos);
+    u.push_back(read_volume(out));
+    const test::RunResult g =
+        run({"classify", in, "--iso", std::to_string(130.0 + double(c.offset)), "-o", given});
+    ASSERT_EQ(g.status, 0) << g.err;
+    EXPECT_NE(g.out.find(", iso " + std::to_string(int(130 + c.offset)) + ".000"), std::string::npos) << g.out;
+    ug.push_back(read_volume(given));
+  }
+  for (std::size_t k = 1; k < u.size(); ++k) {
+    float worst = 0, worst_given = 0;
+    for (std::size_t i = 0; i < u[0].data.size(); ++i) {
+      worst = std::max(worst, std::fabs(u[k].data[i] - u[0].data[i]));
+      worst_given = std::max(worst_given, std::fabs(ug[k].data[i] - ug[0].data[i]));
+    }
+    EXPECT_LT(worst, 1e-3f) << "case " << k;
+    EXPECT_LT(worst_given, 1e-3f) << "case " << k << ", given isovalue";
+  }
+  EXPECT_GT(centre_max(u[0], 34, 40), 0.5f) << "the block's top is drawn";
+  EXPECT_EQ(u[1].at(2, 20, 30), 0.0f) << "the wedge is unscanned";
 }
 
 TEST_F(CliMask, ASheetThatFollowsTheSkinLineIsHeldWithNoBand) {

@@ -319,6 +319,40 @@ TEST_F(ViewerCli, SavedParametersReproduceTheClassification) {
   EXPECT_NE(uc.data, ua.data);
 }
 
+TEST_F(ViewerCli, FloatDataWhoseFillIsNotZeroViewAsClassify) {
+  // Float data shifted by 500, with an unswept wedge filled at 500 (the data's
+  // 0 moved with it): the viewer takes the fill as classify does (host/mask.hpp,
+  // unscanned_fill_value), its u is classify's, and the parameters it saves
+  // hold the isovalue in the file's units (620, as given).
+  const std::string raw = file("raw.nrrd");
+  ASSERT_EQ(run({"synthetic", "--size", "32", "-o", raw, "-q"}).status, 0);
+  Volume v = read_volume(raw);
+  Volume f = v.with_data(v.data, ScalarType::Float32);
+  for (std::size_t z = 0; z < f.dims[2]; ++z)
+    for (std::size_t y = 0; y < f.dims[1]; ++y)
+      for (std::size_t x = 0; x + z / 4 < 8; ++x) f.at(x, y, z) = 0.0f;
+  for (float& x : f.data) x += 500.0f;
+  const std::string in = file("fill500.nrrd"), vu = file("view-u.nrrd"), saved = file("saved.txt");
+  write_volume(in, f);
+  const RunResult r = run({"view", in, "--iso", "620", "--frames", "1", "--size", "320x240", "--save-params", saved,
+                           "--save-u", vu});
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(slurp(saved).find("iso = 620\n"), std::string::npos) << slurp(saved);
+  const std::string a = file("a.nrrd"), b = file("b.nrrd");
+  const RunResult c = run({"classify", in, "--iso", "620", "-o", a});
+  ASSERT_EQ(c.status, 0) << c.err;
+  EXPECT_NE(c.out.find("(float data: their fill, 500, counted as 0)"), std::string::npos) << c.out;
+  EXPECT_NE(c.out.find(", iso 620.000"), std::string::npos) << c.out;
+  ASSERT_EQ(run({"classify", in, "--params", saved, "-o", b, "-q"}).status, 0);
+  const Volume ua = read_volume(a), ub = read_volume(b), uv = read_volume(vu);
+  EXPECT_EQ(ua.data, uv.data) << "the viewer's u differs from classify's";
+  EXPECT_EQ(ua.data, ub.data) << "classify --params (saved by the viewer) differs";
+  std::size_t drawn = 0;
+  for (float x : ua.data) drawn += x > 0.2f;
+  EXPECT_GT(drawn, 100u);
+  EXPECT_EQ(ua.at(0, 16, 2), 0.0f) << "the wedge is unscanned";
+}
+
 TEST_F(ViewerCli, DepthColourMapRendersWithAColourBarOfItsRange) {
   // render --colour-map depth draws a colour bar at the right edge: the
   // shader's depth colours from near (top) to deep (bottom), labelled; the

@@ -89,8 +89,12 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   MaskReport mr;
   MaskParams mp;
   if (beam_axis >= 0) mp.beam_axis = beam_axis;  // else z, as classify's
+  // Float data whose fill is not 0: it becomes 0, as classify does (host/mask.hpp).
+  in.fill = unscanned_fill_value(v);
+  move_fill_to_zero(v, in.fill);
   in.mask = scanned_mask(v, mp, &mr);
   if (mr.unscanned == 0) in.mask.clear();
+  if (in.fill != 0.0) darken_scanned_fill(v, in.mask);
   const std::vector<std::uint8_t> before = in.mask;
   NearFieldParams np;
   np.axis = beam_axis;  // the near field is an occluder (docs/real-data.md)
@@ -127,6 +131,7 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
     if (iso_text.empty() || *end != '\0' || !std::isfinite(in.iso))
       throw InputError("--iso: expected a number in the input's intensity units or 'auto', got '" + iso_text + "'");
     std::cerr << iso_outside_data(in.bmode, in.iso);  // as classify warns; in.bmode: the samples as read
+    in.iso -= in.fill;
     in.data = std::move(v);
   }
   in.params = defaults;
@@ -167,7 +172,7 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   in.classified = true;
   std::ostringstream note;
   note << "classified " << path << " (" << scalar_type_name(in.data.source_type) << (weights ? ") with the given weights: iso " : ") with the defaults: iso ")
-       << std::setprecision(4) << in.iso << (iso_text == "auto" ? " (auto)" : "") << ", " << in.report.cycles
+       << std::setprecision(4) << in.iso + in.fill << (iso_text == "auto" ? " (auto)" : "") << ", " << in.report.cycles
        << " iterations, relative residual " << std::scientific << std::setprecision(2)
        << (in.report.residuals.empty() ? 0.0 : in.report.residuals.back())
        << (in.report.converged ? "" : " (NOT converged)") << ", bone cue " << (br.on ? "on" : "off")

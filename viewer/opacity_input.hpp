@@ -35,7 +35,8 @@ struct OpacityInput {
   Volume data;
   std::vector<std::uint8_t> mask;
   VariationalParams params;
-  double iso = 0;                    // in the file's units
+  double iso = 0;                    // in the units of `data` (the file's, less `fill`)
+  double fill = 0;                   // float data's unscanned fill, subtracted from `data` (host/mask.hpp)
   SolveReport report;
   std::string note;                  // one line for the user
   // The classifier behind u, kept for re-solves: a change of the pointwise

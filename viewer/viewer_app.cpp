@@ -1050,7 +1050,7 @@ class ViewerApp {
     if (input_.classified) {
       const VariationalParams& p = input_.params;  // of the u shown
       if (o_.iso_text == "auto" && p.v_iso == initial_v_iso_) f.set("iso", std::string("auto"));
-      else f.set("iso", input_.data.intensity_map().from_unit(p.v_iso));
+      else f.set("iso", input_.data.intensity_map().from_unit(p.v_iso) + input_.fill);  // the file's units
       f.set("sigma", p.sigma_mm), f.set("alpha", p.alpha), f.set("beta", p.beta), f.set("gamma", p.gamma);
       f.set("omega", p.omega), f.set("delta", p.delta), f.set("epsilon", p.epsilon), f.set("kappa", p.kappa);
       f.set("shell_shift", p.shell_shift_mm);

@@ -104,7 +104,17 @@ struct DataMask {
   // u = 0 and solved again when the shell draws a sheet in it.
   std::vector<std::uint8_t> underside;
   int axis = -1;
+  // Float data's unscanned fill, subtracted from the data before the mask
+  // (host/mask.hpp, unscanned_fill_value; 0: none): isovalues and
+  // brightness are reported in the file's units, that is plus this.
+  double fill = 0;
 };
+
+// A map in the file's units for the report: `map` is the data's less `fill`.
+IntensityMap in_file_units(IntensityMap map, double fill) {
+  map.lo += fill, map.hi += fill;
+  return map;
+}
 
 // A mask or initial opacity of the volume's dims is used index by index; if
 // its header places those voxels elsewhere in the world (another spacing,
@@ -227,7 +237,7 @@ int run_levoy(const ClassifyOptions& o, Runtime& rt, const Volume& in, double is
       if (!mask.scanned[i]) u.data[i] = 0.0f;
   if (o.hooks) {
     *o.hooks->u = std::move(u);
-    if (o.hooks->iso) *o.hooks->iso = iso;
+    if (o.hooks->iso) *o.hooks->iso = iso + mask.fill;
     return 0;
   }
   write_opacity(o, u);
@@ -235,7 +245,7 @@ int run_levoy(const ClassifyOptions& o, Runtime& rt, const Volume& in, double is
     std::size_t drawn = 0;
     for (float a : u.data) drawn += a > 0.2f;
     std::cout << std::fixed << std::setprecision(3) << "classify (levoy) " << o.in << " -> " << o.out << '\n'
-              << "  volume   " << dims_text(in.dims) << ' ' << scalar_type_name(in.source_type) << ", iso " << p.iso
+              << "  volume   " << dims_text(in.dims) << ' ' << scalar_type_name(in.source_type) << ", iso " << p.iso + mask.fill
               << iso_text << ", thickness " << p.thickness << " voxels (" << levoy_thickness_mm(p.thickness, in.spacing)
               << " mm), lowpass sigma " << p.sigma_mm << " mm\n"
               << "  mask     " << mask.text << '\n'
@@ -257,7 +267,7 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
   VariationalParams p = variational_params(o);
   set_edge_weights(p, std::move(bone_cue), std::move(walls));
   p.v_iso = map.to_unit(iso);
-  check_normalised_iso(p.v_iso, format_iso(iso), map.describe());
+  check_normalised_iso(p.v_iso, format_iso(iso + mask.fill), in_file_units(map, mask.fill).describe());
   std::cerr << iso_warning;
   const SolverParams sp = solver_params(o);
   std::optional<Volume> init;
@@ -339,7 +349,7 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
   if (o.hooks) {
     *o.hooks->u = std::move(u);
     if (o.hooks->report) *o.hooks->report = report;
-    if (o.hooks->iso) *o.hooks->iso = iso;
+    if (o.hooks->iso) *o.hooks->iso = iso + mask.fill;
     return 0;
   }
   write_opacity(o, u);
@@ -347,8 +357,8 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
     std::size_t drawn = 0, opaque = 0;
     for (float a : u.data) drawn += a > 0.2f, opaque += a > kOpaqueLevel;
     std::cout << std::fixed << std::setprecision(3) << "classify (variational) " << o.in << " -> " << o.out << '\n'
-              << "  volume   " << dims_text(in.dims) << ' ' << scalar_type_name(in.source_type) << ", iso " << iso
-              << iso_text << " (" << p.v_iso << " normalised, " << map.describe() << ")\n"
+              << "  volume   " << dims_text(in.dims) << ' ' << scalar_type_name(in.source_type) << ", iso " << iso + mask.fill
+              << iso_text << " (" << p.v_iso << " normalised, " << in_file_units(map, mask.fill).describe() << ")\n"
               << "  mask     " << mask.text << sheet_text << '\n'
               << (o.scale_text.empty() ? "" : "  scale    " + o.scale_text + "\n")
               << "  params   alpha " << p.alpha << " beta " << p.beta << " gamma " << p.gamma << " omega " << p.omega
@@ -645,7 +655,20 @@ int run_classify(const ClassifyOptions& given_options) {
   // (the mask's dark-fluid test, the near field, the depth clip, the
   // isovalue field, the bone cue, the shadow walls); auto: the data's own.
   const int given_axis = beam_axis_option(o.beam_axis);
+  // Float data whose fill is not 0 (host/mask.hpp): the fill becomes 0, as
+  // the mask and the near field take it, and what the mask leaves scanned of
+  // it as dark as the darkest data.
+  const double fill = o.mask == "auto" ? unscanned_fill_value(in) : 0.0;
+  move_fill_to_zero(in, fill);
   DataMask mask = make_mask(o.mask, in, given_axis);
+  mask.fill = fill;
+  if (fill != 0.0) {
+    darken_scanned_fill(in, mask.scanned);
+    std::ostringstream t;
+    t << " (float data: their fill, " << format_iso(fill) << ", counted as 0)";
+    const std::size_t colon = mask.text.find(':');
+    mask.text.insert(colon == std::string::npos ? mask.text.size() : colon, t.str());
+  }
   std::vector<std::uint8_t> clip;  // --depth-clip: the scanned region with the clip applied
   std::size_t unscanned_before_clip = 0;
   int axis = given_axis;
@@ -685,7 +708,8 @@ int run_classify(const ClassifyOptions& given_options) {
       t << "; near field removed: the first " << std::fixed << std::setprecision(1) << nf.depth_mm
         << " mm below the skin line along " << "xyz"[nf.axis];
       if (nf.layered) t << " in layers";
-      t << " (" << nf.voxels << " voxels, median " << std::setprecision(0) << nf.top << " over " << nf.below << " below";
+      t << " (" << nf.voxels << " voxels, median " << std::setprecision(0) << nf.top + fill << " over " << nf.below + fill
+        << " below";
       if (nf.clipped) t << ", a faint band clipped at the data's maximum";
       else if (nf.faint) t << ", a faint band: speckle spread " << std::setprecision(1) << nf.speckle_sd;
       else if (nf.skin)
@@ -746,7 +770,7 @@ int run_classify(const ClassifyOptions& given_options) {
     return beam_axis;
   };
   if (given_iso) {
-    iso = *given_iso;
+    iso = *given_iso - fill;
   } else {
     step.emplace("auto iso");
     // auto: for the variational shell the local rule (an isovalue field near
@@ -806,9 +830,9 @@ int run_classify(const ClassifyOptions& given_options) {
     if (rep.bulk_raised) {
       // The isovalue raised above the bulk (host/auto_iso.hpp): say from what.
       std::ostringstream t;
-      t << std::fixed << std::setprecision(1) << "; raised from " << rep.local_iso << " above the bulk: its mode "
-        << rep.bulk_mode << " + " << ap.bulk_spread << " x its half-width " << rep.bulk_half_width
-        << ", the echoes' crests at " << rep.ridge_iso;
+      t << std::fixed << std::setprecision(1) << "; raised from " << rep.local_iso + fill << " above the bulk: its mode "
+        << rep.bulk_mode + fill << " + " << ap.bulk_spread << " x its half-width " << rep.bulk_half_width
+        << ", the echoes' crests at " << rep.ridge_iso + fill;
       iso_text += t.str();
     }
     iso_text += ")";
@@ -945,7 +969,8 @@ void add_classify_command(CLI::App& app, Action& action) {
                 "depth and local brightness");
   sub->add_option("--mask", o->mask,
                   "Scanned region: auto (the solid zero fill at the border is unscanned, except dark fluid: zeros "
-                  "between echoes, or around an object inside the data's hull), none, or a volume FILE whose "
+                  "between echoes, or around an object inside the data's hull; float data whose fill is another "
+                  "value, such as -80 dB, have it found and counted as 0), none, or a volume FILE whose "
                   "nonzero voxels are scanned; unscanned voxels get opacity 0 (docs/real-data.md)")
       ->capture_default_str()
       ->type_name("FILE|auto|none");
