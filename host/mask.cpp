@@ -1035,6 +1035,14 @@ namespace {
 // Total variation of a brightness profile (the mean of the scanned nonzero
 // samples per slice across an axis, slices with samples only, averaged over
 // a moving window of about 3 mm), over the data's mean.
+// The float normalisation's robust minimum (the 0.5th percentile,
+// Volume::intensity_map) of a set of samples.
+double robust_minimum(std::vector<float> samples) {
+  Volume s({samples.size(), 1, 1}, {1.0, 1.0, 1.0}, ScalarType::Float32);
+  s.data = std::move(samples);
+  return s.intensity_map().lo;
+}
+
 double profile_variation(const std::vector<double>& sum, const std::vector<std::size_t>& count, double slice_mm,
                          double mean) {
   std::vector<double> prof;
@@ -1099,11 +1107,7 @@ std::pair<double, double> brightness_variation(const Volume& v, const std::vecto
     for (std::size_t z = 0; z < d[2]; z += step)
       for (std::size_t i = z * plane; i < (z + 1) * plane; ++i)
         if (v.data[i] != 0.0f && (!scanned || (*scanned)[i])) samples.push_back(v.data[i]);
-    if (!samples.empty()) {
-      Volume s({samples.size(), 1, 1}, v.spacing, ScalarType::Float32);
-      s.data = std::move(samples);
-      floor = s.intensity_map().lo;
-    }
+    if (!samples.empty()) floor = robust_minimum(std::move(samples));
   }
   const double mean = n_all ? all / double(n_all) - floor : 0;
   return {profile_variation(as, ac, v.spacing[std::size_t(axis)], mean),
@@ -1858,9 +1862,7 @@ double brightness_floor(const Volume& v, const std::vector<std::uint8_t>* scanne
       if ((*scanned)[i]) samples.push_back(v.data[i]);
   }
   if (samples.empty()) return v.with_data(v.data, ScalarType::Float32).intensity_map().lo;
-  Volume s({samples.size(), 1, 1}, v.spacing, ScalarType::Float32);
-  s.data = std::move(samples);
-  return s.intensity_map().lo;
+  return robust_minimum(std::move(samples));
 }
 
 std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std::uint8_t>* scanned,
