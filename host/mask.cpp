@@ -1785,12 +1785,13 @@ double unscanned_fill_value(const Volume& v, double min_fraction, int threads) {
   // fill the mask takes touches the volume's border; a fan's or a sweep's
   // reaches its corners).
   const int parts = range_count(n, threads);
-  std::vector<float> mins(std::size_t(parts), INFINITY);
+  std::vector<float> mins(std::size_t(parts), INFINITY), maxs(std::size_t(parts), -INFINITY);
   parallel_ranges_indexed(n, threads, [&](int k, std::size_t i0, std::size_t i1) {
-    float m = INFINITY;
-    for (std::size_t i = i0; i < i1; ++i) m = std::min(m, v.data[i]);
-    mins[std::size_t(k)] = m;
+    float m = INFINITY, M = -INFINITY;
+    for (std::size_t i = i0; i < i1; ++i) m = std::min(m, v.data[i]), M = std::max(M, v.data[i]);
+    mins[std::size_t(k)] = m, maxs[std::size_t(k)] = M;
   });
+  const float top = *std::max_element(maxs.begin(), maxs.end());
   std::vector<float> cand{0.0f, *std::min_element(mins.begin(), mins.end())};
   for (int c = 0; c < 8; ++c) {
     const std::size_t x = c & 1 ? d[0] - 1 : 0, y = c & 2 ? d[1] - 1 : 0, z = c & 4 ? d[2] - 1 : 0;
@@ -1828,7 +1829,9 @@ double unscanned_fill_value(const Volume& v, double min_fraction, int threads) {
     if (v.data[i] != f) rest.push_back(v.data[i]);
   if (rest.empty()) return 0.0;
   std::nth_element(rest.begin(), rest.begin() + long(rest.size() / 2), rest.end());
-  return f <= rest[rest.size() / 2] ? double(f) : 0.0;
+  if (!(f <= rest[rest.size() / 2])) return 0.0;
+  // The data less the fill must stay finite in float (data spanning +-3e38).
+  return double(top) - double(f) <= double(std::numeric_limits<float>::max()) ? double(f) : 0.0;
 }
 
 void move_fill_to_zero(Volume& v, double fill, int threads) {

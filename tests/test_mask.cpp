@@ -338,6 +338,10 @@ TEST(UnscannedFill, FloatDataWhoseFillIsNotZero) {
   EXPECT_EQ(unscanned_fill_value(with_corner(base, 0.0f, 8)), 0.0) << "a zero fill";
   EXPECT_EQ(unscanned_fill_value(with_corner(base, 30.0f, 8)), 0.0) << "a bright clipped block is no fill";
   EXPECT_EQ(unscanned_fill_value(base), 0.0) << "no repeated value";
+  // A fill at -3e38 under data reaching 3e38: moved, the data would overflow.
+  Volume wide = with_corner(base, -3.0e38f, 8);
+  wide.at(20, 20, 20) = 3.0e38f;
+  EXPECT_EQ(unscanned_fill_value(wide), 0.0) << "the data less the fill would not be finite";
   // 1 x 1 x 32 voxels: under 0.1 % of the 32768.
   EXPECT_EQ(unscanned_fill_value(with_corner(base, -80.0f, 1)), 0.0) << "too few";
   // Zeros as common as the fill elsewhere: the zero fill wins, as before.
