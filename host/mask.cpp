@@ -1830,8 +1830,18 @@ double unscanned_fill_value(const Volume& v, double min_fraction, int threads) {
   if (rest.empty()) return 0.0;
   std::nth_element(rest.begin(), rest.begin() + long(rest.size() / 2), rest.end());
   if (!(f <= rest[rest.size() / 2])) return 0.0;
-  // The data less the fill must stay finite in float (data spanning +-3e38).
-  return double(top) - double(f) <= double(std::numeric_limits<float>::max()) ? double(f) : 0.0;
+  // The data less the fill must stay finite in float (data spanning +-3e38)
+  // and keep its detail: the rest's robust range at least a thousandth of
+  // its distance from the fill (float's 24 bits then leave it 2^14 steps; a
+  // fill at -1e30 under data in 10-20 would round every sample to one).
+  if (!(double(top) - double(f) <= double(std::numeric_limits<float>::max()))) return 0.0;
+  const auto at = [&](double q) {
+    const auto k = long(q * double(rest.size() - 1));
+    std::nth_element(rest.begin(), rest.begin() + k, rest.end());
+    return double(rest[std::size_t(k)]);
+  };
+  const double hi = at(0.995), lo = at(0.005);
+  return hi - lo >= 1e-3 * (hi - double(f)) ? double(f) : 0.0;
 }
 
 void move_fill_to_zero(Volume& v, double fill, int threads) {

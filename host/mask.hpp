@@ -102,8 +102,9 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
 // the samples exactly 0 (a zero fill wins, as before), the value, among the
 // data's minimum and the eight corners' samples, that the most samples hold
 // exactly, when at least min_fraction do and it is no brighter than the
-// median of the rest (a fill is dark; a clipped ceiling is not one) and the
-// data less it stay finite in float; else 0.
+// median of the rest (a fill is dark; a clipped ceiling is not one), and the
+// data less it stay finite in float and keep their detail (the rest's
+// robust range at least 1e-3 of its distance from the fill); else 0.
 // Integer data: 0 (grey levels' black). classify and the viewer subtract it
 // from the data before the mask (an exact 0 where the fill was; the
 // classification of float data does not change with an added constant

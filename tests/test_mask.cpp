@@ -342,6 +342,9 @@ TEST(UnscannedFill, FloatDataWhoseFillIsNotZero) {
   Volume wide = with_corner(base, -3.0e38f, 8);
   wide.at(20, 20, 20) = 3.0e38f;
   EXPECT_EQ(unscanned_fill_value(wide), 0.0) << "the data less the fill would not be finite";
+  // A fill at -1e30 under data in 10-20: moved, every sample would round to 1e30.
+  EXPECT_EQ(unscanned_fill_value(with_corner(base, -1.0e30f, 8)), 0.0) << "the data would lose their detail";
+  EXPECT_EQ(unscanned_fill_value(with_corner(base, -5000.0f, 8)), -5000.0) << "10-20 over 5000 below: kept";
   // 1 x 1 x 32 voxels: under 0.1 % of the 32768.
   EXPECT_EQ(unscanned_fill_value(with_corner(base, -80.0f, 1)), 0.0) << "too few";
   // Zeros as common as the fill elsewhere: the zero fill wins, as before.
