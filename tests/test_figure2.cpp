@@ -346,6 +346,40 @@ TEST_F(CliFigure2, TheTangentialTermSmoothsTheContourAndRemovesBlobs) {
   EXPECT_GE(stats['e'].second, 0.5) << "a contour exists";
 }
 
+TEST_F(CliFigure2, FloatDataWhoseFillIsNotZeroKeepTheirMask) {
+  // A face phantom slice as float data with an unswept wedge at 0, and the
+  // same plus 500, fill and all: figure2 finds the fill as classify does
+  // (host/mask.hpp, unscanned_fill_value), so the mask, the panels' blob
+  // counts and roughness are the same, and the isovalue shown is 500 higher
+  // (the file's units). Before, the shifted fill was data: no mask.
+  ASSERT_EQ(run({"phantom", "--shape", "face", "--size", "48", "--seed", "3", "-o", file("ph"), "-q"}).status, 0);
+  const Volume v = read_volume(file("ph") + "/volume.nrrd");
+  Volume f = v.with_data(v.data, ScalarType::Float32);
+  for (std::size_t z = 0; z < f.dims[2]; ++z)
+    for (std::size_t y = 0; y < f.dims[1]; ++y)
+      for (std::size_t x = 0; x + z / 4 < 10; ++x) f.at(x, y, z) = 0.0f;
+  std::vector<std::string> outs;
+  std::vector<double> isos;
+  for (const float c : {0.0f, 500.0f}) {
+    Volume g = f;
+    for (float& x : g.data) x += c;
+    const std::string in = file("f" + std::to_string(int(c)) + ".nrrd");
+    write_volume(in, g);
+    const test::RunResult r = run({"figure2", in, "-o", file("fig" + std::to_string(int(c)) + ".png")});
+    ASSERT_EQ(r.status, 0) << r.err;
+    const std::size_t m = r.out.find("  mask     "), iso = r.out.find("  iso      ");
+    ASSERT_NE(m, std::string::npos) << r.out;
+    ASSERT_NE(iso, std::string::npos) << r.out;
+    isos.push_back(std::atof(r.out.c_str() + iso + 11));
+    const std::size_t dev = r.out.find("  device ");
+    ASSERT_NE(dev, std::string::npos) << r.out;
+    outs.push_back(r.out.substr(m, dev - m));  // the mask, panels and slice lines
+  }
+  EXPECT_EQ(outs[1], outs[0]);
+  EXPECT_EQ(outs[0].find(", 0 voxels unscanned"), std::string::npos) << "the wedge is unscanned: " << outs[0];
+  EXPECT_NEAR(isos[1] - isos[0], 500.0, 1e-3);
+}
+
 TEST_F(CliFigure2, BadArgumentsAreOneLineErrors) {
   const std::string in = write_volume_file();
   const std::string out = file("fig.png");

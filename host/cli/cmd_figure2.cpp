@@ -271,7 +271,12 @@ int run_figure2(const Figure2Options& o) {
                      std::to_string(in.dims[spec.axis]) + " slices along " + "xyz"[spec.axis]);
   const std::size_t index = spec.index >= 0 ? std::size_t(spec.index) : in.dims[spec.axis] / 2;
 
-  // Data region, as in `classify` (host/mask.hpp).
+  // A given isovalue's warning in the file's units, before the fill moves.
+  const std::string iso_warning = given_iso ? iso_outside_data(in, *given_iso) : "";
+  // Data region, as in `classify` (host/mask.hpp): float data whose fill is
+  // not 0 have it moved to 0 first; isovalues are shown in the file's units.
+  const double fill = o.mask == "auto" ? unscanned_fill_value(in) : 0.0;
+  move_fill_to_zero(in, fill);
   std::vector<std::uint8_t> mask;
   if (o.mask == "auto") mask = scanned_mask(in);
   else if (o.mask != "none") {
@@ -283,8 +288,9 @@ int run_figure2(const Figure2Options& o) {
   }
   const std::size_t unscanned = mask.empty() ? 0 : count_unscanned(mask);
   if (unscanned == 0) mask.clear();
+  if (fill != 0.0) darken_scanned_fill(in, mask);
   const std::vector<std::uint8_t>* mask_ptr = mask.empty() ? nullptr : &mask;
-  const double iso = given_iso ? *given_iso : auto_iso(in, mask_ptr, auto_params);
+  const double iso = given_iso ? *given_iso - fill : auto_iso(in, mask_ptr, auto_params);
   const Volume filled = mask.empty() ? Volume() : fill_unscanned(in, mask);
   const Volume& data = mask.empty() ? in : filled;
   auto apply_mask = [&](Volume& u) {
@@ -328,7 +334,7 @@ int run_figure2(const Figure2Options& o) {
   }
 
   panel.reset();
-  if (given_iso) std::cerr << iso_outside_data(in, iso);  // after every check of the isovalue passed
+  std::cerr << iso_warning;  // after every check of the isovalue passed
   int au, av;
   plane_axes(spec.axis, au, av);
   int zoom = o.zoom;
@@ -354,7 +360,7 @@ int run_figure2(const Figure2Options& o) {
   const std::string mask_name = o.mask == "auto" || o.mask == "none" ? o.mask : fs::path(o.mask).filename().string();
   const std::string mask_label = o.mask == "none" ? mask_name : mask_name + " (" + std::to_string(unscanned) + " unscanned)";
   std::ostringstream footer;
-  footer << "slice " << "xyz"[spec.axis] << '=' << index << "  iso " << number(iso) << (given_iso ? "" : " (auto)")
+  footer << "slice " << "xyz"[spec.axis] << '=' << index << "  iso " << number(iso + fill) << (given_iso ? "" : " (auto)")
          << "  mask " << mask_label << "  beta " << b << "\nblobs / contour roughness:";
   for (std::size_t k = 0; k < stats.size(); ++k)
     footer << "  (" << char('b' + k) << ") " << stats[k].blobs << " / " << std::fixed << std::setprecision(2)
@@ -366,7 +372,7 @@ int run_figure2(const Figure2Options& o) {
               << "x" << img.height << ", panels " << panels[0].width << "x" << panels[0].height << ", zoom " << zoom
               << ")\n"
               << "  slice    " << "xyz"[spec.axis] << " = " << index << " of " << in.dims[spec.axis] << '\n'
-              << "  iso      " << iso << (given_iso ? "" : " (auto)") << '\n'
+              << "  iso      " << iso + fill << (given_iso ? "" : " (auto)") << '\n'
               << "  mask     " << (o.mask == "none" ? "none" : o.mask) << ", " << unscanned << " voxels unscanned\n"
               << "  panels   (a) input, (b) Levoy (thickness 1 voxel, lowpass " << number(o.levoy_sigma)
               << " mm), (c) omega 1 beta 0, (d) omega 0.6 beta 0, "
