@@ -1032,9 +1032,6 @@ BandSheetReport hold_band_sheet(const Volume& u, const std::vector<std::uint8_t>
 
 namespace {
 
-// Total variation of a brightness profile (the mean of the scanned nonzero
-// samples per slice across an axis, slices with samples only, averaged over
-// a moving window of about 3 mm), over the data's mean.
 // The float normalisation's robust minimum (the 0.5th percentile,
 // Volume::intensity_map) of a set of samples.
 double robust_minimum(std::vector<float> samples) {
@@ -1043,6 +1040,9 @@ double robust_minimum(std::vector<float> samples) {
   return s.intensity_map().lo;
 }
 
+// Total variation of a brightness profile (the mean of the scanned nonzero
+// samples per slice across an axis, slices with samples only, averaged over
+// a moving window of about 3 mm), over the data's mean less its floor.
 double profile_variation(const std::vector<double>& sum, const std::vector<std::size_t>& count, double slice_mm,
                          double mean) {
   std::vector<double> prof;
