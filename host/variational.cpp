@@ -132,16 +132,36 @@ double crest_of(const Volume& u) {
 }
 
 double reference_edge_gradient(const std::vector<float>& grad2, double share) {
+  return reference_edge_gradient(grad2, share, 0.0, 0.0).g_ref;
+}
+
+ReferenceEdge reference_edge_gradient(const std::vector<float>& grad2, double share, double fine_share, double split) {
+  ReferenceEdge r;
+  r.share = share;
   std::vector<float> g;
   g.reserve(grad2.size());
   for (float x : grad2)
     if (x >= 0) g.push_back(x);
-  if (g.empty()) return 0;
-  // The top `share` of the entries, at least one; their median.
-  const std::size_t top = std::max<std::size_t>(1, std::size_t(double(g.size()) * std::clamp(share, 0.0, 1.0)));
-  const std::size_t k = g.size() - top / 2 - 1;
+  if (g.empty()) return r;
+  // The top `share` of the entries, at least one; their median (the entry
+  // at index k once sorted).
+  const auto median_index = [&](double s) {
+    const std::size_t top = std::max<std::size_t>(1, std::size_t(double(g.size()) * std::clamp(s, 0.0, 1.0)));
+    return g.size() - top / 2 - 1;
+  };
+  const std::size_t k = median_index(share);
   std::nth_element(g.begin(), g.begin() + long(k), g.end());
-  return std::sqrt(double(g[k]));
+  r.g_ref = std::sqrt(double(g[k]));
+  if (!(split > 0) || !(fine_share > 0) || !(fine_share < share) || !(r.g_ref > 0)) return r;
+  // The finer share's median lies above k, among the entries nth_element
+  // left there.
+  const std::size_t kf = median_index(fine_share);
+  if (kf <= k) return r;
+  std::nth_element(g.begin() + long(k) + 1, g.begin() + long(kf), g.end());
+  const double fine = std::sqrt(double(g[kf]));
+  r.ratio = fine / r.g_ref;
+  if (r.ratio >= split) r.g_ref = fine, r.share = fine_share;
+  return r;
 }
 
 DeviceSystem::DeviceSystem(Runtime& rt, const GridDesc& g) : rt_(rt), grid_(g) {
@@ -224,7 +244,8 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
       const std::vector<float>& w = *p.edge_weight;
       for (std::size_t i = 0; i < n; ++i)
         if (g2[i] >= 0) g2[i] *= w[i] * w[i];
-      resolved_.g_ref = reference_edge_gradient(g2, p.edge_share);
+      const ReferenceEdge r = reference_edge_gradient(g2, p.edge_share, p.edge_share_fine, p.edge_split);
+      resolved_.g_ref = r.g_ref, resolved_.g_ref_share = r.share, resolved_.g_ref_ratio = r.ratio;
     } else if (p.edge_weight && p.edge_reference == VariationalParams::EdgeReference::Cue) {
       // With the bone cue the reference is the cued edges' own: the median
       // weighted |grad v| of the voxels whose weight is at least 1/2 (the
@@ -238,8 +259,10 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
       }
       if (cued == 0) g2 = download<float>(rt, grad2, n);  // nothing cued: the data's own reference
       resolved_.g_ref = reference_edge_gradient(g2, cued ? kCueEdgeShare : p.edge_share);
+      resolved_.g_ref_share = cued ? kCueEdgeShare : p.edge_share;
     } else {
-      resolved_.g_ref = reference_edge_gradient(g2, p.edge_share);
+      const ReferenceEdge r = reference_edge_gradient(g2, p.edge_share, p.edge_share_fine, p.edge_split);
+      resolved_.g_ref = r.g_ref, resolved_.g_ref_share = r.share, resolved_.g_ref_ratio = r.ratio;
     }
     // A volume without edges: any positive unit keeps the system defined
     // (F_ind is then delta everywhere).
@@ -271,7 +294,7 @@ void DeviceSystem::update_point(const VariationalParams& p) {
     throw std::logic_error("DeviceSystem::update_point: the system was not built from a volume");
   // The data's resolved quantities stay (g_ref, the thickness floor).
   VariationalParams r = p;
-  r.g_ref = resolved_.g_ref;
+  r.g_ref = resolved_.g_ref, r.g_ref_share = resolved_.g_ref_share, r.g_ref_ratio = resolved_.g_ref_ratio;
   r.thickness_mm = p.effective_thickness_mm(spacing_);
   cl::Kernel k = rt_.kernel(kSystem, "system_update_point", density_options(r.coeffs()));
   Runtime::set_args(k, sources_[0], sources_[1], sources_[2], fixed_, dT_, mu_, rho_, coef_, b_, r.coeffs(), grid_);
@@ -291,7 +314,7 @@ void DeviceSystem::update_sharpen(const VariationalParams& p, const cl::Buffer& 
   if (!updatable())
     throw std::logic_error("DeviceSystem::update_sharpen: the system was not built from a volume");
   VariationalParams r = p;
-  r.g_ref = resolved_.g_ref;
+  r.g_ref = resolved_.g_ref, r.g_ref_share = resolved_.g_ref_share, r.g_ref_ratio = resolved_.g_ref_ratio;
   r.thickness_mm = p.effective_thickness_mm(spacing_);
   ClassifyCoeffs k = r.coeffs();
   k.sharpen_lambda = float(lambda), k.sharpen_ratio = float(ratio);

@@ -54,6 +54,14 @@ struct VariationalParams {
   // on the echo"). 0: centred on the isosurface.
   double shell_shift_mm = 0.5;
   double edge_share = 0.03, edge_power = 3.5;
+  // A small object's walls (docs/parameters.md, "A small object's walls"):
+  // where the median |grad v| of the top edge_share_fine stands at least
+  // edge_split times that of the top edge_share, the strongest edges are a
+  // population of their own, fewer than edge_share of the voxels (a small
+  // cyst's walls among speckle: the top edge_share is then mostly speckle,
+  // and F_ind gives speckle edges an object's weight); g_ref is then the top
+  // edge_share_fine's median. edge_split 0: off (always edge_share).
+  double edge_share_fine = 0.01, edge_split = 2.0;
   // u_ind from the data (the shell functional): the system is linear in
   // u_ind, so solving with u_ind / crest scales u by 1 / crest exactly; the
   // crest is the median of u on the shell's ridge (voxels where u is a
@@ -71,6 +79,12 @@ struct VariationalParams {
   // The resolved reference gradient (per mm of normalised intensity): 0
   // until DeviceSystem takes it from the data (edge_share > 0), or given.
   double g_ref = 0;
+  // The share g_ref was taken from (edge_share or edge_share_fine): 0 until
+  // resolved from the data, or when g_ref was given.
+  double g_ref_share = 0;
+  // ... and the top edge_share_fine's median over the top edge_share's
+  // (edge_split's test; 0 when not measured).
+  double g_ref_ratio = 0;
   // The bone cue (host/bone_cue.hpp; docs/numerics.md, "The bone cue"): a
   // per-voxel factor w in [0, 1] on the edge strength |grad v| wherever it
   // enters the functional (F_ind's edge weight, F_iso's denominator, the
@@ -126,6 +140,16 @@ double crest_of(const Volume& u);
 // not scanned): the median |grad v| of its top `share` entries. 0 when no
 // entry is usable.
 double reference_edge_gradient(const std::vector<float>& grad2, double share);
+// The same with VariationalParams::edge_split's rule: the median of the top
+// `fine_share` when it is at least `split` times the top `share`'s (split >
+// 0 and fine_share < share), else the top `share`'s. `used_share` (optional)
+// gets the share taken. 0 when no entry is usable.
+struct ReferenceEdge {
+  double g_ref = 0;  // 0: no usable entry
+  double share = 0;  // the share taken
+  double ratio = 0;  // the top fine_share's median over the top share's (0: not measured)
+};
+ReferenceEdge reference_edge_gradient(const std::vector<float>& grad2, double share, double fine_share, double split);
 
 // Per-voxel densities (docs/numerics.md): mu, rho, the tangential tensor T
 // (xx, yy, zz, xy, xz, yz) and the fixed flag, on a grid with spacing h and

@@ -579,5 +579,77 @@ TEST(System, RejectsAFreeBoundaryVoxel) {
   EXPECT_THROW(DeviceSystem(test::runtime(), d), std::invalid_argument);
 }
 
+// The reference edge gradient (VariationalParams::edge_share, edge_split)
+// against medians taken from a full sort: speckle alone, speckle with a
+// small object's walls (1.2 % of the entries, a gradient 8x the speckle's),
+// and speckle whose walls fill more than edge_share.
+TEST(ReferenceEdge, ASmallObjectsWallsStandApartFromSpeckle) {
+  std::mt19937_64 rng(test::seed());
+  std::normal_distribution<double> N(0.0, 1.0);
+  const std::size_t n = 100000;
+  // |grad| of speckle: the length of a 3-D Gaussian vector.
+  auto speckle = [&] {
+    const double a = N(rng), b = N(rng), c = N(rng);
+    return std::sqrt(a * a + b * b + c * c);
+  };
+  auto field = [&](double wall_share) {
+    std::vector<float> g2(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      const double g = double(i) < wall_share * double(n) ? 8.0 + 0.5 * N(rng) : speckle();
+      g2[i] = float(g * g);
+    }
+    for (std::size_t i = 0; i < n; i += 97) g2[i] = -1.0f;  // unscanned: ignored
+    return g2;
+  };
+  // The median of the top `share` of the usable entries, from a full sort.
+  auto sorted_median = [](const std::vector<float>& g2, double share) {
+    std::vector<double> g;
+    for (float x : g2)
+      if (x >= 0) g.push_back(std::sqrt(double(x)));
+    std::sort(g.begin(), g.end());
+    const std::size_t top = std::max<std::size_t>(1, std::size_t(double(g.size()) * share));
+    return g[g.size() - top / 2 - 1];
+  };
+  {
+    // Speckle alone: the top 1 % is the same tail, not twice as steep.
+    const std::vector<float> g2 = field(0.0);
+    const ReferenceEdge r = reference_edge_gradient(g2, 0.03, 0.01, 2.0);
+    EXPECT_EQ(r.share, 0.03);
+    EXPECT_NEAR(r.g_ref, sorted_median(g2, 0.03), 1e-6);
+    EXPECT_NEAR(r.ratio, sorted_median(g2, 0.01) / sorted_median(g2, 0.03), 1e-6);
+    EXPECT_LT(r.ratio, 1.3);
+    EXPECT_NEAR(reference_edge_gradient(g2, 0.03), r.g_ref, 0);
+  }
+  {
+    // Walls on 1.2 %: the top 3 % is more than half speckle, its median
+    // speckle's; the top 1 % is walls.
+    const std::vector<float> g2 = field(0.012);
+    const double coarse = sorted_median(g2, 0.03), fine = sorted_median(g2, 0.01);
+    EXPECT_LT(coarse, 5.0);
+    EXPECT_GT(fine, 7.0);
+    const ReferenceEdge r = reference_edge_gradient(g2, 0.03, 0.01, 2.0);
+    EXPECT_EQ(r.share, 0.01);
+    EXPECT_NEAR(r.g_ref, fine, 1e-6);
+    EXPECT_NEAR(r.ratio, fine / coarse, 1e-6);
+    // Off (split 0), or a split the ratio does not reach: the top 3 %'s.
+    EXPECT_NEAR(reference_edge_gradient(g2, 0.03, 0.01, 0.0).g_ref, coarse, 1e-6);
+    EXPECT_EQ(reference_edge_gradient(g2, 0.03, 0.01, 0.0).share, 0.03);
+    const ReferenceEdge high = reference_edge_gradient(g2, 0.03, 0.01, 1.01 * r.ratio);
+    EXPECT_EQ(high.share, 0.03);
+    EXPECT_NEAR(high.g_ref, coarse, 1e-6);
+    // A finer share not below the share: off.
+    EXPECT_EQ(reference_edge_gradient(g2, 0.01, 0.03, 2.0).share, 0.01);
+  }
+  {
+    // Walls on 5 %, more than the share: the top 3 % is walls already.
+    const std::vector<float> g2 = field(0.05);
+    const ReferenceEdge r = reference_edge_gradient(g2, 0.03, 0.01, 2.0);
+    EXPECT_EQ(r.share, 0.03);
+    EXPECT_GT(r.g_ref, 7.0);
+  }
+  // Nothing usable.
+  EXPECT_EQ(reference_edge_gradient(std::vector<float>(10, -1.0f), 0.03, 0.01, 2.0).g_ref, 0.0);
+}
+
 }  // namespace
 }  // namespace softshell

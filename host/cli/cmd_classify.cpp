@@ -35,6 +35,25 @@
 namespace softshell::cli {
 namespace {
 
+// The report's words for the share the reference edge gradient was taken
+// from: the top edge_share, or (VariationalParams::edge_split) the top
+// edge_share_fine, with the ratio that decided. With the bone cue (its own
+// reference, no ratio measured) or a given g_ref: the share, as before.
+std::string edge_share_text(const VariationalParams& r, const VariationalParams& p) {
+  std::ostringstream t;
+  t << std::fixed << std::setprecision(1);
+  if (!(r.g_ref_ratio > 0)) {
+    t << "top " << 100 * p.edge_share << " %";
+  } else if (r.g_ref_share != p.edge_share) {
+    t << "top " << 100 * r.g_ref_share << " %: its median " << std::setprecision(2) << r.g_ref_ratio << " x the top "
+      << std::setprecision(1) << 100 * p.edge_share << " %'s, a small object's walls among speckle";
+  } else {
+    t << "top " << 100 * p.edge_share << " %; the top " << 100 * p.edge_share_fine << " %'s median "
+      << std::setprecision(2) << r.g_ref_ratio << " x its";
+  }
+  return t.str();
+}
+
 struct ClassifyOptions {
   std::string in, out, device, method = "variational", iso, init, cycle = "pcg", smoother = "gs", mask = "auto";
   std::string near_field = "remove", reverb = "remove", depth_clip;
@@ -369,7 +388,7 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
     if (!p.literal())
       std::cout << "  shell    thickness " << timing.resolved.thickness_mm << " mm, profile power " << p.profile_power
                 << ", reference edge gradient " << std::setprecision(4) << timing.resolved.g_ref
-                << " per mm (top " << std::setprecision(1) << 100 * p.edge_share << " %), edge power "
+                << " per mm (" << edge_share_text(timing.resolved, p) << "), edge power "
                 << std::setprecision(3) << p.edge_power << ", shift " << timing.resolved.shell_shift_mm << " mm\n";
     std::cout << "  solve    " << report.levels << " levels, " << report.cycles << (sp.krylov ? " PCG iterations" : " V-cycles")
               << ", relative residual " << std::scientific << std::setprecision(2) << report.residuals.back()
@@ -1083,6 +1102,12 @@ void add_classify_command(CLI::App& app, Action& action) {
                 "edge weight, beta, kappa and epsilon are relative to it; 0: the paper's absolute units")
       ->capture_default_str()
       ->check(real_range(0, 0.5));
+  g->add_option("--edge-split", o->vp.edge_split,
+                "A small object's walls: where the median |grad v| of the top 1 % of the scanned voxels is at least "
+                "this x the top --edge-share's, the strongest edges are few (a small cyst's walls among speckle) and "
+                "the reference edge gradient is the top 1 %'s (docs/parameters.md, \"A small object's walls\"); 0: off")
+      ->capture_default_str()
+      ->check(real_range(0, 100));
   g->add_option("--weight-cap", o->vp.weight_cap, "Upper bound of the shell F_iso weight (u outside the shell < 1/(1+cap))")
       ->capture_default_str()
       ->check(real_range(1, 1e12));
