@@ -238,15 +238,7 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
     Runtime::set_args(kg, dvg, dmask, grad2, grid_);
     rt.enqueue_3d(kg, grid_);
     std::vector<float> g2 = download<float>(rt, grad2, n);
-    if (p.edge_weight && p.edge_reference == VariationalParams::EdgeReference::Weighted) {
-      // The strongest edges that remain once weighted (the shadow walls).
-      if (p.edge_weight->size() != n) throw std::invalid_argument("edge weight size differs from the volume");
-      const std::vector<float>& w = *p.edge_weight;
-      for (std::size_t i = 0; i < n; ++i)
-        if (g2[i] >= 0) g2[i] *= w[i] * w[i];
-      const ReferenceEdge r = reference_edge_gradient(g2, p.edge_share, p.edge_share_fine, p.edge_split);
-      resolved_.g_ref = r.g_ref, resolved_.g_ref_share = r.share, resolved_.g_ref_ratio = r.ratio;
-    } else if (p.edge_weight && p.edge_reference == VariationalParams::EdgeReference::Cue) {
+    if (p.edge_weight && p.edge_reference == VariationalParams::EdgeReference::Cue) {
       // With the bone cue the reference is the cued edges' own: the median
       // weighted |grad v| of the voxels whose weight is at least 1/2 (the
       // bone echoes are weaker edges than the shadows' walls).
@@ -259,10 +251,16 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
       }
       if (cued == 0) g2 = download<float>(rt, grad2, n);  // nothing cued: the data's own reference
       resolved_.g_ref = reference_edge_gradient(g2, cued ? kCueEdgeShare : p.edge_share);
-      resolved_.g_ref_share = cued ? kCueEdgeShare : p.edge_share;
     } else {
+      if (p.edge_weight && p.edge_reference == VariationalParams::EdgeReference::Weighted) {
+        // The strongest edges that remain once weighted (the shadow walls).
+        if (p.edge_weight->size() != n) throw std::invalid_argument("edge weight size differs from the volume");
+        const std::vector<float>& w = *p.edge_weight;
+        for (std::size_t i = 0; i < n; ++i)
+          if (g2[i] >= 0) g2[i] *= w[i] * w[i];
+      }
       const ReferenceEdge r = reference_edge_gradient(g2, p.edge_share, p.edge_share_fine, p.edge_split);
-      resolved_.g_ref = r.g_ref, resolved_.g_ref_share = r.share, resolved_.g_ref_ratio = r.ratio;
+      resolved_.g_ref = r.g_ref, resolved_.g_ref_ratio = r.ratio;
     }
     // A volume without edges: any positive unit keeps the system defined
     // (F_ind is then delta everywhere).
@@ -294,7 +292,7 @@ void DeviceSystem::update_point(const VariationalParams& p) {
     throw std::logic_error("DeviceSystem::update_point: the system was not built from a volume");
   // The data's resolved quantities stay (g_ref, the thickness floor).
   VariationalParams r = p;
-  r.g_ref = resolved_.g_ref, r.g_ref_share = resolved_.g_ref_share, r.g_ref_ratio = resolved_.g_ref_ratio;
+  r.g_ref = resolved_.g_ref, r.g_ref_ratio = resolved_.g_ref_ratio;
   r.thickness_mm = p.effective_thickness_mm(spacing_);
   cl::Kernel k = rt_.kernel(kSystem, "system_update_point", density_options(r.coeffs()));
   Runtime::set_args(k, sources_[0], sources_[1], sources_[2], fixed_, dT_, mu_, rho_, coef_, b_, r.coeffs(), grid_);
@@ -314,7 +312,7 @@ void DeviceSystem::update_sharpen(const VariationalParams& p, const cl::Buffer& 
   if (!updatable())
     throw std::logic_error("DeviceSystem::update_sharpen: the system was not built from a volume");
   VariationalParams r = p;
-  r.g_ref = resolved_.g_ref, r.g_ref_share = resolved_.g_ref_share, r.g_ref_ratio = resolved_.g_ref_ratio;
+  r.g_ref = resolved_.g_ref, r.g_ref_ratio = resolved_.g_ref_ratio;
   r.thickness_mm = p.effective_thickness_mm(spacing_);
   ClassifyCoeffs k = r.coeffs();
   k.sharpen_lambda = float(lambda), k.sharpen_ratio = float(ratio);

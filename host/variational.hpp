@@ -79,11 +79,10 @@ struct VariationalParams {
   // The resolved reference gradient (per mm of normalised intensity): 0
   // until DeviceSystem takes it from the data (edge_share > 0), or given.
   double g_ref = 0;
-  // The share g_ref was taken from (edge_share or edge_share_fine): 0 until
-  // resolved from the data, or when g_ref was given.
-  double g_ref_share = 0;
-  // ... and the top edge_share_fine's median over the top edge_share's
-  // (edge_split's test; 0 when not measured).
+  // The top edge_share_fine's median over the top edge_share's, as measured
+  // when g_ref was taken from the data (edge_split's test: g_ref is the top
+  // edge_share_fine's where it is at least edge_split); 0 when not measured
+  // (edge_split 0, the bone cue's reference, or a given g_ref).
   double g_ref_ratio = 0;
   // The bone cue (host/bone_cue.hpp; docs/numerics.md, "The bone cue"): a
   // per-voxel factor w in [0, 1] on the edge strength |grad v| wherever it
@@ -142,8 +141,7 @@ double crest_of(const Volume& u);
 double reference_edge_gradient(const std::vector<float>& grad2, double share);
 // The same with VariationalParams::edge_split's rule: the median of the top
 // `fine_share` when it is at least `split` times the top `share`'s (split >
-// 0 and fine_share < share), else the top `share`'s. `used_share` (optional)
-// gets the share taken. 0 when no entry is usable.
+// 0 and fine_share < share), else the top `share`'s.
 struct ReferenceEdge {
   double g_ref = 0;  // 0: no usable entry
   double share = 0;  // the share taken

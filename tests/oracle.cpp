@@ -250,7 +250,7 @@ Densities reference_densities(const Volume& v, const VariationalParams& p, const
     if (!mags.empty() && p.edge_split > 0 && p.edge_share_fine > 0 && p.edge_share_fine < p.edge_share && g_ref > 0) {
       const std::size_t fine_top = std::max<std::size_t>(1, std::size_t(double(mags.size()) * p.edge_share_fine));
       const double fine = mags[mags.size() - fine_top / 2 - 1];
-      if (fine > mags[mags.size() - top / 2 - 1] && fine >= p.edge_split * g_ref) g_ref = fine;
+      if (fine >= p.edge_split * g_ref) g_ref = fine;
     }
     if (!(g_ref > 0)) g_ref = 1.0;
   }

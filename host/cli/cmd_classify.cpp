@@ -44,9 +44,9 @@ std::string edge_share_text(const VariationalParams& r, const VariationalParams&
   t << std::fixed << std::setprecision(1);
   if (!(r.g_ref_ratio > 0)) {
     t << "top " << 100 * p.edge_share << " %";
-  } else if (r.g_ref_share != p.edge_share) {
-    t << "top " << 100 * r.g_ref_share << " %: its median " << std::setprecision(2) << r.g_ref_ratio << " x the top "
-      << std::setprecision(1) << 100 * p.edge_share << " %'s, a small object's walls among speckle";
+  } else if (r.g_ref_ratio >= p.edge_split) {
+    t << "top " << 100 * p.edge_share_fine << " %: its median " << std::setprecision(2) << r.g_ref_ratio
+      << " x the top " << std::setprecision(1) << 100 * p.edge_share << " %'s, a small object's walls among speckle";
   } else {
     t << "top " << 100 * p.edge_share << " %; the top " << 100 * p.edge_share_fine << " %'s median "
       << std::setprecision(2) << r.g_ref_ratio << " x its";
