@@ -26,6 +26,7 @@ inline bool set_variational_param(VariationalParams& p, const std::string& key, 
   else if (key == "edge_power") p.edge_power = v;
   else if (key == "edge_share_fine") p.edge_share_fine = v;
   else if (key == "edge_split") p.edge_split = v;
+  else if (key == "edge_split_from") p.edge_split_from = v;
   else if (key == "profile_power") p.profile_power = v;
   else if (key == "sharpen") p.sharpen_iterations = int(v);
   else if (key == "sharpen_lambda") p.sharpen_lambda = v;

@@ -33,6 +33,7 @@ void check_variational_params(const VariationalParams& p) {
   if (!(p.edge_share >= 0 && p.edge_share <= 0.5)) throw InputError("--edge-share must be in [0, 0.5]");
   if (!(p.edge_power >= 0 && p.edge_power <= 8)) throw InputError("--edge-power must be in [0, 8]");
   if (!(p.edge_split >= 0 && p.edge_split <= 100)) throw InputError("--edge-split must be in [0, 100]");
+  if (!(p.edge_split_from >= 0 && p.edge_split_from <= 100)) throw InputError("--edge-split-from must be in [0, 100]");
   if (!(p.edge_share_fine >= 0 && p.edge_share_fine <= 0.5)) throw InputError("edge_share_fine must be in [0, 0.5]");
   if (!(p.shell_shift_mm >= 0 && p.shell_shift_mm <= 10)) throw InputError("--shell-shift must be in [0, 10] mm");
   if (!(p.weight_cap >= 1 && p.weight_cap <= 1e12)) throw InputError("--weight-cap must be in [1, 1e12]");

@@ -574,7 +574,8 @@ VariationalClassifier::~VariationalClassifier() = default;
 bool VariationalClassifier::can_update(const VariationalParams& p) const {
   return p.beta == params_.beta && p.kappa == params_.kappa && p.sigma_mm == params_.sigma_mm &&
          p.grad_sigma_mm == params_.grad_sigma_mm && p.edge_share == params_.edge_share &&
-         p.edge_share_fine == params_.edge_share_fine && p.edge_split == params_.edge_split && p.g_ref == params_.g_ref &&
+         p.edge_share_fine == params_.edge_share_fine && p.edge_split == params_.edge_split &&
+         p.edge_split_from == params_.edge_split_from && p.g_ref == params_.g_ref &&
          p.edge_weight == params_.edge_weight && p.edge_reference == params_.edge_reference;
 }
 

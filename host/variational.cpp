@@ -135,7 +135,15 @@ double reference_edge_gradient(const std::vector<float>& grad2, double share) {
   return reference_edge_gradient(grad2, share, 0.0, 0.0).g_ref;
 }
 
-ReferenceEdge reference_edge_gradient(const std::vector<float>& grad2, double share, double fine_share, double split) {
+double edge_split_weight(double ratio, double split, double split_from) {
+  if (!(split > 0) || !(ratio > 0)) return 0.0;
+  if (ratio >= split) return 1.0;
+  if (!(split_from > 0) || !(split_from < split) || !(ratio > split_from)) return 0.0;
+  return (ratio - split_from) / (split - split_from);
+}
+
+ReferenceEdge reference_edge_gradient(const std::vector<float>& grad2, double share, double fine_share, double split,
+                                      double split_from) {
   ReferenceEdge r;
   r.share = share;
   std::vector<float> g;
@@ -160,7 +168,9 @@ ReferenceEdge reference_edge_gradient(const std::vector<float>& grad2, double sh
   std::nth_element(g.begin() + long(k) + 1, g.begin() + long(kf), g.end());
   const double fine = std::sqrt(double(g[kf]));
   r.ratio = fine / r.g_ref;
-  if (r.ratio >= split) r.g_ref = fine, r.share = fine_share;
+  r.weight = edge_split_weight(r.ratio, split, split_from);
+  if (r.weight >= 1) r.g_ref = fine, r.share = fine_share;
+  else if (r.weight > 0) r.g_ref *= std::pow(r.ratio, r.weight);  // blended (edge_split_from)
   return r;
 }
 
@@ -259,7 +269,7 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
         for (std::size_t i = 0; i < n; ++i)
           if (g2[i] >= 0) g2[i] *= w[i] * w[i];
       }
-      const ReferenceEdge r = reference_edge_gradient(g2, p.edge_share, p.edge_share_fine, p.edge_split);
+      const ReferenceEdge r = reference_edge_gradient(g2, p.edge_share, p.edge_share_fine, p.edge_split, p.edge_split_from);
       resolved_.g_ref = r.g_ref, resolved_.g_ref_ratio = r.ratio;
     }
     // A volume without edges: any positive unit keeps the system defined

@@ -61,7 +61,12 @@ struct VariationalParams {
   // cyst's walls among speckle: the top edge_share is then mostly speckle,
   // and F_ind gives speckle edges an object's weight); g_ref is then the top
   // edge_share_fine's median. edge_split 0: off (always edge_share).
-  double edge_share_fine = 0.01, edge_split = 2.0;
+  // Between edge_split_from and edge_split the two medians are blended
+  // (geometrically, the weight rising linearly with the ratio from 0 to 1),
+  // so that g_ref does not jump by the ratio where the ratio crosses one
+  // threshold (a small change of resolution or noise); edge_split_from 0
+  // (or not below edge_split): a switch at edge_split.
+  double edge_share_fine = 0.01, edge_split = 2.0, edge_split_from = 1.6;
   // u_ind from the data (the shell functional): the system is linear in
   // u_ind, so solving with u_ind / crest scales u by 1 / crest exactly; the
   // crest is the median of u on the shell's ridge (voxels where u is a
@@ -142,12 +147,21 @@ double reference_edge_gradient(const std::vector<float>& grad2, double share);
 // The same with VariationalParams::edge_split's rule: the median of the top
 // `fine_share` when it is at least `split` times the top `share`'s (split >
 // 0 and fine_share < share), else the top `share`'s.
+// Between split_from and split the medians are blended: g_ref = (top
+// share's) x ratio^w, w = (ratio - split_from) / (split - split_from).
 struct ReferenceEdge {
-  double g_ref = 0;  // 0: no usable entry
-  double share = 0;  // the share taken
-  double ratio = 0;  // the top fine_share's median over the top share's (0: not measured)
+  double g_ref = 0;   // 0: no usable entry
+  double share = 0;   // the share taken (fine_share at a weight of 1)
+  double ratio = 0;   // the top fine_share's median over the top share's (0: not measured)
+  double weight = 0;  // the top fine_share's weight in g_ref, in [0, 1]
 };
-ReferenceEdge reference_edge_gradient(const std::vector<float>& grad2, double share, double fine_share, double split);
+ReferenceEdge reference_edge_gradient(const std::vector<float>& grad2, double share, double fine_share, double split,
+                                      double split_from = 0.0);
+// The weight of the top fine share's median at `ratio` (VariationalParams::
+// edge_split, edge_split_from): 0 below split_from, 1 from split, linear
+// between; a switch at split when split_from is 0 or not below it; 0 when
+// split is 0 (off).
+double edge_split_weight(double ratio, double split, double split_from);
 
 // Per-voxel densities (docs/numerics.md): mu, rho, the tangential tensor T
 // (xx, yy, zz, xy, xz, yz) and the fixed flag, on a grid with spacing h and

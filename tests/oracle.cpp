@@ -250,7 +250,14 @@ Densities reference_densities(const Volume& v, const VariationalParams& p, const
     if (!mags.empty() && p.edge_split > 0 && p.edge_share_fine > 0 && p.edge_share_fine < p.edge_share && g_ref > 0) {
       const std::size_t fine_top = std::max<std::size_t>(1, std::size_t(double(mags.size()) * p.edge_share_fine));
       const double fine = mags[mags.size() - fine_top / 2 - 1];
-      if (fine >= p.edge_split * g_ref) g_ref = fine;
+      // Blended between edge_split_from and edge_split: g_ref ratio^w.
+      const double ratio = fine / g_ref;
+      double w = 0;
+      if (ratio >= p.edge_split) w = 1;
+      else if (p.edge_split_from > 0 && p.edge_split_from < p.edge_split && ratio > p.edge_split_from)
+        w = (ratio - p.edge_split_from) / (p.edge_split - p.edge_split_from);
+      if (w >= 1) g_ref = fine;
+      else if (w > 0) g_ref *= std::pow(ratio, w);
     }
     if (!(g_ref > 0)) g_ref = 1.0;
   }

@@ -252,6 +252,17 @@ TEST_F(CliTest, ClassifyTakesASmallObjectsWallsAsTheReferenceEdge) {
   EXPECT_GT(b.near, 200u);
   // ... the haze away from it is cut at least in half.
   EXPECT_LT(2 * a.far, b.far) << "far from the ball: " << a.far << " with the rule, " << b.far << " without";
+  // Thresholds that put the ratio halfway between --edge-split-from and
+  // --edge-split: the two medians blended half and half, and the report
+  // says so.
+  const std::size_t at = split.find("its median ");
+  ASSERT_NE(at, std::string::npos) << split;
+  const double ratio = std::stod(split.substr(at + 11));
+  ASSERT_GT(ratio, 2.0);
+  std::string blend;
+  const Drawn m = classify({"--edge-split", std::to_string(1.25 * ratio), "--edge-split-from", std::to_string(0.75 * ratio)}, blend);
+  EXPECT_NE(blend.find("(top 3.0 % and top 1.0 % blended, 50 % the latter: its median "), std::string::npos) << blend;
+  EXPECT_GT(m.near, 200u);
 }
 
 }  // namespace

@@ -651,5 +651,65 @@ TEST(ReferenceEdge, ASmallObjectsWallsStandApartFromSpeckle) {
   EXPECT_EQ(reference_edge_gradient(std::vector<float>(10, -1.0f), 0.03, 0.01, 2.0).g_ref, 0.0);
 }
 
+// Between edge_split_from and edge_split the two medians are blended
+// (VariationalParams::edge_split_from): the weight rises linearly with the
+// ratio, g_ref = (top 3 %'s) x ratio^w, so g_ref does not jump where the
+// ratio crosses a threshold; the switch (from 0) does.
+TEST(ReferenceEdge, BlendedBetweenTheThresholdsWithoutAJump) {
+  EXPECT_EQ(edge_split_weight(1.5, 2.0, 1.6), 0.0);
+  EXPECT_EQ(edge_split_weight(1.6, 2.0, 1.6), 0.0);
+  EXPECT_NEAR(edge_split_weight(1.8, 2.0, 1.6), 0.5, 1e-12);
+  EXPECT_EQ(edge_split_weight(2.0, 2.0, 1.6), 1.0);
+  EXPECT_EQ(edge_split_weight(3.0, 2.0, 1.6), 1.0);
+  EXPECT_EQ(edge_split_weight(1.8, 2.0, 0.0), 0.0);  // a switch at 2
+  EXPECT_EQ(edge_split_weight(2.0, 2.0, 0.0), 1.0);
+  EXPECT_EQ(edge_split_weight(1.8, 2.0, 2.5), 0.0);  // from not below split: a switch
+  EXPECT_EQ(edge_split_weight(5.0, 0.0, 1.6), 0.0);  // off
+  EXPECT_EQ(edge_split_weight(0.0, 2.0, 1.6), 0.0);  // not measured
+
+  // A field whose top 1 % (walls) stands about 2x above its top 3 %.
+  std::mt19937_64 rng(test::seed());
+  std::normal_distribution<double> N(0.0, 1.0);
+  const std::size_t n = 100000;
+  std::vector<float> g2(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    double g = 8.0 + 0.5 * N(rng);
+    if (i >= n * 12 / 1000) {
+      const double a = N(rng), b = N(rng), c = N(rng);
+      g = std::sqrt(a * a + b * b + c * c);
+    }
+    g2[i] = float(g * g);
+  }
+  const ReferenceEdge off = reference_edge_gradient(g2, 0.03, 0.01, 0.0);
+  const ReferenceEdge full = reference_edge_gradient(g2, 0.03, 0.01, 1.0);
+  const double coarse = off.g_ref, fine = full.g_ref, r0 = full.ratio;
+  ASSERT_GT(r0, 1.5);
+  EXPECT_NEAR(fine, coarse * r0, 1e-6 * fine);
+  // Halfway between from and split: the geometric mean, weight 1/2, the
+  // top 3 % still the share named.
+  const ReferenceEdge half = reference_edge_gradient(g2, 0.03, 0.01, 1.25 * r0, 0.75 * r0);
+  EXPECT_NEAR(half.weight, 0.5, 1e-9);
+  EXPECT_NEAR(half.g_ref, std::sqrt(coarse * fine), 1e-6 * fine);
+  EXPECT_EQ(half.share, 0.03);
+  EXPECT_NEAR(half.ratio, r0, 1e-12);
+  // Below from: the top 3 %'s, weight 0; from split up: the top 1 %'s.
+  const ReferenceEdge below = reference_edge_gradient(g2, 0.03, 0.01, 2.0 * r0, 1.1 * r0);
+  EXPECT_EQ(below.weight, 0.0);
+  EXPECT_EQ(below.g_ref, coarse);
+  const ReferenceEdge above = reference_edge_gradient(g2, 0.03, 0.01, 0.99 * r0, 0.5 * r0);
+  EXPECT_EQ(above.weight, 1.0);
+  EXPECT_EQ(above.g_ref, fine);
+  EXPECT_EQ(above.share, 0.01);
+  // The ratio just under the split: blended (w = 0.2 / 0.201), g_ref within
+  // 1 % of the top 1 %'s; the switch gives the top 3 %'s there (a jump by
+  // the ratio).
+  const ReferenceEdge ramp = reference_edge_gradient(g2, 0.03, 0.01, 1.001 * r0, 0.8 * r0);
+  EXPECT_NEAR(ramp.weight, 0.2 / 0.201, 1e-9);
+  EXPECT_NEAR(ramp.g_ref, coarse * std::pow(r0, ramp.weight), 1e-6 * fine);
+  EXPECT_GT(ramp.g_ref, 0.99 * fine);
+  EXPECT_LT(ramp.g_ref, fine);
+  EXPECT_EQ(reference_edge_gradient(g2, 0.03, 0.01, 1.001 * r0, 0.0).g_ref, coarse);
+}
+
 }  // namespace
 }  // namespace softshell

@@ -44,9 +44,13 @@ std::string edge_share_text(const VariationalParams& r, const VariationalParams&
   t << std::fixed << std::setprecision(1);
   if (!(r.g_ref_ratio > 0)) {
     t << "top " << 100 * p.edge_share << " %";
-  } else if (r.g_ref_ratio >= p.edge_split) {
+  } else if (const double w = edge_split_weight(r.g_ref_ratio, p.edge_split, p.edge_split_from); w >= 1) {
     t << "top " << 100 * p.edge_share_fine << " %: its median " << std::setprecision(2) << r.g_ref_ratio
       << " x the top " << std::setprecision(1) << 100 * p.edge_share << " %'s, a small object's walls among speckle";
+  } else if (w > 0) {
+    t << "top " << 100 * p.edge_share << " % and top " << 100 * p.edge_share_fine << " % blended, "
+      << std::setprecision(0) << 100 * w << " % the latter: its median " << std::setprecision(2) << r.g_ref_ratio
+      << " x the former's, between --edge-split-from " << p.edge_split_from << " and --edge-split " << p.edge_split;
   } else {
     t << "top " << 100 * p.edge_share << " %; the top " << 100 * p.edge_share_fine << " %'s median "
       << std::setprecision(2) << r.g_ref_ratio << " x its";
@@ -1106,6 +1110,12 @@ void add_classify_command(CLI::App& app, Action& action) {
                 "A small object's walls: where the median |grad v| of the top 1 % of the scanned voxels is at least "
                 "this x the top --edge-share's, the strongest edges are few (a small cyst's walls among speckle) and "
                 "the reference edge gradient is the top 1 %'s (docs/parameters.md, \"A small object's walls\"); 0: off")
+      ->capture_default_str()
+      ->check(real_range(0, 100));
+  g->add_option("--edge-split-from", o->vp.edge_split_from,
+                "Where that ratio lies between this and --edge-split, the reference edge gradient is blended between "
+                "the two medians (the top 1 %'s weight rising linearly from 0 to 1), so that it does not jump where the "
+                "ratio crosses one threshold; 0 (or not below --edge-split): a switch at --edge-split")
       ->capture_default_str()
       ->check(real_range(0, 100));
   g->add_option("--weight-cap", o->vp.weight_cap, "Upper bound of the shell F_iso weight (u outside the shell < 1/(1+cap))")
