@@ -160,6 +160,7 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "reverb_second_peak") nf.reverb_params.second_peak = x != 0;
   else if (k == "near_fill_layered") nf.fill_layered = x != 0;
   else if (k == "near_fill_crossing") nf.fill_crossing = x;
+  else if (k == "near_layer_reach") nf.layer_reach_mm = x;
   else if (k == "near_clip_share") nf.clip_share = x;
   else if (k == "iso_fraction") ap.local_fraction = x;
   else if (k == "iso_field_sigma") ap.field_sigma_mm = x;
@@ -435,7 +436,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "usage: softshell_study_shells [--train S,S..] [--test S,S..] [--shapes face,spine] "
                            "[--size N] [--physics NAME] [--tolerance-mm MM] [--variational-only] [--defaults-only] "
                            "[--set iso_fraction=..,iso_clip_fraction=..,iso_floor_fraction=..,iso_floor_share=..,iso_field_sigma=..,iso_field_depth_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
-                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,iso_offset=..,iso_cut_crest_votes=..,cut_hold=..,band_sheet=..,data_normals=..,band_sheet_mm=..,band_sheet_patch=..,band_sheet_deep_mm=..,band_sheet_flat_mm=..,band_sheet_skin_mm=..,band_sheet_skin_patch=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,near_skin_step=..,near_step_sds=..,near_echo_bounded=..,reverb_second_peak=..,near_fill_layered=..,near_fill_crossing=..,"
+                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,iso_offset=..,iso_cut_crest_votes=..,cut_hold=..,band_sheet=..,data_normals=..,band_sheet_mm=..,band_sheet_patch=..,band_sheet_deep_mm=..,band_sheet_flat_mm=..,band_sheet_skin_mm=..,band_sheet_skin_patch=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,near_skin_step=..,near_step_sds=..,near_echo_bounded=..,reverb_second_peak=..,near_fill_layered=..,near_fill_crossing=..,near_layer_reach=..,"
                            "mask_grow=..,mask_max_enclosed=..,mask_fluid_enclosed=..,mask_fluid_inside=..] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..] "
                            "[--shadow-walls on|off] [--walls beam_cos=..,reach=..,smooth=..,sigma=..,gap=..,bright=..,fan=0|1,fan_skip=..] [--wall-ref weighted|data]\n");
       return 2;

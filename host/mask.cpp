@@ -5,8 +5,6 @@
 // combined in order, so the mask is the same for any thread count; the flood
 // fill and the growth layers stay serial.
 #include "mask.hpp"
-#include <cstdio>
-#include <cstdlib>
 
 #include <algorithm>
 #include <array>
@@ -24,6 +22,7 @@
 #include "filter.hpp"
 #include "io.hpp"
 #include "parallel.hpp"
+#include "shadow_walls.hpp"
 #include "text.hpp"
 
 namespace softshell {
@@ -2372,6 +2371,66 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
       if (n > 0 && double(under) >= params.fill_crossing * double(n)) bottom_mm[l] = fill;
     }
   }
+  // A layered band is a layer across the probe, about as deep on every
+  // line. Where the tissue under it hovers about the halfway mark, a line
+  // stays under the mark for layer_gap_mm only in an acoustic shadow, so a
+  // line over a bone ended under the bone; where many lines do so, the
+  // median across the beam below keeps them, and the bone's top went with
+  // the band (an independent simulator's bones: up to 48 % of their visible
+  // surface). So a line's band ends at most layer_reach_mm under the lines'
+  // median bottom (docs/parameters.md, "A layered band's reach") -- unless
+  // the line stayed under the mark for stay_mm in between: then what lies
+  // deeper is a layer of the band's own over a dark gap (a deep fascia, the
+  // band's echo merged into it), not tissue over a shadow. In a fan a line
+  // along the axis crosses the band at its beam's angle, so both depths are
+  // taken along the beam: each bottom divided by its line's stretch (the
+  // beam's length per unit along the axis, from the fan's apex; 1 without a
+  // fan) before the median, the bound multiplied by it. The band's echo
+  // (echo_layer) is looked for on the lines not bounded.
+  std::vector<std::uint8_t> bounded;  // 1: the line's band was bounded (empty: none was)
+  if (rep.layered && params.layer_reach_mm > 0) {
+    const FanBeams fan = scanned ? fan_beams(*scanned, d, v.spacing, ax) : FanBeams{};
+    std::vector<double> stretch(lines, 1.0);
+    if (fan.found)
+      for (std::size_t bb = 0; bb < d[w_ax]; ++bb)
+        for (std::size_t a = 0; a < d[u_ax]; ++a) {
+          const std::size_t l = a + bb * d[u_ax];
+          if (skin[l] < 0) continue;
+          const double along = (double(skin[l]) - fan.apex[ax]) * hz;
+          double len2 = along * along;
+          for (const int k : {u_ax, w_ax})
+            if (fan.spreads[k]) {
+              const double c = (double(k == u_ax ? a : bb) - fan.apex[k]) * v.spacing[std::size_t(k)];
+              len2 += c * c;
+            }
+          if (along > 0) stretch[l] = std::sqrt(len2) / along;
+        }
+    std::vector<double> found;
+    for (std::size_t l = 0; l < lines; ++l)
+      if (bottom_mm[l] > 0) found.push_back(bottom_mm[l] / stretch[l]);
+    if (!found.empty()) {
+      const double med = median(found);
+      const auto stay_k = std::max<long>(1, long(std::ceil(params.stay_mm / hz)));
+      for (std::size_t l = 0; l < lines; ++l)
+        if (bottom_mm[l] > (med + params.layer_reach_mm) * stretch[l]) {
+          // A line that stayed under the mark for stay_mm between the
+          // median bottom and its own has a further layer of its own there
+          // (the band's deep fascia, or its echo over a dark gap): kept.
+          const float* x = &A[l * K];
+          const double half = 0.5 * (double(ltop[l]) + below);
+          long longest = 0, r = 0;
+          for (long k = std::max(0L, long(std::floor(med * stretch[l] / hz))); k < lbottom[l] && longest < stay_k; ++k) {
+            r = !std::isnan(x[k]) && double(x[k]) < half ? r + 1 : 0;
+            longest = std::max(longest, r);
+          }
+          if (longest >= stay_k) continue;
+          if (bounded.empty()) bounded.assign(lines, 0);
+          bottom_mm[l] = (med + params.layer_reach_mm) * stretch[l];
+          bounded[l] = 1;
+          ++rep.reach_lines;
+        }
+    }
+  }
   const auto median_along = [&](int axis_lat, std::size_t n_along, std::size_t n_other, double h_lat) {
     const long r = std::max(1L, long(std::lround(params.smooth_mm / h_lat)));
     std::vector<double> out(bottom_mm);
@@ -2395,6 +2454,15 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
   };
   median_along(0, d[u_ax], d[w_ax], v.spacing[u_ax]);
   median_along(1, d[w_ax], d[u_ax], v.spacing[w_ax]);
+  // The band's echo lies at multiples of a line's own band depth, which a
+  // bounded line does not show (it lies over an object): the echo is looked
+  // for, and joined, on the other lines.
+  std::vector<double> echo_bottom;
+  if (!bounded.empty()) {
+    echo_bottom = bottom_mm;
+    for (std::size_t l = 0; l < lines; ++l)
+      if (bounded[l]) echo_bottom[l] = 0;
+  }
   std::size_t with_skin = 0, band_lines = 0;
   std::vector<double> depths, tops;
   for (std::size_t l = 0; l < lines; ++l) {
@@ -2427,7 +2495,9 @@ std::vector<std::uint8_t> near_field_band(const Volume& v, const std::vector<std
           ++rep.voxels;
         }
       }
-    if (params.echo_layer) echo_layer(lp, skin, bottom_mm, rep, band, voxel, scanned, d[u_ax], d[w_ax], d[ax], hz, params, threads);
+    if (params.echo_layer)
+      echo_layer(lp, skin, echo_bottom.empty() ? bottom_mm : echo_bottom, rep, band, voxel, scanned, d[u_ax], d[w_ax], d[ax], hz,
+                 params, threads);
   } else if (params.skin_step) {
     // The skin line (NearFieldParams::skin_step): a thin layer at the skin
     // line ended by a sharp step in P.

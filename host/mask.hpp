@@ -245,6 +245,10 @@ struct NearFieldParams {
   // (a fat layer that only some lines' skin is bright enough to fall below
   // halfway over; 0: the test above alone).
   double layer_dip = 0.2;
+  // A layered band's line ends at most this far under the lines' median
+  // bottom (along the beam, in a fan): deeper, it ended in the shadow of an
+  // object under the band, not at the band (0: no bound).
+  double layer_reach_mm = 3.0;
   // In a layered band, a line that never stays below halfway under its
   // layers but has at least fill_crossing of its samples in the
   // fill_reach_mm under them below the mark (tissue near the mark, not an
@@ -329,6 +333,7 @@ struct NearFieldReport {
   bool faint = false;           // found by the faint rule (faint_ratio, speckle_sds, faint_lines): its median top is not min_ratio brighter
   bool clipped = false;         // ... and by the clipped tops of its lines, not by the speckle test
   bool layered = false;         // a layered band: its lines ended where they stayed below halfway for layer_gap_mm
+  std::size_t reach_lines = 0;  // ... of them, lines that ended deeper than layer_reach_mm under the median, bounded there
   bool skin = false;            // found by the skin-line rule (params.skin_step): a thin layer ended by a sharp step in P
   double step = 0, roughness = 0;  // that rule's fall of P at the step and P's roughness below it (file units)
   std::size_t voxels = 0;       // voxels in the band

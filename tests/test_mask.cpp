@@ -932,6 +932,67 @@ TEST(NearField, ALayeredBandOverTissueNearItsHalfwayMarkEndsWhereItsLayersEnd) {
   EXPECT_EQ(band[v.index(8, 16, 20)], 0);
 }
 
+TEST(NearField, ALayeredBandsLinesOverABoneEndAtTheBandNotUnderTheBone) {
+  // The layered band and muscle of the test above (skin, fat, fascia to
+  // 6.5 mm; muscle rising from 125 through the halfway mark), and a bone
+  // (240) at 16-17 mm under the lines with x < 12 mm (3/8 of them, wider
+  // than the median across the beam) with its shadow (10) below. Those
+  // lines stay under the mark only in the shadow, so each ended under the
+  // bone, and the median across the beam kept them: the bone's top went
+  // with the band. With layer_reach_mm they end at the lines' median bottom,
+  // and the bone stays; the fascia over it is still band.
+  const Volume v = speckled({64, 32, 90}, 0.5,
+                            [](double x, double, double z) {
+                              if (z < 6.5) return z < 2.0 ? 220.0 : z < 5.0 ? 60.0 : 210.0;
+                              if (x < 12.0 && z >= 16.0) return z < 17.0 ? 240.0 : 10.0;
+                              return std::min(250.0, 125.0 + 3.0 * (z - 6.5));
+                            },
+                            test::seed() + 35);
+  NearFieldParams unbounded;
+  unbounded.layer_reach_mm = 0;
+  NearFieldReport r;
+  const auto before = near_field_band(v, nullptr, unbounded, &r);
+  ASSERT_TRUE(r.found);
+  ASSERT_TRUE(r.layered);
+  EXPECT_EQ(before[v.index(6, 16, 33)], 1);  // 3 mm across, 16.5 mm deep: the bone, taken
+  const auto band = near_field_band(v, nullptr, NearFieldParams{}, &r);
+  ASSERT_TRUE(r.found);
+  EXPECT_TRUE(r.layered);
+  EXPECT_GT(r.reach_lines, 0u);
+  EXPECT_NEAR(r.depth_mm, 6.5 + NearFieldParams{}.margin_mm, 1.0);
+  for (std::size_t x : {2u, 6u, 12u, 18u}) {
+    EXPECT_EQ(band[v.index(x, 16, 33)], 0) << "x " << x;  // the bone stays
+    EXPECT_EQ(band[v.index(x, 16, 30)], 0) << "x " << x;  // and the muscle over it
+    EXPECT_EQ(band[v.index(x, 16, 12)], 1) << "x " << x;  // the fascia (6 mm) is band
+  }
+  EXPECT_EQ(band[v.index(48, 16, 12)], 1);  // ... on the muscle's lines too
+  EXPECT_EQ(band[v.index(48, 16, 40)], 0);
+}
+
+TEST(NearField, ALayeredBandsDeeperLayerOverADarkGapStaysBand) {
+  // The layered band over dark fluid (30), and under the lines with
+  // x < 12 mm a deeper fascia (210, 11-12.5 mm) over a 4.5 mm gap: shorter
+  // than layer_gap_mm, so those lines end under the fascia, more than
+  // layer_reach_mm under the lines' median bottom. But each stayed under
+  // the mark for stay_mm in the gap: a layer of the band's own, not tissue
+  // over a shadow, so they keep their depth and the fascia stays band.
+  const Volume v = speckled({64, 32, 90}, 0.5,
+                            [](double x, double, double z) {
+                              if (z < 6.5) return z < 2.0 ? 220.0 : z < 5.0 ? 60.0 : 210.0;
+                              if (x < 12.0 && z >= 11.0 && z < 12.5) return 210.0;
+                              return 30.0;
+                            },
+                            test::seed() + 36);
+  NearFieldReport r;
+  const auto band = near_field_band(v, nullptr, NearFieldParams{}, &r);
+  ASSERT_TRUE(r.found);
+  ASSERT_TRUE(r.layered);
+  EXPECT_EQ(r.reach_lines, 0u);
+  for (std::size_t x : {2u, 6u, 12u})
+    EXPECT_EQ(band[v.index(x, 16, 23)], 1) << "x " << x;  // the deep fascia at 11.5 mm
+  EXPECT_EQ(band[v.index(48, 16, 23)], 0);                 // fluid beside it
+}
+
 TEST(NearField, EveryEchoLayerUnderTheBandJoinsIt) {
   // Two copies under the band: the brightest (90) at twice its depth, a
   // fainter one (70) at 1.35 x, between the band and the first, each over

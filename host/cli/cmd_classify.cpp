@@ -738,6 +738,9 @@ int run_classify(const ClassifyOptions& given_options) {
       else if (nf.skin)
         t << ", a skin line: the lines' median falls " << std::setprecision(1) << nf.step << " at its bottom, "
           << std::setprecision(1) << nf.step / std::max(nf.roughness, 1e-30) << " x its roughness below";
+      if (nf.reach_lines > 0)
+        t << "; " << nf.reach_lines << " lines bounded at " << std::setprecision(1) << np.layer_reach_mm
+          << " mm under its median bottom (deeper, they ended only in a shadow under the band)";
       t << "; --near-field keep to draw it)";
       if (nf.echo.tail_to > 0)
         t << ", with its tail to " << std::setprecision(2) << nf.echo.tail_to << " x the band's depth ("
