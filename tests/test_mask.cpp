@@ -993,6 +993,54 @@ TEST(NearField, ALayeredBandsDeeperLayerOverADarkGapStaysBand) {
   EXPECT_EQ(band[v.index(48, 16, 23)], 0);                 // fluid beside it
 }
 
+TEST(NearField, InAFanALayeredBandIsMeasuredAlongTheBeam) {
+  // A curvilinear probe's sector (apex at x 30 mm, z -10 mm, half-angle
+  // 1.1 rad; the probe's arc 24 mm from the apex) over a layered band 16 mm
+  // thick along the beam (skin, fat, fascia), then dark fluid. A line along
+  // z at the sector's side crosses the band at a steep angle, so its band is
+  // more than layer_reach_mm longer along z than the lines' median; measured
+  // along the beam (the stretch from the fan's apex) it is not, and no line
+  // is bounded. (With the stretch left out, 192 lines were.)
+  const double h = 0.5, ax = 30.0, az = -10.0, half_angle = 1.1, r0 = 24.0;
+  const Dims3 dims{120, 8, 128};
+  const auto angle = [&](double x, double z) { return std::atan2(x - ax, z - az); };
+  const auto radius = [&](double x, double z) { return std::hypot(x - ax, z - az); };
+  const auto inside = [&](double x, double z) { return std::fabs(angle(x, z)) < half_angle && radius(x, z) >= r0; };
+  const Volume v = speckled(dims, h,
+                            [&](double x, double, double z) {
+                              if (!inside(x, z)) return 0.0;
+                              const double r = radius(x, z) - r0;
+                              return r < 2.0 ? 220.0 : r < 5.0 ? 60.0 : r < 16.0 ? 210.0 : 30.0;
+                            },
+                            test::seed() + 37);
+  std::vector<std::uint8_t> scanned(v.voxels());
+  for (std::size_t z = 0; z < dims[2]; ++z)
+    for (std::size_t y = 0; y < dims[1]; ++y)
+      for (std::size_t x = 0; x < dims[0]; ++x) scanned[v.index(x, y, z)] = inside(double(x) * h, double(z) * h);
+  NearFieldReport r;
+  const auto band = near_field_band(v, &scanned, NearFieldParams{}, &r);
+  ASSERT_TRUE(r.found);
+  ASSERT_TRUE(r.layered);
+  EXPECT_EQ(r.reach_lines, 0u);
+  // The lines under the probe's arc whose band (skin to the fascia's
+  // bottom, 16 mm along the beam) is longer along z than the median line's
+  // plus layer_reach_mm: a bound along z would have cut them.
+  std::vector<double> lengths;
+  for (std::size_t x = 0; x < dims[0]; ++x) {
+    const double dx = double(x) * h - ax;
+    if (std::fabs(dx) < r0 * std::sin(half_angle))
+      lengths.push_back(std::sqrt((r0 + 16.0) * (r0 + 16.0) - dx * dx) - std::sqrt(r0 * r0 - dx * dx));
+  }
+  std::vector<double> sorted = lengths;
+  std::nth_element(sorted.begin(), sorted.begin() + long(sorted.size() / 2), sorted.end());
+  const double med = sorted[sorted.size() / 2];
+  std::size_t steep = 0;
+  for (double len : lengths) steep += len > med + NearFieldParams{}.layer_reach_mm + 0.5;
+  // The middle line's band reaches the fascia's bottom.
+  EXPECT_EQ(band[v.index(60, 4, std::size_t(std::lround((r0 + 15.5 + az) / h)))], 1);
+  EXPECT_GT(steep, 4u);
+}
+
 TEST(NearField, EveryEchoLayerUnderTheBandJoinsIt) {
   // Two copies under the band: the brightest (90) at twice its depth, a
   // fainter one (70) at 1.35 x, between the band and the first, each over
