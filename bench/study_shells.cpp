@@ -105,6 +105,8 @@ bool set_wall_param(ShadowWallParams& wp, const std::string& k, double x) {
   else if (k == "gap") wp.gap_mm = x;
   else if (k == "fan") wp.fan = x != 0;  // 0: beams along the axis in a fan too
   else if (k == "fan_skip") wp.fan_skip_mm = x;
+  else if (k == "underside") wp.underside = wp.underside && x != 0;  // 0: off (classify --echo-underside keep)
+  else if (k == "underside_mm") wp.underside_mm = x;
   else return false;
   return true;
 }
@@ -249,8 +251,9 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   bool grad_sigma_auto = true;
   for (const auto& [k, x] : g_overrides)
     if (k == "grad_sigma" || (k == "grad_sigma_auto" && x == 0)) grad_sigma_auto = false;
+  // The shares also decide the walls' underside rule (host/shadow_walls.hpp, underside_applies).
+  const GradSigmaChoice gc = auto_grad_sigma(lv.data, mp, nf.axis, scale);
   if (grad_sigma_auto) {
-    const GradSigmaChoice gc = auto_grad_sigma(lv.data, mp, nf.axis, scale);
     p.grad_sigma_mm = gc.sigma_mm;
     std::fprintf(stderr, "  grad sigma %.3f mm (falling %.3f rising %.3f, speckle %.3f mm)\n", p.grad_sigma_mm,
                  gc.falling, gc.rising, gc.speckle.sigma_mm);
@@ -259,6 +262,7 @@ Volume classify_default(Runtime& rt, const Volume& in, double* iso_out, SolveRep
   p.edge_weight = bone_cue_weights(lv.data, mp, mode, cue, cue_report);
   if (g_shadow_walls) {
     ShadowWallParams wp = shadow_wall_params(p, nf.axis);
+    wp.underside = underside_applies(gc.falling, gc.rising);  // as classify's default
     for (const auto& [k, x] : g_wall_overrides) set_wall_param(wp, k, x);
     ShadowWallReport wr;
     // At the classifier's isovalue, the edges' where it was raised above the

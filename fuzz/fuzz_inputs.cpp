@@ -464,8 +464,9 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
         if (!(gc.sigma_mm >= kGradSigmaMinMm && gc.sigma_mm <= kGradSigmaMaxMm)) fail("grad sigma outside its bounds");
         // classify's default: the walls of acoustic shadows weighted down
         // (with the near field's removal, the other default occluder step).
-        auto w = std::make_shared<const std::vector<float>>(
-            shadow_wall_weight(runtime(), v, m, iso, shadow_wall_params(p, 2)));
+        ShadowWallParams wp = shadow_wall_params(p, 2);
+        wp.underside = underside_applies(gc.falling, gc.rising);
+        auto w = std::make_shared<const std::vector<float>>(shadow_wall_weight(runtime(), v, m, iso, wp));
         for (float x : *w)
           if (!(x >= 0.0f && x <= 1.0f)) fail("shadow wall weight outside [0, 1]");
         set_edge_weights(p, nullptr, std::move(w));

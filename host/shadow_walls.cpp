@@ -348,31 +348,87 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
                                (1.0 - sample(shadow, bright[0], bright[1], bright[2])));
         }
   });
+  // 2b. The underside of a thin echo (params.underside): an edge falling
+  // along the beam between its bright side above the isovalue and its dark
+  // side below, whose bright side falls under the isovalue again within
+  // underside_mm up the beam (walked in steps of the finest spacing).
+  std::vector<std::uint8_t> underside;
+  if (params.underside && params.underside_mm > 0) {
+    underside.assign(n, 0);
+    const double h = std::min({v.spacing[0], v.spacing[1], v.spacing[2]});
+    parallel_ranges(d[2], threads, [&](std::size_t z0, std::size_t z1) {
+      for (std::size_t z = z0; z < z1; ++z)
+        for (std::size_t y = 0; y < d[1]; ++y)
+          for (std::size_t x = 0; x < d[0]; ++x) {
+            const std::size_t i = x + d[0] * (y + d[1] * z);
+            if (!is_scanned(i)) continue;
+            const std::size_t c[3] = {x, y, z};
+            double g[3];
+            for (int k = 0; k < 3; ++k) {
+              const std::size_t lo = c[k] > 0 ? i - stride[k] : i, hi = c[k] + 1 < d[std::size_t(k)] ? i + stride[k] : i;
+              const double span = double((c[k] + 1 < d[std::size_t(k)]) + (c[k] > 0)) * v.spacing[std::size_t(k)];
+              g[k] = span > 0 ? (double(vg.data[hi]) - double(vg.data[lo])) / span : 0.0;
+            }
+            const double m = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+            double b[3] = {0.0, 0.0, 0.0};  // the beam, pointing deeper
+            if (fan.found) beam_at(c, b);
+            else b[ax] = 1.0;
+            // Falling along the beam: the gradient points up it.
+            const double along = g[0] * b[0] + g[1] * b[1] + g[2] * b[2];
+            if (!(m > 0) || !std::isfinite(m) || !(along <= -params.beam_cos * m)) continue;
+            double dark[3], bright[3];
+            for (int k = 0; k < 3; ++k) {
+              const double step = params.reach_mm * g[k] / m / v.spacing[std::size_t(k)];
+              dark[k] = double(c[k]) - step, bright[k] = double(c[k]) + step;
+            }
+            if (!(sample(vs.data, bright[0], bright[1], bright[2]) > iso) ||
+                !(sample(vs.data, dark[0], dark[1], dark[2]) < iso))
+              continue;
+            // Up the beam from the bright side, inside the volume.
+            for (double t = h; t <= params.underside_mm + 1e-9; t += h) {
+              double q[3];
+              bool inside = true;
+              for (int k = 0; k < 3; ++k) {
+                q[k] = bright[k] - t * b[k] / v.spacing[std::size_t(k)];
+                inside = inside && q[k] >= 0.0 && q[k] <= double(d[std::size_t(k)] - 1);
+              }
+              if (!inside) break;
+              if (sample(vs.data, q[0], q[1], q[2]) < iso) {
+                wall.data[i] = 1.0f;
+                underside[i] = 1;
+                break;
+              }
+            }
+          }
+    });
+  }
   // 3. The weight: 1 - the lowpassed wall indicator, in [0, 1].
   const Volume ws = params.smooth_mm > 0 ? lowpass_volume(rt, wall, {params.smooth_mm, 3.0}) : wall;
   std::vector<float> weight(n);
-  std::size_t scanned_count = 0, in_shadow = 0, walls = 0;
+  std::size_t scanned_count = 0, in_shadow = 0, walls = 0, undersides = 0;
   {
     // Over threads; the counts are sums (the same for any split).
     const int parts = range_count(n, threads);
-    std::vector<std::array<std::size_t, 3>> counts(std::size_t(parts), {0, 0, 0});
+    std::vector<std::array<std::size_t, 4>> counts(std::size_t(parts), {0, 0, 0, 0});
     parallel_ranges_indexed(n, threads, [&](int part, std::size_t i0, std::size_t i1) {
-      std::size_t c0 = 0, c1 = 0, c2 = 0;
+      std::size_t c0 = 0, c1 = 0, c2 = 0, c3 = 0;
       for (std::size_t i = i0; i < i1; ++i) {
         weight[i] = std::clamp(1.0f - ws.data[i], 0.0f, 1.0f);
         if (!is_scanned(i)) continue;
         ++c0;
         c1 += shadow[i] > 0;
         c2 += weight[i] < 0.5f;
+        c3 += !underside.empty() && underside[i];
       }
-      counts[std::size_t(part)] = {c0, c1, c2};
+      counts[std::size_t(part)] = {c0, c1, c2, c3};
     });
-    for (const auto& c : counts) scanned_count += c[0], in_shadow += c[1], walls += c[2];
+    for (const auto& c : counts) scanned_count += c[0], in_shadow += c[1], walls += c[2], undersides += c[3];
   }
   if (report) {
     report->fan = fan;
     report->shadow_share = scanned_count ? double(in_shadow) / double(scanned_count) : 0.0;
     report->wall_share = scanned_count ? double(walls) / double(scanned_count) : 0.0;
+    report->underside_share = scanned_count ? double(undersides) / double(scanned_count) : 0.0;
   }
   return weight;
 }
@@ -382,8 +438,12 @@ ShadowWallParams shadow_wall_params(const VariationalParams& p, int axis) {
   const double f = p.sigma_mm / VariationalParams{}.sigma_mm;
   w.axis = axis;
   w.sigma_mm = w.grad_sigma_mm = p.grad_sigma_mm > 0 ? p.grad_sigma_mm : p.sigma_mm;
-  w.reach_mm *= f, w.smooth_mm *= f, w.gap_mm *= f, w.fan_skip_mm *= f;
+  w.reach_mm *= f, w.smooth_mm *= f, w.gap_mm *= f, w.fan_skip_mm *= f, w.underside_mm *= f;
   return w;
+}
+
+bool underside_applies(double falling, double rising) {
+  return rising > 0 && falling <= kUndersideFallRatio * rising;
 }
 
 std::shared_ptr<const std::vector<float>> combine_edge_weights(std::shared_ptr<const std::vector<float>> a,

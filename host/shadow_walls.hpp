@@ -50,7 +50,28 @@ struct ShadowWallParams {
   // probe, and the near field's bright remnants there lie on every one of
   // them (they shaded two thirds of some phantoms' sectors).
   double fan_skip_mm = 6.0;
+  // The underside of a thin echo (docs/parameters.md, "The underside of a
+  // thin echo"): with `underside` on, an edge falling in brightness along
+  // the beam (|cos(grad, beam)| at least beam_cos) whose bright side
+  // (reach_mm up its gradient) is above the isovalue and its dark side below,
+  // and whose bright side falls under the isovalue again within
+  // underside_mm up the beam, is marked like a wall. It is the far side of a
+  // thin bright layer seen from dark fluid (a skull's echo over the brain),
+  // not a surface. Off for bone echoes, where the layer's far side may be all
+  // that can be drawn (underside_applies below decides).
+  bool underside = false;
+  double underside_mm = 3.0;
 };
+
+// Whether the data's strong edges are steps up from dark fluid (fluid over
+// a head or a face) rather than echoes over darker data (bone over its
+// shadow): they fall in brightness along the beam at most
+// kUndersideFallRatio x as often as they rise (`falling`, `rising`: the
+// shares of GradSigmaChoice, host/speckle.hpp). Chosen on the cross-check's
+// seeds 1-12, 301-324 and 349-396 (heads 0.02-0.45, bones from 0.26) and the
+// family's faces (0.09-0.34) and spines (from 0.74).
+constexpr double kUndersideFallRatio = 0.2;
+bool underside_applies(double falling, double rising);
 
 // The beams of a fan: the apex (voxel coordinates, usually above the volume)
 // and the axes across the beam along which the sector spreads. A beam runs
@@ -87,6 +108,7 @@ ShadowWallParams shadow_wall_params(const VariationalParams& p, int axis);
 struct ShadowWallReport {
   double shadow_share = 0;  // of the scanned voxels, in shadow
   double wall_share = 0;    // of the scanned voxels, weight below 1/2
+  double underside_share = 0;  // of the scanned voxels, marked as a thin echo's underside
   FanBeams fan;             // the fan followed (found false: beams along the axis)
 };
 

@@ -1,8 +1,10 @@
 // Shadow walls (host/shadow_walls.hpp): known answers on synthetic scenes --
 // the sides of a shadow under a bright bar are weighted down below the gap
 // and nowhere else, an object in fluid keeps every edge, unscanned voxels
-// neither occlude nor shade -- the parameters' scaling, the product of two
-// weights, and classify's switch (drawn with keep, not with remove).
+// neither occlude nor shade; a thin echo's underside weighted down where asked,
+// its top, a thick layer's far side and a cyst's top wall not -- the
+// parameters' scaling, the product of two weights, and classify's switch
+// (drawn with keep, not with remove).
 #include <algorithm>
 #include <cmath>
 #include <memory>
@@ -303,6 +305,72 @@ TEST(ShadowWalls, InAFanTheBrightLayerUnderTheProbeShadesNothing) {
   EXPECT_LT(r.shadow_share, 0.2 * r0.shadow_share);
 }
 
+// Dark fluid (10) down to 10 mm, a bright layer (250) `thick` mm thick,
+// medium tissue (100) under it: a skull's echo seen from the amniotic fluid.
+Volume layer_in_fluid(double thick, std::uint64_t seed) {
+  return scene({24, 12, 64}, [thick](double, double, double z) { return z < 10.0 ? 10.0 : z < 10.0 + thick ? 250.0 : 100.0; },
+               seed);
+}
+
+// The smallest weight at x = 6 mm, y = 3 mm, z in [z0, z1] mm.
+float min_along_beam(const std::vector<float>& w, const Volume& v, double z0, double z1) {
+  float lo = 1.0f;
+  for (double z = z0; z <= z1 + 1e-9; z += kH) lo = std::min(lo, at_mm(w, v, 6.0, 3.0, z));
+  return lo;
+}
+
+TEST(ShadowWalls, TheUndersideOfAThinEchoIsWeightedDownItsTopAndAThickLayersAreNot) {
+  // At an isovalue of 140 the 3 mm layer's two flanks both cross it: its top
+  // (rising along the beam, the surface) and its underside (falling, the
+  // layer's far side over the tissue). Up the beam from the underside's bright
+  // side the data fall under the isovalue again within 3 mm (the fluid), so
+  // with `underside` on that edge is weighted down; the top keeps its weight.
+  const Volume v = layer_in_fluid(3.0, test::seed() + 21);
+  ShadowWallParams on;
+  on.underside = true;
+  ShadowWallReport r;
+  const std::vector<float> w = shadow_wall_weight(test::runtime(), v, nullptr, 140.0, on, &r);
+  EXPECT_LT(min_along_beam(w, v, 12.5, 15.0), 0.5f) << "the underside";
+  EXPECT_GT(min_along_beam(w, v, 7.0, 11.0), 0.99f) << "the top";
+  EXPECT_GT(r.underside_share, 0.0);
+  // Off (the default of ShadowWallParams): nothing is weighted down.
+  ShadowWallReport r0;
+  const std::vector<float> w0 = shadow_wall_weight(test::runtime(), v, nullptr, 140.0, ShadowWallParams{}, &r0);
+  EXPECT_GT(*std::min_element(w0.begin(), w0.end()), 0.99f);
+  EXPECT_EQ(r0.underside_share, 0.0);
+  // No reach up the beam: none.
+  ShadowWallParams no_reach = on;
+  no_reach.underside_mm = 0.0;
+  const std::vector<float> wn = shadow_wall_weight(test::runtime(), v, nullptr, 140.0, no_reach);
+  EXPECT_GT(min_along_beam(wn, v, 12.5, 15.0), 0.99f);
+  // A layer 8 mm thick: its far side lies more than 3 mm under its top, and
+  // is kept.
+  const Volume thick = layer_in_fluid(8.0, test::seed() + 22);
+  const std::vector<float> wt = shadow_wall_weight(test::runtime(), thick, nullptr, 140.0, on);
+  EXPECT_GT(*std::min_element(wt.begin(), wt.end()), 0.99f);
+}
+
+TEST(ShadowWalls, ACystsTopWallIsNoUnderside) {
+  // Tissue (150) over an anechoic cyst (10) from 16 mm: the cyst's top wall
+  // falls along the beam, but the tissue above it stays over the isovalue
+  // (85): no thin echo, its weight stays.
+  const Volume v = scene({24, 12, 64}, [](double, double, double z) { return z < 16.0 ? 150.0 : 10.0; }, test::seed() + 23);
+  ShadowWallParams on;
+  on.underside = true;
+  ShadowWallReport r;
+  const std::vector<float> w = shadow_wall_weight(test::runtime(), v, nullptr, 85.0, on, &r);
+  EXPECT_GT(*std::min_element(w.begin(), w.end()), 0.99f);
+  EXPECT_EQ(r.underside_share, 0.0);
+}
+
+TEST(ShadowWalls, TheUndersideRuleAppliesWhereTheStrongEdgesAreStepsUpFromFluid) {
+  EXPECT_TRUE(underside_applies(0.10, 0.70));   // a head in fluid
+  EXPECT_TRUE(underside_applies(0.0, 0.5));
+  EXPECT_FALSE(underside_applies(0.18, 0.68));  // 0.26: the bone nearest to the heads seen so far
+  EXPECT_FALSE(underside_applies(0.45, 0.45));  // bone echoes over shadow
+  EXPECT_FALSE(underside_applies(0.0, 0.0));    // no strong edges
+}
+
 TEST(ShadowWalls, ParametersFollowTheClassifiersLowpass) {
   VariationalParams p;
   const ShadowWallParams d = shadow_wall_params(p, 1);
@@ -317,6 +385,8 @@ TEST(ShadowWalls, ParametersFollowTheClassifiersLowpass) {
   EXPECT_DOUBLE_EQ(s.reach_mm, 0.5 * ShadowWallParams{}.reach_mm);
   EXPECT_DOUBLE_EQ(s.smooth_mm, 0.5 * ShadowWallParams{}.smooth_mm);
   EXPECT_DOUBLE_EQ(s.fan_skip_mm, 0.5 * ShadowWallParams{}.fan_skip_mm);
+  EXPECT_DOUBLE_EQ(s.underside_mm, 0.5 * ShadowWallParams{}.underside_mm);
+  EXPECT_FALSE(s.underside);  // the caller decides (underside_applies)
 }
 
 TEST(ShadowWalls, CombinedWeightsAreTheProduct) {

@@ -155,7 +155,8 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
   ShadowWallReport wr;
   keep_freed.reset();  // before the device work, as classify does
   if (!(weights && weights->literal())) {
-    const ShadowWallParams wp = shadow_wall_params(in.params, nf.axis);
+    ShadowWallParams wp = shadow_wall_params(in.params, nf.axis);
+    wp.underside = grad_choice && underside_applies(grad_choice->falling, grad_choice->rising);  // as classify's default
     in.walls = std::make_shared<const std::vector<float>>(
         shadow_wall_weight(rt, in.data, mask, wall_iso.value_or(in.iso), wp, &wr));
   }

@@ -68,6 +68,7 @@ struct ClassifyOptions {
   std::string per_frame;            // --per-frame-files PATTERN
   std::string bone_cue = "off";  // docs/parameters.md: off by default (it lost bone on a real sweep)
   std::string shadow_walls = "remove";  // host/shadow_walls.hpp: weighted down by default
+  std::string echo_underside = "auto";  // host/shadow_walls.hpp, ShadowWallParams::underside
   std::string beam_axis = "auto";       // --beam-axis: auto (the data's own, beam_axis_of) or x, y, z
   double thickness = 1.0;
   double iso_fraction = AutoIsoParams().local_fraction, iso_field_sigma = AutoIsoParams().field_sigma_mm;
@@ -891,9 +892,10 @@ int run_classify(const ClassifyOptions& given_options) {
   keep_freed.reset();
   // --grad-sigma's default from the data's speckle (host/speckle.hpp), on
   // the data the classifier sees; given, it stays the user's.
+  std::optional<GradSigmaChoice> grad_choice;  // also the underside rule's shares
   if (variational && !o.literal && !o.given.count("--grad-sigma")) {
     step.emplace("speckle");
-    const GradSigmaChoice gc = auto_grad_sigma(in, sc, beam_axis_now(), o.length_scale);
+    const GradSigmaChoice& gc = grad_choice.emplace(auto_grad_sigma(in, sc, beam_axis_now(), o.length_scale));
     const SpeckleReport& sr = gc.speckle;
     o.vp.grad_sigma_mm = gc.sigma_mm;
     std::ostringstream t;
@@ -912,7 +914,13 @@ int run_classify(const ClassifyOptions& given_options) {
   // weighted down, like the bone cue's.
   if (variational && !o.literal && o.shadow_walls == "remove") {
     step.emplace("shadow walls");
-    const ShadowWallParams wp = shadow_wall_params(variational_params(o), beam_axis_now());
+    ShadowWallParams wp = shadow_wall_params(variational_params(o), beam_axis_now());
+    if (o.echo_underside == "auto") {
+      // The underside of thin echoes, where the strong edges are steps up
+      // from fluid (host/shadow_walls.hpp, underside_applies).
+      if (!grad_choice) grad_choice = auto_grad_sigma(in, sc, beam_axis_now(), o.length_scale);
+      wp.underside = underside_applies(grad_choice->falling, grad_choice->rising);
+    }
     ShadowWallReport wr;
     walls = std::make_shared<const std::vector<float>>(
         shadow_wall_weight(rt, in, sc, wall_iso.value_or(iso), wp, &wr));
@@ -926,6 +934,10 @@ int run_classify(const ClassifyOptions& given_options) {
         if (wr.fan.spreads[k] || k == wp.axis) t << " " << "xyz"[k] << " " << wr.fan.apex[k] * in.spacing[std::size_t(k)];
       t << " mm)";
     }
+    if (wp.underside)
+      t << "; the underside of thin echoes weighted down on " << 100 * wr.underside_share
+        << " % (the strong edges are steps up from fluid: " << std::setprecision(0) << 100 * grad_choice->falling
+        << " % fall, " << 100 * grad_choice->rising << " % rise along the beam; --echo-underside keep to draw it)";
     cue_text += t.str();
   }
   step.reset();
@@ -1021,6 +1033,15 @@ void add_classify_command(CLI::App& app, Action& action) {
       ->capture_default_str()
       ->type_name("remove|keep")
       ->check(one_of({"remove", "keep"}));
+  sub->add_option("--echo-underside", o->echo_underside,
+                  "auto: where the data's strong edges are steps up from dark fluid (they rise along the beam at "
+                  "least 5 x as often as they fall: a head or a face in fluid, not bone), the far side of a thin "
+                  "bright echo (falling along the beam, and under the isovalue again within 3 mm up the beam: a "
+                  "skull's underside) is weighted down like a shadow's wall; keep: drawn like any edge "
+                  "(docs/parameters.md, \"The underside of a thin echo\"); with --shadow-walls remove")
+      ->capture_default_str()
+      ->type_name("auto|keep")
+      ->check(one_of({"auto", "keep"}));
   sub->add_option("--near-field", o->near_field,
                   "remove: the bright layered band under the probe (skin, fat, muscle) is found from the depth "
                   "profile and held at u = 0 like unscanned voxels, with its echoes (fainter copies of the band's "
