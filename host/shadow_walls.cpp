@@ -293,6 +293,24 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
     }
     return s;
   };
+  // grad v~ at voxel i (coordinates c; central differences, one-sided at the
+  // faces), in units per mm; returns its length.
+  const auto gradient_at = [&](std::size_t i, const std::size_t c[3], double g[3]) {
+    for (int k = 0; k < 3; ++k) {
+      const std::size_t lo = c[k] > 0 ? i - stride[k] : i, hi = c[k] + 1 < d[std::size_t(k)] ? i + stride[k] : i;
+      const double span = double((c[k] + 1 < d[std::size_t(k)]) + (c[k] > 0)) * v.spacing[std::size_t(k)];
+      g[k] = span > 0 ? (double(vg.data[hi]) - double(vg.data[lo])) / span : 0.0;
+    }
+    return std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+  };
+  // An edge's two sides, reach_mm down (dark) and up (bright) its gradient
+  // g of length m > 0, in voxel coordinates.
+  const auto sides_of = [&](const std::size_t c[3], const double g[3], double m, double dark[3], double bright[3]) {
+    for (int k = 0; k < 3; ++k) {
+      const double step = params.reach_mm * g[k] / m / v.spacing[std::size_t(k)];
+      dark[k] = double(c[k]) - step, bright[k] = double(c[k]) + step;
+    }
+  };
   // Voxels with no shadow within reach: their dark side's sample is 0 (its
   // eight corners are), so their wall is 0 (0 times the bright side's
   // share, in [0, 1]), as written below; skipped. The dark side lies at
@@ -320,12 +338,7 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
           if (!near[i] || !is_scanned(i)) continue;
           const std::size_t c[3] = {x, y, z};
           double g[3];
-          for (int k = 0; k < 3; ++k) {
-            const std::size_t lo = c[k] > 0 ? i - stride[k] : i, hi = c[k] + 1 < d[std::size_t(k)] ? i + stride[k] : i;
-            const double span = double((c[k] + 1 < d[std::size_t(k)]) + (c[k] > 0)) * v.spacing[std::size_t(k)];
-            g[k] = span > 0 ? (double(vg.data[hi]) - double(vg.data[lo])) / span : 0.0;
-          }
-          const double m = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+          const double m = gradient_at(i, c, g);
           double along = g[ax];
           if (fan.found) {
             double b[3];
@@ -337,10 +350,7 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
           // it) not: an edge between a shadow and what is beside it (in
           // voxels per axis).
           double dark[3], bright[3];
-          for (int k = 0; k < 3; ++k) {
-            const double step = params.reach_mm * g[k] / m / v.spacing[std::size_t(k)];
-            dark[k] = double(c[k]) - step, bright[k] = double(c[k]) + step;
-          }
+          sides_of(c, g, m, dark, bright);
           // Only where the classifier could draw it: the bright side above
           // the isovalue (the dark side, in shadow, is below it).
           if (!(sample(vs.data, bright[0], bright[1], bright[2]) > iso - params.bright_mm * m)) continue;
@@ -364,12 +374,7 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
             if (!is_scanned(i)) continue;
             const std::size_t c[3] = {x, y, z};
             double g[3];
-            for (int k = 0; k < 3; ++k) {
-              const std::size_t lo = c[k] > 0 ? i - stride[k] : i, hi = c[k] + 1 < d[std::size_t(k)] ? i + stride[k] : i;
-              const double span = double((c[k] + 1 < d[std::size_t(k)]) + (c[k] > 0)) * v.spacing[std::size_t(k)];
-              g[k] = span > 0 ? (double(vg.data[hi]) - double(vg.data[lo])) / span : 0.0;
-            }
-            const double m = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+            const double m = gradient_at(i, c, g);
             double b[3] = {0.0, 0.0, 0.0};  // the beam, pointing deeper
             if (fan.found) beam_at(c, b);
             else b[ax] = 1.0;
@@ -377,10 +382,7 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
             const double along = g[0] * b[0] + g[1] * b[1] + g[2] * b[2];
             if (!(m > 0) || !std::isfinite(m) || !(along <= -params.beam_cos * m)) continue;
             double dark[3], bright[3];
-            for (int k = 0; k < 3; ++k) {
-              const double step = params.reach_mm * g[k] / m / v.spacing[std::size_t(k)];
-              dark[k] = double(c[k]) - step, bright[k] = double(c[k]) + step;
-            }
+            sides_of(c, g, m, dark, bright);
             if (!(sample(vs.data, bright[0], bright[1], bright[2]) > iso) ||
                 !(sample(vs.data, dark[0], dark[1], dark[2]) < iso))
               continue;
