@@ -7,25 +7,15 @@ fixed isovalue per anatomy, chosen on the training seeds. The unscanned zero fil
 
 usage: levoy.py CASE_DIR T[,T...] [SIGMA_MM]   -> CASE_DIR/u_lvT.nrrd for each isovalue T
 """
-import re, sys
+import sys
 import numpy as np
 from scipy import ndimage
+
+from nrrd_raw import read
 
 d = sys.argv[1]
 ts = [float(t) for t in sys.argv[2].split(',')]
 sig = float(sys.argv[3]) if len(sys.argv) > 3 else 1.0
-
-
-def read(fn):
-    raw = open(fn, 'rb').read()
-    i = raw.index(b'\n\n') + 2
-    hdr = raw[:i].decode('latin1')
-    typ = re.search(r'type: (\w+)', hdr).group(1)
-    dims = [int(x) for x in re.search(r'sizes: (\d+) (\d+) (\d+)', hdr).groups()]
-    sp = [float(x) for x in re.search(r'\(([-0-9.e]+),0,0\) \(0,([-0-9.e]+),0\) \(0,0,([-0-9.e]+)\)', hdr).groups()]
-    dt = {'uchar': np.uint8, 'ushort': np.uint16, 'float': np.float32}[typ]
-    return raw[:i], np.frombuffer(raw[i:], dtype=dt).reshape(dims[::-1]), sp
-
 
 _, v, sp = read(d + '/volume.nrrd')
 v = v.astype(np.float32)

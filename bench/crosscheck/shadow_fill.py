@@ -15,21 +15,11 @@ evaluate the written volume as bench/crosscheck/run.sh does.
 
 usage: shadow_fill.py IN.nrrd OUT.nrrd [REACH_MM]
 """
-import re, sys
+import sys
 import numpy as np
 from scipy import ndimage
 
-
-def read(fn):
-    raw = open(fn, 'rb').read()
-    i = raw.index(b'\n\n') + 2
-    hdr = raw[:i].decode('latin1')
-    typ = re.search(r'type: (\w+)', hdr).group(1)
-    dims = [int(x) for x in re.search(r'sizes: (\d+) (\d+) (\d+)', hdr).groups()]
-    sp = [float(x) for x in re.search(r'\(([-0-9.e]+),0,0\) \(0,([-0-9.e]+),0\) \(0,0,([-0-9.e]+)\)', hdr).groups()]
-    dt = {'uchar': np.uint8, 'ushort': np.uint16, 'float': np.float32}[typ]
-    return raw[:i], np.frombuffer(raw[i:], dtype=dt).reshape(dims[::-1]), sp
-
+from nrrd_raw import read
 
 head, raw, sp = read(sys.argv[1])
 reach = float(sys.argv[3]) if len(sys.argv) > 3 else 3.0

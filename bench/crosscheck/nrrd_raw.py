@@ -1,0 +1,19 @@
+"""The cross-check's volumes as the simulator writes them (indsim.py): one attached raw NRRD
+header with axis-aligned space directions. Shared by the hand-run tools (levoy.py,
+shadow_fill.py)."""
+import re
+
+import numpy as np
+
+
+def read(fn):
+    """Returns (the header's bytes with its blank line, the samples as a (z, y, x) array, the
+    spacing x, y, z in mm)."""
+    raw = open(fn, 'rb').read()
+    i = raw.index(b'\n\n') + 2
+    hdr = raw[:i].decode('latin1')
+    typ = re.search(r'type: (\w+)', hdr).group(1)
+    dims = [int(x) for x in re.search(r'sizes: (\d+) (\d+) (\d+)', hdr).groups()]
+    sp = [float(x) for x in re.search(r'\(([-0-9.e]+),0,0\) \(0,([-0-9.e]+),0\) \(0,0,([-0-9.e]+)\)', hdr).groups()]
+    dt = {'uchar': np.uint8, 'ushort': np.uint16, 'float': np.float32}[typ]
+    return raw[:i], np.frombuffer(raw[i:], dtype=dt).reshape(dims[::-1]), sp
