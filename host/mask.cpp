@@ -1065,11 +1065,34 @@ double profile_variation(const std::vector<double>& sum, const std::vector<std::
   return tv / mean;
 }
 
-// profile_variation() of the slices across `axis` and across z, {axis's, z's}
-// (every `step`-th z-plane): one pass, sums per z-plane added in z order, so
-// the same for any thread count.
-std::pair<double, double> brightness_variation(const Volume& v, const std::vector<std::uint8_t>* scanned, int axis,
-                                               int threads, std::size_t step) {
+// How much a sector widens across the slices of an axis: the sampled count
+// per slice (slices from the first to the last with a sample), the mean of
+// the last tenth over the first tenth's or the other way round, whichever is
+// larger (1: as wide at both ends). A fan's scanned sector opens along its
+// beam and stays as wide at both ends across it.
+double sector_widening(const std::vector<std::size_t>& count) {
+  std::size_t first = 0, last = count.size();
+  while (first < count.size() && count[first] == 0) ++first;
+  while (last > first && count[last - 1] == 0) --last;
+  const std::size_t n = last - first;
+  if (n < 10) return 1.0;
+  const std::size_t k = std::max<std::size_t>(1, n / 10);
+  double a = 0, b = 0;
+  for (std::size_t i = 0; i < k; ++i) a += double(count[first + i]), b += double(count[last - 1 - i]);
+  const double lo = std::min(a, b), hi = std::max(a, b);
+  return lo > 0 ? hi / lo : std::numeric_limits<double>::infinity();
+}
+
+struct BeamProfiles {
+  double tv_axis = 0, tv_z = 0;        // profile_variation() across `axis`'s slices and z's
+  double widen_axis = 1, widen_z = 1;  // sector_widening() of the same slices
+};
+
+// profile_variation() and sector_widening() of the slices across `axis` and
+// across z (every `step`-th z-plane): one pass, sums per z-plane added in z
+// order, so the same for any thread count.
+BeamProfiles brightness_variation(const Volume& v, const std::vector<std::uint8_t>* scanned, int axis, int threads,
+                                  std::size_t step) {
   const Dims3& d = v.dims;
   const std::size_t plane = d[0] * d[1];
   const std::size_t na = d[std::size_t(axis)];  // axis 0 or 1
@@ -1109,8 +1132,12 @@ std::pair<double, double> brightness_variation(const Volume& v, const std::vecto
     if (!samples.empty()) floor = robust_minimum(std::move(samples));
   }
   const double mean = n_all ? all / double(n_all) - floor : 0;
-  return {profile_variation(as, ac, v.spacing[std::size_t(axis)], mean),
-          profile_variation(zs, zc, v.spacing[2] * double(step), mean)};
+  BeamProfiles out;
+  out.tv_axis = profile_variation(as, ac, v.spacing[std::size_t(axis)], mean);
+  out.tv_z = profile_variation(zs, zc, v.spacing[2] * double(step), mean);
+  out.widen_axis = sector_widening(ac);
+  out.widen_z = sector_widening(zc);
+  return out;
 }
 
 }  // namespace
@@ -1233,9 +1260,14 @@ int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int 
   // band, attenuation, gain drifting with depth), much less across it: when
   // the profile across z's slices varies kBeamProfileMargin as much as
   // across the winner's, and clearly more than noise, the beam stays z.
-  const auto [tv_best, tv_z] =
-      brightness_variation(v, scanned, best, threads, std::max<std::size_t>(1, plane_step));
-  if (tv_z >= kBeamProfileFloor && tv_z >= kBeamProfileMargin * tv_best) return 2;
+  const BeamProfiles prof = brightness_variation(v, scanned, best, threads, std::max<std::size_t>(1, plane_step));
+  if (prof.tv_z >= kBeamProfileFloor && prof.tv_z >= kBeamProfileMargin * prof.tv_axis) return 2;
+  // A fan's sector opens with depth along its beam: sampled data that widen
+  // from one end of z to the other (kBeamSectorWidening) and stay as wide
+  // at both ends across the winner (kBeamSectorFlat) are a fan with its
+  // beam along z, whatever the grain says (a linear scan, or a fan's
+  // winner, is not touched).
+  if (prof.widen_z >= kBeamSectorWidening && prof.widen_axis <= kBeamSectorFlat) return 2;
   return best;
 }
 

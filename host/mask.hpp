@@ -126,12 +126,18 @@ constexpr double kBeamAxisMargin = 1.1;
 // along that axis, with a total variation of at least kBeamProfileFloor of
 // the data's mean (docs/real-data.md, "The beam axis").
 constexpr double kBeamProfileMargin = 1.5, kBeamProfileFloor = 0.3;
+// ... and only when the sampled data do not widen from one end of z to the
+// other by kBeamSectorWidening while as wide at both ends across that axis
+// (within kBeamSectorFlat): a fan's sector, opening along its beam, z
+// (the ends: the first and last tenth of the slices with samples).
+constexpr double kBeamSectorWidening = 1.5, kBeamSectorFlat = 1.1;
 // The beam axis of a scan, from the data: speckle is finest along the beam,
 // so the mean squared difference between neighbours (per mm, scanned
 // nonzero samples) is largest along it. Another axis than z wins only by
 // kBeamAxisMargin over z; less is a tie, and ties go to z (the default beam).
 // Brightness varies with depth along the beam: a winner other than z whose
-// profile varies much less than z's (kBeamProfileMargin) gives z too.
+// profile varies much less than z's (kBeamProfileMargin) gives z too, and
+// so does one across which a sector that opens along z stays as wide.
 // `threads` (0: every core) does not change the result.
 // `plane_step` > 1 sums every plane_step-th z-plane only (a cheaper estimate).
 int beam_axis_of(const Volume& v, const std::vector<std::uint8_t>* scanned, int threads = 0, std::size_t plane_step = 1);

@@ -556,6 +556,34 @@ TEST(NearField, BeamAxisTiesGoToTheDefaultZ) {
 }
 
 
+TEST(NearField, AFansBeamIsTheAxisItsSectorOpensAlong) {
+  // y's grain 21 % finer than z's and the brightness flat (neither the
+  // margin nor the profile gives z), but the data are a fan's sector: zero
+  // fill outside a wedge whose apex lies 5 voxels before the first slice.
+  // Opening along z, the sampled data widen from the top to the bottom of z
+  // and stay as wide at both ends of y: the beam is z
+  // (kBeamSectorWidening). The same wedge opening along y keeps y: there z
+  // does not widen. A linear scan (no fill) keeps y too.
+  for (const int opens : {2, 1, -1}) {
+    Volume v({30, 30, 30}, {0.5, 0.5, 0.55}, ScalarType::UInt8);
+    std::mt19937_64 rng(test::seed() + 13);
+    std::uniform_real_distribution<double> U(0.6, 1.4);
+    for (std::size_t z = 0; z < 30; ++z)
+      for (std::size_t y = 0; y < 30; ++y) {
+        double f = 1;
+        for (std::size_t x = 0; x < 30; ++x) {
+          if (x % 3 == 0) f = U(rng);
+          const double depth = opens == 2 ? double(z) : double(y);
+          const bool inside = opens < 0 || std::fabs(double(x) - 14.5) <= 0.45 * (depth + 5.0);
+          v.at(x, y, z) = inside ? float(std::round(120 * f)) : 0.0f;
+        }
+      }
+    EXPECT_EQ(beam_axis_of(v, nullptr), opens == 2 ? 2 : 1)
+        << (opens < 0 ? std::string("no sector") : std::string("a sector opening along ") + "xyz"[opens]);
+  }
+}
+
+
 TEST(NearField, ABandUnderPartOfTheProbeIsFoundOnItsOwnLines) {
   // The cap of a volume probe, as the volume's top face cuts a fan: the
   // layered band (skin, fat, muscle; 7 mm) lies under the lines within 7 mm

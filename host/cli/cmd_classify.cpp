@@ -1024,7 +1024,7 @@ void add_classify_command(CLI::App& app, Action& action) {
   add_beam_axis_option(sub, o->beam_axis,
                        "The axis the beam runs along, depth growing with the index (the transducer on that axis's "
                        "first face): auto takes the data's own (speckle finest along the beam, brightness changing "
-                       "with depth; docs/real-data.md, \"The beam axis\"); the near field, the mask's dark-fluid test, "
+                       "with depth, a fan's sector opening along it; docs/real-data.md, \"The beam axis\"); the near field, the mask's dark-fluid test, "
                        "the depth clip, the isovalue field and the shadow walls follow it");
   sub->add_option("--shadow-walls", o->shadow_walls,
                   "remove: the edges of acoustic shadows' sides (across the beam, a shadow on their dark side: dark, "
