@@ -41,6 +41,13 @@ void check_variational_params(const VariationalParams& p) {
   if (!(p.sharpen_lambda >= 0 && p.sharpen_lambda <= 1e6)) throw InputError("--sharpen-lambda must be in [0, 1e6]");
   if (!(p.sharpen_barrier >= 0.05 && p.sharpen_barrier <= 1)) throw InputError("--sharpen-barrier must be in [0.05, 1]");
   if (!(p.max_gain >= 0 && p.max_gain <= 100)) throw InputError("--max-gain must be in [0, 100]");
+  const CrestParams& c = p.crest;
+  if (!(c.ridge >= 0 && c.ridge <= 1)) throw InputError("--echo-crest must be in [0, 1]");
+  if (!(c.quantile > 0 && c.quantile < 1) || !(c.reach_mm > 0 && c.reach_mm <= 100) ||
+      !(c.above_mm > 0 && c.above_mm <= 100) || !(c.pad_mm >= 0 && c.pad_mm <= 100) ||
+      !(c.min_edge >= 0 && c.min_edge <= 100) || !(c.lift >= 0 && c.lift <= 100) || c.axis < 0 || c.axis > 2)
+    throw InputError("the echo-crest rule's quantile must be in (0, 1), its lengths in (0, 100] mm, its edge share and lift in "
+                     "[0, 100] and its axis x, y or z");
 }
 
 void check_solver_params(const SolverParams& sp) {

@@ -294,6 +294,21 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
     Runtime::set_args(ku, dv, dvs, grad2, fixed_, dT_, mu_, rho_, coef_, b_, resolved_.coeffs(), grid_);
     rt.enqueue_3d(ku, grid_);
   }
+  const CrestParams& cp = p.crest;
+  if (cp.ridge > 0 && resolved_.thickness_mm > 0) {
+    // Shells on a bright echo's crest (host/crest.hpp): v~ and |grad v| over
+    // each ridge replaced, then mu, rho, the diagonal and b re-derived.
+    std::vector<float> vs = download<float>(rt, dvs, n), g2 = download<float>(rt, grad2, n);
+    std::vector<std::uint8_t> fx = download<std::uint8_t>(rt, fixed_, n);
+    crest_ = crest_shells(vs, g2, fx, v.dims, v.spacing, resolved_.v_iso, resolved_.shell_shift_mm, resolved_.g_ref, cp);
+    if (crest_.voxels > 0) {
+      rt.queue().enqueueWriteBuffer(dvs, CL_TRUE, 0, bytes, vs.data());
+      rt.queue().enqueueWriteBuffer(grad2, CL_TRUE, 0, bytes, g2.data());
+      cl::Kernel ku = rt.kernel(kSystem, "system_update_point", density_options(resolved_.coeffs()));
+      Runtime::set_args(ku, dv, dvs, grad2, fixed_, dT_, mu_, rho_, coef_, b_, resolved_.coeffs(), grid_);
+      rt.enqueue_3d(ku, grid_);
+    }
+  }
   sources_ = {dv, dvs, grad2};
 }
 

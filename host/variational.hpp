@@ -12,6 +12,7 @@
 
 #include "cl_runtime.hpp"
 #include "stencil.h"
+#include "crest.hpp"
 #include "volume.hpp"
 
 namespace softshell {
@@ -102,6 +103,10 @@ struct VariationalParams {
   // strongest edges that remain); Data, the data's own (unweighted).
   enum class EdgeReference { Cue, Weighted, Data };
   EdgeReference edge_reference = EdgeReference::Cue;
+  // Shells on a bright echo's crest (host/crest.hpp; docs/parameters.md,
+  // "The echo's crest"): F_iso re-centred on the crest of ridges along the
+  // beam (crest.axis). ridge 0: off (the default; --literal turns it off).
+  CrestParams crest{0.0};
   ClassifyCoeffs coeffs() const;
   // The paper's functional exactly (no lowpassed |grad v|, no kappa, no
   // shell terms) with the weights chosen for it by the earlier study.
@@ -212,6 +217,7 @@ class DeviceSystem {
   // The parameters in force on a volume-built level: g_ref resolved from the
   // data when it was 0, thickness_mm raised to its voxel floor.
   const VariationalParams& resolved() const { return resolved_; }
+  const CrestReport& crest() const { return crest_; }
   // On a coarse level made by coarsen(fine): re-restricts mu and rho after
   // fine.update_point() (or the fine level's own restrict_point) and updates
   // the diagonal and b to match.
@@ -295,6 +301,7 @@ class DeviceSystem {
   std::array<cl::Buffer, 6> T_;
   std::array<cl::Buffer, 3> sources_;  // v, v~, |grad v|^2 of a volume-built level (for update_point)
   VariationalParams resolved_;
+  CrestReport crest_;  // the crest rule's count (host/crest.hpp)
   Vec3d spacing_{1, 1, 1};  // the volume's spacing, in double (the thickness floor)
   GsOrder gs_order_ = GsOrder::Points;
   bool strided_dot_ = false;
@@ -430,10 +437,15 @@ class VariationalClassifier {
 
   const VariationalParams& params() const { return params_; }
   const VariationalParams& resolved() const { return sys_->resolved(); }
+  // What the echo-crest rule re-centred (VariationalParams::crest).
+  const CrestReport& crest() const { return sys_->crest(); }
   const IntensityMap& intensity_map() const { return map_; }
   // True when `p` keeps beta, kappa and both lowpass sigmas: update() can
   // then re-target this classifier; otherwise build a new one.
   bool can_update(const VariationalParams& p) const;
+  // With the echo-crest rule on (either side): the rule's parameters, the
+  // isovalue, the thickness and the shell shift unchanged.
+  bool same_crest(const VariationalParams& p) const;
   // Throws std::invalid_argument unless can_update(p).
   void update(const VariationalParams& p);
   // The opacity u, clamped to [0, 1], with the volume's geometry: from
@@ -511,6 +523,7 @@ class VariationalClassifier {
 struct ClassifyTiming {
   double setup = 0, solve = 0;  // seconds: densities, assembly, hierarchy; multigrid iterations
   VariationalParams resolved;   // the parameters in force (g_ref from the data, the thickness floor)
+  CrestReport crest;            // what the echo-crest rule re-centred (VariationalParams::crest)
 };
 Volume classify_variational(Runtime& rt, const Volume& v, const VariationalParams& params, const SolverParams& sp,
                             SolveReport* report = nullptr, const Volume* init = nullptr,

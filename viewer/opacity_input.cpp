@@ -144,6 +144,9 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
     in.params.grad_sigma_mm = grad_choice->sigma_mm;
   }
   in.params.v_iso = in.data.intensity_map().to_unit(in.iso);
+  // Shells on bright echoes' crests, as classify's default (host/crest.hpp);
+  // not with the paper's functional.
+  if (!(weights && weights->literal())) in.params.crest.ridge = kEchoCrestRidge, in.params.crest.axis = nf.axis;
   // The bone cue: classify's default is off (docs/parameters.md says why); a preset may set it.
   in.beam_axis = nf.axis;
   in.bone_cue = bone_cue;
@@ -178,6 +181,8 @@ OpacityInput load_opacity(Runtime& rt, const std::string& path, InputKind kind, 
        << (in.report.residuals.empty() ? 0.0 : in.report.residuals.back())
        << (in.report.converged ? "" : " (NOT converged)") << ", bone cue " << (br.on ? "on" : "off")
        << ", shadow walls " << (in.walls ? "weighted down" : "kept");
+  if (in.params.crest.ridge > 0 && in.classifier)
+    note << ", " << in.classifier->crest().crests << " echo crests along " << "xyz"[in.params.crest.axis];
   if (grad_choice)
     note << ", gradient lowpass " << std::fixed << std::setprecision(2) << grad_choice->sigma_mm << " mm ("
          << (grad_choice->echoes ? "from the speckle" : "the strong edges are no echoes") << ")";

@@ -227,6 +227,7 @@ VariationalParams variational_params(const ClassifyOptions& o) {
     if (!given("--delta")) p.delta = lit.delta;
     if (!given("--epsilon")) p.epsilon = lit.epsilon;
     p.grad_sigma_mm = 0, p.kappa = 0, p.thickness_mm = 0, p.edge_share = 0, p.sharpen_iterations = 0, p.max_gain = 0;
+    p.crest.ridge = 0;
   }
   check_variational_params(p);
   return p;
@@ -395,6 +396,18 @@ int run_variational(const ClassifyOptions& o, Runtime& rt, const Volume& in, dou
                 << ", reference edge gradient " << std::setprecision(4) << timing.resolved.g_ref
                 << " per mm (" << edge_share_text(timing.resolved, p) << "), edge power "
                 << std::setprecision(3) << p.edge_power << ", shift " << timing.resolved.shell_shift_mm << " mm\n";
+    if (!p.literal()) {
+      std::cout << "  crest    ";
+      if (!(p.crest.ridge > 0)) {
+        std::cout << "echo crest off (--echo-crest 0)\n";
+      } else {
+        const CrestReport& cr = timing.crest;
+        std::cout << "echo crest " << cr.crests << " crests along " << "xyz"[p.crest.axis] << ", " << cr.voxels
+                  << " voxels re-centred (ridge " << std::setprecision(2) << p.crest.ridge << ", crests above "
+                  << std::setprecision(3) << cr.threshold << " normalised, the " << std::setprecision(1)
+                  << 100 * p.crest.quantile << "th percentile)" << std::setprecision(3) << "\n";
+      }
+    }
     std::cout << "  solve    " << report.levels << " levels, " << report.cycles << (sp.krylov ? " PCG iterations" : " V-cycles")
               << ", relative residual " << std::scientific << std::setprecision(2) << report.residuals.back()
               << std::fixed << std::setprecision(3) << '\n'
@@ -940,6 +953,8 @@ int run_classify(const ClassifyOptions& given_options) {
         << " % fall, " << 100 * grad_choice->rising << " % rise along the beam; --echo-underside keep to draw it)";
     cue_text += t.str();
   }
+  // Shells on a bright echo's crest (host/crest.hpp): along the beam.
+  if (variational && !o.literal && o.vp.crest.ridge > 0) o.vp.crest.axis = beam_axis_now();
   step.reset();
   return o.method == "levoy" ? run_levoy(o, rt, in, iso, iso_text, iso_warning, mask, t0)
                              : run_variational(o, rt, in, iso, iso_text, iso_warning, mask, t0, std::move(cue),
@@ -950,6 +965,7 @@ int run_classify(const ClassifyOptions& given_options) {
 
 void add_classify_command(CLI::App& app, Action& action) {
   auto o = std::make_shared<ClassifyOptions>();
+  o->vp.crest.ridge = kEchoCrestRidge;  // on by default (host/crest.hpp)
   auto* sub = app.add_subcommand("classify", "Opacity classification of a volume (float opacity in [0, 1])");
   sub->add_option("IN", o->inputs,
                   "Input volume; or a 3D+t sequence: a 4-D NRRD, or several 3-D files of one grid (names, or a quoted "
@@ -968,6 +984,13 @@ void add_classify_command(CLI::App& app, Action& action) {
                   "weights alpha beta gamma omega delta epsilon kappa are taken from it unless given here; its "
                   "rendering keys are ignored; an unknown key or a bad value is an error")
       ->type_name("FILE");
+  sub->add_option("--echo-crest", o->vp.crest.ridge,
+                  "Shells on bright echoes' crests (docs/parameters.md, \"The echo's crest\"): where an echo among "
+                  "the brightest 3 % rises from above by at least this share of its fall into a shadow that lasts to "
+                  "the end of the beam (a bone seen from above), the isovalue term is centred on its crest rather "
+                  "than on its lower flank; 0 turns it off; the default was chosen on the cross-check")
+      ->capture_default_str()
+      ->check(real_range(0, 1));
   sub->add_option("--iso-fraction", o->iso_fraction,
                   "The local rule: where between a boundary's dark trough (0) and bright crest (1) its isovalue lies")
       ->capture_default_str()
