@@ -470,6 +470,10 @@ bool run_classify(const std::uint8_t* data, std::size_t size) {
         for (float x : *w)
           if (!(x >= 0.0f && x <= 1.0f)) fail("shadow wall weight outside [0, 1]");
         set_edge_weights(p, nullptr, std::move(w));
+        // classify's default: shells on bright echoes' crests (host/crest.hpp),
+        // or a fuzzed ridge (byte 30).
+        p.crest.ridge = b[30] < 128 ? kEchoCrestRidge : param(b[30], 0, 1);
+        p.crest.axis = 2;
       }
       SolveReport rep;
       const Volume u = classify_variational(runtime(), v, p, sp, &rep, nullptr, m);

@@ -51,7 +51,7 @@ bool run_dicom(const std::uint8_t* data, std::size_t size);
 // mask rule, the near-field removal, the isovalue (a value, or auto by the
 // local rule with or without its field, the echo ridge or the edge) and
 // the parameters (the shell functional's, sharpening included, or the
-// paper's functional; small volumes' length scales); the rest are the samples. Runs what `softshell
+// paper's functional; small volumes' length scales; the echo-crest ridge); the rest are the samples. Runs what `softshell
 // classify` runs (checks, mask, near field, automatic isovalue, unscanned
 // fill, levelling by the isovalue field, the variational or Levoy
 // classifier with at most 20 iterations) on one OpenCL runtime per
