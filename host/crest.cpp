@@ -35,9 +35,15 @@ CrestReport crest_shells(std::vector<float>& vs, std::vector<float>& grad2, cons
   const std::size_t stride[3] = {1, dims[0], dims[0] * dims[1]};
   const std::size_t len = dims[std::size_t(a)], lines = n / std::max<std::size_t>(len, 1);
   const double h = spacing[std::size_t(a)];
-  const int reach = std::max(1, int(std::floor(p.reach_mm / h + 1e-9)));
-  const int above = std::max(1, int(std::lround(p.above_mm / h)));
-  const int pad = std::max(0, int(std::lround(p.pad_mm / h)));
+  if (!(h > 0) || !std::isfinite(h)) throw std::invalid_argument("crest_shells: the spacing along the beam must be positive");
+  // In samples, at most the line's length (a tiny spacing must not overflow an int).
+  const auto samples = [&](double mm, bool round) {
+    const double k = round ? std::round(mm / h) : std::floor(mm / h + 1e-9);
+    return int(std::min(k, double(len)));
+  };
+  const int reach = std::max(1, samples(p.reach_mm, false));
+  const int above = std::max(1, samples(p.above_mm, true));
+  const int pad = std::max(0, samples(p.pad_mm, true));
   const float iso = float(v_iso), min_g = float(p.min_edge * g_ref);
   const int parts = host_threads(threads);
   std::vector<std::size_t> crests(std::size_t(range_count(lines, parts)), 0), voxels(crests.size(), 0);

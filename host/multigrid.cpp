@@ -579,21 +579,20 @@ bool VariationalClassifier::can_update(const VariationalParams& p) const {
          p.edge_weight == params_.edge_weight && p.edge_reference == params_.edge_reference && same_crest(p);
 }
 
-// The echo-crest rule rewrote the lowpassed data and its gradient once, for
-// the isovalue, the thickness and the shell shift it was built with: with
-// the rule on, those must stay too.
+// The echo-crest rule was built with its parameters; a new isovalue or
+// shell shift re-applies it (DeviceSystem::update_point), other parameters
+// need a new setup.
 bool VariationalClassifier::same_crest(const VariationalParams& p) const {
   const CrestParams &a = p.crest, &b = params_.crest;
   if (!(a.ridge > 0) && !(b.ridge > 0)) return true;
   return a.ridge == b.ridge && a.quantile == b.quantile && a.reach_mm == b.reach_mm && a.above_mm == b.above_mm &&
          a.pad_mm == b.pad_mm && a.min_edge == b.min_edge && a.shadow == b.shadow && a.lift == b.lift &&
-         a.axis == b.axis && p.v_iso == params_.v_iso &&
-         p.thickness_mm == params_.thickness_mm && p.shell_shift_mm == params_.shell_shift_mm;
+         a.axis == b.axis;
 }
 
 void VariationalClassifier::update(const VariationalParams& p) {
   if (!can_update(p))
-    throw std::invalid_argument("VariationalClassifier::update: beta, kappa, the lowpass sigmas, the edge reference, the edge weight and (with the echo-crest rule) the isovalue and shell need a new setup");
+    throw std::invalid_argument("VariationalClassifier::update: beta, kappa, the lowpass sigmas, the edge reference, the edge weight and the echo-crest rule's parameters need a new setup");
   const auto t0 = std::chrono::steady_clock::now();
   sys_->update_point(p);
   mg_->update_point();

@@ -294,22 +294,38 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
     Runtime::set_args(ku, dv, dvs, grad2, fixed_, dT_, mu_, rho_, coef_, b_, resolved_.coeffs(), grid_);
     rt.enqueue_3d(ku, grid_);
   }
-  const CrestParams& cp = p.crest;
-  if (cp.ridge > 0 && resolved_.thickness_mm > 0) {
+  sources_ = {dv, dvs, grad2};
+  if (p.crest.ridge > 0 && resolved_.thickness_mm > 0) {
     // Shells on a bright echo's crest (host/crest.hpp): v~ and |grad v| over
     // each ridge replaced, then mu, rho, the diagonal and b re-derived.
-    std::vector<float> vs = download<float>(rt, dvs, n), g2 = download<float>(rt, grad2, n);
-    std::vector<std::uint8_t> fx = download<std::uint8_t>(rt, fixed_, n);
-    crest_ = crest_shells(vs, g2, fx, v.dims, v.spacing, resolved_.v_iso, resolved_.shell_shift_mm, resolved_.g_ref, cp);
-    if (crest_.voxels > 0) {
-      rt.queue().enqueueWriteBuffer(dvs, CL_TRUE, 0, bytes, vs.data());
-      rt.queue().enqueueWriteBuffer(grad2, CL_TRUE, 0, bytes, g2.data());
+    crest_params_ = p.crest, dims_ = v.dims;
+    if (apply_crest(resolved_.v_iso, resolved_.shell_shift_mm)) {
       cl::Kernel ku = rt.kernel(kSystem, "system_update_point", density_options(resolved_.coeffs()));
       Runtime::set_args(ku, dv, dvs, grad2, fixed_, dT_, mu_, rho_, coef_, b_, resolved_.coeffs(), grid_);
       rt.enqueue_3d(ku, grid_);
     }
   }
-  sources_ = {dv, dvs, grad2};
+}
+
+bool DeviceSystem::apply_crest(double v_iso, double shift_mm) {
+  // The data as they were before the rule: the voxels it changed last time
+  // restored from their kept values, so the result is a fresh build's.
+  const std::size_t n = voxels(), bytes = n * sizeof(float);
+  std::vector<float> vs = download<float>(rt_, sources_[1], n), g2 = download<float>(rt_, sources_[2], n);
+  const bool had = !crest_index_.empty();
+  for (std::size_t k = 0; k < crest_index_.size(); ++k)
+    vs[crest_index_[k]] = crest_vs_[k], g2[crest_index_[k]] = crest_g2_[k];
+  const std::vector<float> vs0 = vs, g20 = g2;
+  const std::vector<std::uint8_t> fx = download<std::uint8_t>(rt_, fixed_, n);
+  crest_ = crest_shells(vs, g2, fx, dims_, spacing_, v_iso, shift_mm, resolved_.g_ref, crest_params_);
+  crest_iso_ = v_iso, crest_shift_ = shift_mm;
+  crest_index_.clear(), crest_vs_.clear(), crest_g2_.clear();
+  for (std::size_t i = 0; i < n; ++i)
+    if (vs[i] != vs0[i] || g2[i] != g20[i]) crest_index_.push_back(i), crest_vs_.push_back(vs0[i]), crest_g2_.push_back(g20[i]);
+  if (!had && crest_index_.empty()) return false;
+  rt_.queue().enqueueWriteBuffer(sources_[1], CL_TRUE, 0, bytes, vs.data());
+  rt_.queue().enqueueWriteBuffer(sources_[2], CL_TRUE, 0, bytes, g2.data());
+  return true;
 }
 
 void DeviceSystem::update_point(const VariationalParams& p) {
@@ -319,6 +335,10 @@ void DeviceSystem::update_point(const VariationalParams& p) {
   VariationalParams r = p;
   r.g_ref = resolved_.g_ref, r.g_ref_ratio = resolved_.g_ref_ratio;
   r.thickness_mm = p.effective_thickness_mm(spacing_);
+  // The echo-crest rule for the new isovalue and shell shift, on the data as
+  // they were before it (apply_crest).
+  if (crest_params_.ridge > 0 && (r.v_iso != crest_iso_ || r.shell_shift_mm != crest_shift_))
+    apply_crest(r.v_iso, r.shell_shift_mm);
   cl::Kernel k = rt_.kernel(kSystem, "system_update_point", density_options(r.coeffs()));
   Runtime::set_args(k, sources_[0], sources_[1], sources_[2], fixed_, dT_, mu_, rho_, coef_, b_, r.coeffs(), grid_);
   resolved_ = r;

@@ -302,6 +302,17 @@ class DeviceSystem {
   std::array<cl::Buffer, 3> sources_;  // v, v~, |grad v|^2 of a volume-built level (for update_point)
   VariationalParams resolved_;
   CrestReport crest_;  // the crest rule's count (host/crest.hpp)
+  // The echo-crest rule as built (ridge 0: off), the isovalue and shell
+  // shift it was last applied for, and the voxels it changed with their
+  // values before it (update_point re-applies it to those).
+  CrestParams crest_params_{0.0};
+  double crest_iso_ = 0, crest_shift_ = 0;
+  Dims3 dims_{0, 0, 0};
+  std::vector<std::size_t> crest_index_;
+  std::vector<float> crest_vs_, crest_g2_;
+  // Applies the rule to v~ and |grad v|^2 (sources_) for this isovalue and
+  // shift; false when nothing changed on the device.
+  bool apply_crest(double v_iso, double shift_mm);
   Vec3d spacing_{1, 1, 1};  // the volume's spacing, in double (the thickness floor)
   GsOrder gs_order_ = GsOrder::Points;
   bool strided_dot_ = false;
@@ -443,8 +454,8 @@ class VariationalClassifier {
   // True when `p` keeps beta, kappa and both lowpass sigmas: update() can
   // then re-target this classifier; otherwise build a new one.
   bool can_update(const VariationalParams& p) const;
-  // With the echo-crest rule on (either side): the rule's parameters, the
-  // isovalue, the thickness and the shell shift unchanged.
+  // With the echo-crest rule on (either side): the rule's parameters
+  // unchanged (a new isovalue or shell shift re-applies it).
   bool same_crest(const VariationalParams& p) const;
   // Throws std::invalid_argument unless can_update(p).
   void update(const VariationalParams& p);
