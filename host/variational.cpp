@@ -281,29 +281,31 @@ DeviceSystem::DeviceSystem(Runtime& rt, const Volume& v, const VariationalParams
                     T_[3], T_[4], T_[5], fixed_, grad2, resolved_.coeffs(), grid_);
   rt.enqueue_3d(k, grid_);
   assemble();
+  // mu, rho, the diagonal and b re-derived once, by the update kernel, when
+  // the edge weights or the crest rule below changed |grad v| or v~ (T and
+  // the couplings do not depend on them).
+  bool changed = false;
   if (p.edge_weight) {
-    // The bone cue: |grad v| weighted per voxel (grad2 by w^2), then mu, rho,
-    // the diagonal and b re-derived from it by the update kernel (T and the
-    // couplings do not depend on |grad v|). g_ref stays the data's own.
+    // The bone cue and the shadow walls: |grad v| weighted per voxel (grad2
+    // by w^2). g_ref stays the data's own.
     if (p.edge_weight->size() != n) throw std::invalid_argument("edge weight size differs from the volume");
     std::vector<float> g2 = download<float>(rt, grad2, n);
     const std::vector<float>& w = *p.edge_weight;
     for (std::size_t i = 0; i < n; ++i) g2[i] *= w[i] * w[i];
     rt.queue().enqueueWriteBuffer(grad2, CL_TRUE, 0, bytes, g2.data());
-    cl::Kernel ku = rt.kernel(kSystem, "system_update_point", density_options(resolved_.coeffs()));
-    Runtime::set_args(ku, dv, dvs, grad2, fixed_, dT_, mu_, rho_, coef_, b_, resolved_.coeffs(), grid_);
-    rt.enqueue_3d(ku, grid_);
+    changed = true;
   }
   sources_ = {dv, dvs, grad2};
   if (p.crest.ridge > 0 && resolved_.thickness_mm > 0) {
     // Shells on a bright echo's crest (host/crest.hpp): v~ and |grad v| over
-    // each ridge replaced, then mu, rho, the diagonal and b re-derived.
+    // each ridge replaced.
     crest_params_ = p.crest, dims_ = v.dims;
-    if (apply_crest(resolved_.v_iso, resolved_.shell_shift_mm)) {
-      cl::Kernel ku = rt.kernel(kSystem, "system_update_point", density_options(resolved_.coeffs()));
-      Runtime::set_args(ku, dv, dvs, grad2, fixed_, dT_, mu_, rho_, coef_, b_, resolved_.coeffs(), grid_);
-      rt.enqueue_3d(ku, grid_);
-    }
+    changed = apply_crest(resolved_.v_iso, resolved_.shell_shift_mm) || changed;
+  }
+  if (changed) {
+    cl::Kernel ku = rt.kernel(kSystem, "system_update_point", density_options(resolved_.coeffs()));
+    Runtime::set_args(ku, dv, dvs, grad2, fixed_, dT_, mu_, rho_, coef_, b_, resolved_.coeffs(), grid_);
+    rt.enqueue_3d(ku, grid_);
   }
 }
 
