@@ -167,6 +167,59 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
     const double len = beam_unnormalised(c, b);
     for (int k = 0; k < 3; ++k) b[k] /= len;
   };
+  // A shadow that lasts: a scanned voxel under the level from which every
+  // scanned voxel down its beam to the end is under it too (unscanned
+  // voxels pass it on). Such a shadow starts lasting_gap_mm under its
+  // occluder instead of gap_mm (a cyst has its far wall and the tissue
+  // behind it below; a bone, its shadow). Walked up the beams from the last
+  // plane along the axis, one state per voxel of the plane: a voxel's
+  // successor is the nearest voxel of the plane below on its beam (in a fan
+  // from the apex; else straight down the axis).
+  std::vector<std::uint8_t> lasting;
+  const bool short_gap = params.lasting_gap_mm < params.gap_mm;
+  if (short_gap) {
+    lasting.assign(n, 0);
+    const std::size_t la = ax == 0 ? 1 : 0, lb = ax == 2 ? 1 : 2;  // the plane's axes
+    const std::size_t planes = d[std::size_t(ax)], per_plane = n / planes;
+    std::vector<std::uint8_t> next(per_plane, 1), cur(per_plane, 1);
+    std::vector<long> below[3];
+    for (const std::size_t k : {la, lb}) below[k].resize(d[k]);
+    for (std::size_t depth = planes; depth-- > 0;) {
+      const double dd = double(depth) - fan.apex[ax];
+      const bool last = depth + 1 == planes;
+      for (const std::size_t k : {la, lb})
+        for (std::size_t t = 0; t < d[k]; ++t) {
+          long at = long(t);
+          if (!last && fan.found && dd > 1.0 && fan.spreads[k]) {
+            at = round_half_away(fan.apex[k] + (double(t) - fan.apex[k]) * (dd + 1.0) / dd);
+            if (at < 0 || at >= long(d[k])) at = -1;
+          }
+          below[k][t] = at;
+        }
+      parallel_ranges(d[lb], per_plane >= 65536 ? threads : 1, [&](std::size_t q0, std::size_t q1) {
+        for (std::size_t q = q0; q < q1; ++q)
+          for (std::size_t p = 0; p < d[la]; ++p) {
+            std::size_t c[3];
+            c[ax] = depth, c[la] = p, c[lb] = q;
+            const std::size_t i = c[0] * stride[0] + c[1] * stride[1] + c[2] * stride[2];
+            // Past the end of the beam (the last plane, or off the sides): dark.
+            std::uint8_t after = 1;
+            if (!last) {
+              const long pa = below[la][p], pb = below[lb][q];
+              if (pa >= 0 && pb >= 0) after = next[std::size_t(pa) + d[la] * std::size_t(pb)];
+            }
+            const std::size_t cell = p + d[la] * q;
+            if (!is_scanned(i)) {
+              cur[cell] = after;
+              continue;
+            }
+            cur[cell] = lasting[i] = after && vs.data[i] < level ? 1 : 0;
+          }
+      });
+      next.swap(cur);
+    }
+  }
+  const auto gap_for = [&](std::size_t i) { return short_gap && lasting[i] ? params.lasting_gap_mm : params.gap_mm; };
   if (fan.found) {
     // Down each beam from the apex, plane by plane along the axis: a voxel's
     // predecessor is the nearest voxel of the plane above on its beam, and a
@@ -227,7 +280,7 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
             if (vs.data[i] > level) {
               if (double(long(depth) - top) * along() >= params.fan_skip_mm) cur[cell] = long(depth);
             } else if (up >= 0 && vs.data[i] < level) {
-              if (double(long(depth) - up) * along() >= params.gap_mm) shadow[i] = 1.0f;
+              if (double(long(depth) - up) * along() >= gap_for(i)) shadow[i] = 1.0f;
             }
           }
       });
@@ -243,7 +296,7 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
       if (!is_scanned(i)) return;
       if (vs.data[i] > level) last_bright[line] = long(depth);
       else if (last_bright[line] >= 0 && vs.data[i] < level &&
-               double(long(depth) - last_bright[line]) * h_ax >= params.gap_mm)
+               double(long(depth) - last_bright[line]) * h_ax >= gap_for(i))
         shadow[i] = 1.0f;
     };
     if (ax == 2) {
@@ -440,7 +493,7 @@ ShadowWallParams shadow_wall_params(const VariationalParams& p, int axis) {
   const double f = p.sigma_mm / VariationalParams{}.sigma_mm;
   w.axis = axis;
   w.sigma_mm = w.grad_sigma_mm = p.grad_sigma_mm > 0 ? p.grad_sigma_mm : p.sigma_mm;
-  w.reach_mm *= f, w.smooth_mm *= f, w.gap_mm *= f, w.fan_skip_mm *= f, w.underside_mm *= f;
+  w.reach_mm *= f, w.smooth_mm *= f, w.gap_mm *= f, w.lasting_gap_mm *= f, w.fan_skip_mm *= f, w.underside_mm *= f;
   return w;
 }
 

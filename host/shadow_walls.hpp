@@ -34,6 +34,12 @@ struct ShadowWallParams {
   double reach_mm = 1.5;       // the dark side is probed this far down the gradient
   double smooth_mm = 0.5;      // the wall indicator's lowpass before the weight is taken
   double gap_mm = 6.0;         // shadow only this far below the deepest bright voxel above
+  // ... or this far, where the shadow lasts: its beam stays under the
+  // isovalue from the voxel to the end (in a fan along the fan's beams),
+  // as under a bone; a cyst's inside has its far wall below. Chosen on the
+  // cross-check's seeds 1-12 (docs/parameters.md, "A shadow that lasts").
+  // At least gap_mm: the rule off (the shadow from gap_mm everywhere).
+  double lasting_gap_mm = 3.0;
   // The bright side at most this far under the isovalue by the gradient
   // (its value above iso - bright_mm |grad v|). 0 (the default): above the
   // isovalue. Half the shell (1 mm) was tried and not kept
