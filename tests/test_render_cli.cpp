@@ -6,6 +6,7 @@
 #include <array>
 #include <cmath>
 #include <cstdlib>
+#include <memory>
 #include <random>
 
 #include "cli_fixture.hpp"
@@ -431,12 +432,15 @@ TEST_F(RenderCli, ViewerReSolveUpdatesTheClassifierInPlaceForAnIsoChange) {
   viewer::OpacityInput input = viewer::load_opacity(runtime(), in, viewer::InputKind::Auto, "auto");
   ASSERT_TRUE(input.classified);
   ASSERT_TRUE(input.classifier);
-  const VariationalClassifier* first = input.classifier.get();
+  // Held weakly: a rebuild frees the first classifier (the weak pointer
+  // expires), even where the new one lands at the freed one's address.
+  const std::weak_ptr<VariationalClassifier> first = input.classifier;
   VariationalParams p = input.params;
   p.v_iso *= 1.05;
   SolveReport warm, cold, ref;
   const Volume uw = viewer::reclassify(runtime(), input, p, nullptr, &warm);
-  EXPECT_EQ(input.classifier.get(), first);
+  ASSERT_FALSE(first.expired()) << "the iso re-solve built a new classifier";
+  EXPECT_EQ(input.classifier, first.lock());
   const std::vector<std::uint8_t>* mask = input.mask.empty() ? nullptr : &input.mask;
   const Volume uc = classify_variational(runtime(), input.data, p, SolverParams{}, &cold, nullptr, mask);
   SolverParams converged;
@@ -450,6 +454,7 @@ TEST_F(RenderCli, ViewerReSolveUpdatesTheClassifierInPlaceForAnIsoChange) {
   EXPECT_TRUE(warm.converged);
   EXPECT_NE(input.classifier.get(), nullptr);
   EXPECT_TRUE(input.classifier->params().beta == p.beta);
+  EXPECT_TRUE(first.expired()) << "a new beta needs a new classifier";
 }
 
 
