@@ -12,7 +12,7 @@ namespace softshell {
 
 CrestReport crest_shells(std::vector<float>& vs, std::vector<float>& grad2, const std::vector<std::uint8_t>& fixed,
                          const Dims3& dims, const Vec3d& spacing, double v_iso, double shift_mm, double g_ref,
-                         const CrestParams& p, int threads) {
+                         const CrestParams& p, int threads, CrestChanges* changed) {
   const std::size_t n = dims[0] * dims[1] * dims[2];
   if (vs.size() != n || grad2.size() != n || fixed.size() != n)
     throw std::invalid_argument("crest_shells: the volumes' sizes differ from the grid");
@@ -47,6 +47,7 @@ CrestReport crest_shells(std::vector<float>& vs, std::vector<float>& grad2, cons
   const float iso = float(v_iso), min_g = float(p.min_edge * g_ref);
   const int parts = host_threads(threads);
   std::vector<std::size_t> crests(std::size_t(range_count(lines, parts)), 0), voxels(crests.size(), 0);
+  std::vector<CrestChanges> part_changes(changed ? crests.size() : 0);
   parallel_ranges_indexed(lines, parts, [&](int part, std::size_t begin, std::size_t end) {
     std::vector<float> lv(len), lg(len), nv(len), ng(len), best(len);
     std::vector<std::uint8_t> lf(len);
@@ -98,12 +99,26 @@ CrestReport crest_shells(std::vector<float>& vs, std::vector<float>& grad2, cons
       if (!any) continue;
       for (std::size_t i = 0; i < len; ++i)
         if (best[i] < std::numeric_limits<float>::infinity()) {
-          vs[base + i * s] = nv[i], grad2[base + i * s] = ng[i] * ng[i];
+          const std::size_t at = base + i * s;
+          if (changed) {
+            CrestChanges& c = part_changes[std::size_t(part)];
+            c.index.push_back(at), c.vs.push_back(vs[at]), c.grad2.push_back(grad2[at]);
+          }
+          vs[at] = nv[i], grad2[at] = ng[i] * ng[i];
           ++voxels[std::size_t(part)];
         }
     }
   });
   for (std::size_t i = 0; i < crests.size(); ++i) rep.crests += crests[i], rep.voxels += voxels[i];
+  if (changed) {
+    *changed = {};
+    changed->index.reserve(rep.voxels), changed->vs.reserve(rep.voxels), changed->grad2.reserve(rep.voxels);
+    for (const CrestChanges& c : part_changes) {
+      changed->index.insert(changed->index.end(), c.index.begin(), c.index.end());
+      changed->vs.insert(changed->vs.end(), c.vs.begin(), c.vs.end());
+      changed->grad2.insert(changed->grad2.end(), c.grad2.begin(), c.grad2.end());
+    }
+  }
   return rep;
 }
 

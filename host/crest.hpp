@@ -58,8 +58,16 @@ struct CrestReport {
 // with d the signed distance (mm) from the crest along the beam and G the
 // fall's steepest |grad v|. threads: host threads (0: every core); the
 // result is the same for any count.
+//
+// changed (optional): the voxels whose values were replaced, with their
+// values before (index, v~, |grad v|^2), so a caller can restore them; in
+// the order of the lines, the same for any thread count.
+struct CrestChanges {
+  std::vector<std::size_t> index;
+  std::vector<float> vs, grad2;
+};
 CrestReport crest_shells(std::vector<float>& vs, std::vector<float>& grad2, const std::vector<std::uint8_t>& fixed,
                          const Dims3& dims, const Vec3d& spacing, double v_iso, double shift_mm, double g_ref,
-                         const CrestParams& p, int threads = 0);
+                         const CrestParams& p, int threads = 0, CrestChanges* changed = nullptr);
 
 }  // namespace softshell

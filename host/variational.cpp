@@ -314,17 +314,13 @@ bool DeviceSystem::apply_crest(double v_iso, double shift_mm) {
   // restored from their kept values, so the result is a fresh build's.
   const std::size_t n = voxels(), bytes = n * sizeof(float);
   std::vector<float> vs = download<float>(rt_, sources_[1], n), g2 = download<float>(rt_, sources_[2], n);
-  const bool had = !crest_index_.empty();
-  for (std::size_t k = 0; k < crest_index_.size(); ++k)
-    vs[crest_index_[k]] = crest_vs_[k], g2[crest_index_[k]] = crest_g2_[k];
-  const std::vector<float> vs0 = vs, g20 = g2;
+  CrestChanges& c = crest_changes_;
+  const bool had = !c.index.empty();
+  for (std::size_t k = 0; k < c.index.size(); ++k) vs[c.index[k]] = c.vs[k], g2[c.index[k]] = c.grad2[k];
   const std::vector<std::uint8_t> fx = download<std::uint8_t>(rt_, fixed_, n);
-  crest_ = crest_shells(vs, g2, fx, dims_, spacing_, v_iso, shift_mm, resolved_.g_ref, crest_params_);
+  crest_ = crest_shells(vs, g2, fx, dims_, spacing_, v_iso, shift_mm, resolved_.g_ref, crest_params_, 0, &c);
   crest_iso_ = v_iso, crest_shift_ = shift_mm;
-  crest_index_.clear(), crest_vs_.clear(), crest_g2_.clear();
-  for (std::size_t i = 0; i < n; ++i)
-    if (vs[i] != vs0[i] || g2[i] != g20[i]) crest_index_.push_back(i), crest_vs_.push_back(vs0[i]), crest_g2_.push_back(g20[i]);
-  if (!had && crest_index_.empty()) return false;
+  if (!had && c.index.empty()) return false;
   rt_.queue().enqueueWriteBuffer(sources_[1], CL_TRUE, 0, bytes, vs.data());
   rt_.queue().enqueueWriteBuffer(sources_[2], CL_TRUE, 0, bytes, g2.data());
   return true;

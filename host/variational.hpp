@@ -308,8 +308,7 @@ class DeviceSystem {
   CrestParams crest_params_{0.0};
   double crest_iso_ = 0, crest_shift_ = 0;
   Dims3 dims_{0, 0, 0};
-  std::vector<std::size_t> crest_index_;
-  std::vector<float> crest_vs_, crest_g2_;
+  CrestChanges crest_changes_;  // the voxels the rule replaced, their values before it
   // Applies the rule to v~ and |grad v|^2 (sources_) for this isovalue and
   // shift; false when nothing changed on the device.
   bool apply_crest(double v_iso, double shift_mm);

@@ -156,12 +156,38 @@ TEST(Crest, TheSameAlongXAndZAndForAnyThreadCount) {
   Lines z = lines_of(p, 5, h);
   for (std::size_t k = 0; k < p.size(); ++k) z.vs[k * 5 + 2] *= 1.05f;
   Lines z2 = z;
-  const CrestReport rz = crest_shells(z.vs, z.grad2, z.fixed, z.dims, z.spacing, 0.5, 0.4, 0.1, cp, 1);
-  const CrestReport rz2 = crest_shells(z2.vs, z2.grad2, z2.fixed, z2.dims, z2.spacing, 0.5, 0.4, 0.1, cp, 2);
+  const Lines z0 = z;
+  CrestChanges c1, c2;
+  const CrestReport rz = crest_shells(z.vs, z.grad2, z.fixed, z.dims, z.spacing, 0.5, 0.4, 0.1, cp, 1, &c1);
+  const CrestReport rz2 = crest_shells(z2.vs, z2.grad2, z2.fixed, z2.dims, z2.spacing, 0.5, 0.4, 0.1, cp, 2, &c2);
   EXPECT_EQ(rz.crests, 5u);
   EXPECT_EQ(z.vs, z2.vs);
   EXPECT_EQ(z.grad2, z2.grad2);
   EXPECT_EQ(rz.voxels, rz2.voxels);
+  // The changes returned: every voxel that differs from before, with its
+  // value before, and nothing else; the same list for both thread counts;
+  // restoring them gives the input back.
+  EXPECT_EQ(c1.index, c2.index);
+  EXPECT_EQ(c1.vs, c2.vs);
+  EXPECT_EQ(c1.grad2, c2.grad2);
+  ASSERT_EQ(c1.index.size(), rz.voxels);
+  ASSERT_EQ(c1.vs.size(), rz.voxels);
+  ASSERT_EQ(c1.grad2.size(), rz.voxels);
+  std::vector<std::uint8_t> listed(z.vs.size(), 0);
+  for (std::size_t k = 0; k < c1.index.size(); ++k) {
+    const std::size_t i = c1.index[k];
+    ASSERT_LT(i, z.vs.size());
+    EXPECT_EQ(listed[i], 0) << "listed twice: " << i;
+    listed[i] = 1;
+    EXPECT_EQ(c1.vs[k], z0.vs[i]);
+    EXPECT_EQ(c1.grad2[k], z0.grad2[i]);
+  }
+  for (std::size_t i = 0; i < z.vs.size(); ++i)
+    if (z.vs[i] != z0.vs[i] || z.grad2[i] != z0.grad2[i]) EXPECT_EQ(listed[i], 1) << "changed, not listed: " << i;
+  Lines back = z;
+  for (std::size_t k = 0; k < c1.index.size(); ++k) back.vs[c1.index[k]] = c1.vs[k], back.grad2[c1.index[k]] = c1.grad2[k];
+  EXPECT_EQ(back.vs, z0.vs);
+  EXPECT_EQ(back.grad2, z0.grad2);
   // The transpose: beam along x (dims n x 1 x 5), axis 0.
   const std::size_t n = p.size();
   std::vector<float> xv(n * 5), xg(n * 5), zvs0 = lines_of(p, 5, h).vs, zg0 = lines_of(p, 5, h).grad2;
