@@ -18,6 +18,7 @@ CrestReport crest_shells(std::vector<float>& vs, std::vector<float>& grad2, cons
     throw std::invalid_argument("crest_shells: the volumes' sizes differ from the grid");
   if (p.axis < 0 || p.axis > 2) throw std::invalid_argument("crest_shells: the beam axis must be 0, 1 or 2");
   CrestReport rep;
+  if (changed) *changed = {};  // also when nothing is replaced below
   if (!(p.ridge > 0) || n == 0) return rep;
   // The quantile of the scanned voxels' lowpassed v.
   std::vector<float> free_vs;
@@ -111,7 +112,6 @@ CrestReport crest_shells(std::vector<float>& vs, std::vector<float>& grad2, cons
   });
   for (std::size_t i = 0; i < crests.size(); ++i) rep.crests += crests[i], rep.voxels += voxels[i];
   if (changed) {
-    *changed = {};
     changed->index.reserve(rep.voxels), changed->vs.reserve(rep.voxels), changed->grad2.reserve(rep.voxels);
     for (const CrestChanges& c : part_changes) {
       changed->index.insert(changed->index.end(), c.index.begin(), c.index.end());

@@ -119,6 +119,26 @@ long round_half_away(double x) {
   return r;
 }
 
+// Where the beam through coordinate t (0 <= t < size) of the plane `dd`
+// voxels below a fan's apex along the beam axis crosses the plane `step`
+// further down (+1 the plane below, -1 the plane above), along the plane's
+// axis k: a table over t, -1 where it leaves the volume. Straight (t itself)
+// unless `spread` and the fan spreads along k. Per plane and axis, not per
+// voxel: the same expression gives the same value without a division and a
+// rounding per voxel.
+void beam_crossings(const FanBeams& fan, std::size_t k, std::size_t size, double dd, double step, bool spread,
+                    std::vector<long>& out) {
+  out.resize(size);
+  for (std::size_t t = 0; t < size; ++t) {
+    long at = long(t);
+    if (spread && fan.spreads[k]) {
+      at = round_half_away(fan.apex[k] + (double(t) - fan.apex[k]) * (dd + step) / dd);
+      if (at < 0 || at >= long(size)) at = -1;
+    }
+    out[t] = at;
+  }
+}
+
 }  // namespace
 
 std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::vector<std::uint8_t>* scanned,
@@ -183,19 +203,11 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
     const std::size_t planes = d[std::size_t(ax)], per_plane = n / planes;
     std::vector<std::uint8_t> next(per_plane, 1), cur(per_plane, 1);
     std::vector<long> below[3];
-    for (const std::size_t k : {la, lb}) below[k].resize(d[k]);
     for (std::size_t depth = planes; depth-- > 0;) {
       const double dd = double(depth) - fan.apex[ax];
       const bool last = depth + 1 == planes;
       for (const std::size_t k : {la, lb})
-        for (std::size_t t = 0; t < d[k]; ++t) {
-          long at = long(t);
-          if (!last && fan.found && dd > 1.0 && fan.spreads[k]) {
-            at = round_half_away(fan.apex[k] + (double(t) - fan.apex[k]) * (dd + 1.0) / dd);
-            if (at < 0 || at >= long(d[k])) at = -1;
-          }
-          below[k][t] = at;
-        }
+        beam_crossings(fan, k, d[k], dd, 1.0, !last && fan.found && dd > 1.0, below[k]);
       parallel_ranges(d[lb], per_plane >= 65536 ? threads : 1, [&](std::size_t q0, std::size_t q1) {
         for (std::size_t q = q0; q < q1; ++q)
           for (std::size_t p = 0; p < d[la]; ++p) {
@@ -233,24 +245,12 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
     const std::size_t la = ax == 0 ? 1 : 0, lb = ax == 2 ? 1 : 2;  // the plane's axes
     std::vector<long> prev(per_plane, -1), cur(per_plane, -1), prev_top(per_plane, -1), cur_top(per_plane, -1);
     // Per plane, a table along each of the plane's two axes of where the
-    // beam through coordinate t crosses the plane above (-1: outside the
-    // volume): it depends on the plane and that one coordinate, so the same
-    // expression gives the same value as per voxel, where it took a
-    // division and a rounding per axis.
+    // beam through coordinate t crosses the plane above (beam_crossings).
     std::vector<long> above[3];
-    for (const std::size_t k : {la, lb}) above[k].resize(d[k]);
     for (std::size_t depth = 0; depth < planes; ++depth) {
       const double dd = double(depth) - fan.apex[ax];
       const bool from_above = depth > 0 && dd > 1.0;
-      for (const std::size_t k : {la, lb})
-        for (std::size_t t = 0; t < d[k]; ++t) {
-          long at = long(t);
-          if (from_above && fan.spreads[k]) {
-            at = round_half_away(fan.apex[k] + (double(t) - fan.apex[k]) * (dd - 1.0) / dd);
-            if (at < 0 || at >= long(d[k])) at = -1;
-          }
-          above[k][t] = at;
-        }
+      for (const std::size_t k : {la, lb}) beam_crossings(fan, k, d[k], dd, -1.0, from_above, above[k]);
       parallel_ranges(d[lb], per_plane >= 65536 ? threads : 1, [&](std::size_t q0, std::size_t q1) {
         for (std::size_t q = q0; q < q1; ++q)
           for (std::size_t p = 0; p < d[la]; ++p) {
