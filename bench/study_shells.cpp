@@ -168,6 +168,8 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "iso_field_sigma") ap.field_sigma_mm = x;
   else if (k == "iso_field_depth_sigma") ap.field_depth_sigma_mm = x;
   else if (k == "iso_edge_share") ap.edge_share = x;
+  else if (k == "iso_climb_mm") ap.climb_mm = x;
+  else if (k == "iso_climb_steps") ap.climb_steps = int(x);
   else if (k == "iso_field_prior") ap.field_prior = x;
   else if (k == "iso_clip_fraction") ap.clip_fraction = x;
   else if (k == "iso_clip_share") ap.clip_share = x;

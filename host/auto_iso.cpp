@@ -311,7 +311,8 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   float floor_drop = 0;
   std::vector<std::size_t> cut_edges;
   // Climbs v~ from voxel (x, y, z) through the 26 neighbours, up (sign 1) or
-  // down (sign -1), at most climb_steps; returns the voxel reached.
+  // down (sign -1), at most climb_n steps (climb_steps_for); returns the voxel
+  // reached.
   // The 26 neighbours as index offsets, in the order (dz, dy, dx) ascending:
   // ties keep the first. A climb stays on usable voxels, which are interior,
   // so every neighbour is inside the volume, and the ones on its faces are
@@ -354,11 +355,12 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
   // a fifth of the isovalue's time at 256^3). Each climb's steps are the
   // ones it takes alone: `at` holds the start voxels and gets the voxels
   // reached.
+  const int climb_n = climb_steps_for(params, v.spacing);
   auto climb_all = [&](std::vector<std::size_t>& at, float sign, std::vector<std::uint32_t>& live) {
     std::uint8_t* steps = sign > 0 ? step_up.data() : step_down.data();
     live.resize(at.size());
     for (std::size_t j = 0; j < at.size(); ++j) live[j] = std::uint32_t(j);
-    for (int step = 0; step < params.climb_steps && !live.empty(); ++step) {
+    for (int step = 0; step < climb_n && !live.empty(); ++step) {
       std::size_t kept = 0;
       for (std::size_t t = 0; t < live.size(); ++t) {
         const std::uint32_t j = live[t];
@@ -782,7 +784,17 @@ double bulk_raised_iso(double iso, double crest, const Bulk& bulk, double spread
   return iso;
 }
 
+int climb_steps_for(const AutoIsoParams& p, const Vec3d& spacing) {
+  const double h = std::min({spacing[0], spacing[1], spacing[2]});
+  int steps = std::max(0, p.climb_steps);
+  // The bound keeps a spacing in metres read as mm from climbing for ever
+  // (auto_iso refuses such a lowpass before it climbs).
+  if (p.climb_mm > 0 && h > 0) steps = std::max(steps, int(std::min(1000.0, std::ceil(p.climb_mm / h - 1e-9))));
+  return steps;
+}
+
 void scale_length_scales(AutoIsoParams& p, double f) {
+  p.climb_mm *= f;
   p.sigma_mm *= f, p.field_sigma_mm *= f, p.field_depth_sigma_mm *= f, p.bulk_sigma_mm *= f;
 }
 

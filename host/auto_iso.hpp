@@ -6,8 +6,9 @@
 //  - EchoRidge (the default, for the variational classifier): ultrasound
 //    draws a boundary as a bright echo layer, and the variational shell sits
 //    best on its crest (docs/parameters.md). From every strong-edge voxel
-//    (|grad v~| in the top 5 %) climb v~ through the 26 neighbours, at most 6
-//    steps, to the crest of the echo; the median crest value is v_iso.
+//    (|grad v~| in the top 5 %) climb v~ through the 26 neighbours, at most
+//    3.5 mm and 6 steps (climb_steps_for), to the crest of the echo; the
+//    median crest value is v_iso.
 //  - Local (the default for the variational classifier since the shell
 //    functional): from every strong-edge voxel climb v~ up to the bright
 //    side's crest B and down to the dark side's trough D (26 neighbours, at
@@ -47,7 +48,13 @@ enum class AutoIsoRule { EchoRidge, Edge, Local };
 struct AutoIsoParams {
   AutoIsoRule rule = AutoIsoRule::Local;
   double edge_share = 0.05;  // share of usable voxels, by |grad v~|, that seed the climb to the echo crest
-  int climb_steps = 6;       // voxels climbed at most from an edge voxel to its crest
+  // How far an edge voxel climbs at most to its crest (and trough): climb_mm
+  // over the smallest spacing, and never fewer than climb_steps voxels
+  // (docs/parameters.md, "The climb in millimetres"). A count of voxels alone
+  // reached 3.5 mm at 0.59 mm but 1.3 mm at 0.22 mm, and the same anatomy
+  // scanned finer stopped short of its crests. climb_mm 0: climb_steps only.
+  int climb_steps = 6;
+  double climb_mm = 3.5;
   double sigma_mm = 1.0;        // lowpass of v~, at least 1 voxel per axis
   int bins = 64;                // over the range of v~ in the scanned voxels
   double min_bin_share = 0.001; // bins with fewer voxels than this share are ignored
@@ -154,9 +161,13 @@ inline Volume level_isovalue(const Volume& v, const std::vector<float>& field, d
   return level_isovalue(v, field.data(), field.size(), iso);
 }
 
+// The most steps an edge voxel climbs on a grid of `spacing` (mm):
+// max(climb_steps, ceil(climb_mm / the smallest spacing)).
+int climb_steps_for(const AutoIsoParams& p, const Vec3d& spacing);
+
 // p's length scales times f (a small volume's, host/variational.hpp's
-// small_volume_scale): the lowpass of v~, the field's spread along and
-// across the beam, and the bulk's lowpass. The classify CLI does the same
+// small_volume_scale): the lowpass of v~, the climb, the field's spread
+// along and across the beam, and the bulk's lowpass. The classify CLI does the same
 // to the ones not given on its command line.
 void scale_length_scales(AutoIsoParams& p, double f);
 

@@ -102,9 +102,9 @@ TEST_F(CliArgs, EveryFloatOptionOfEveryCommandRefusesNanAndInfinityNamingItsRang
     }
   }
 #ifdef SOFTSHELL_HAVE_VIEWER
-  EXPECT_EQ(checked, 65);  // classify alone has 34 (--small-volume the 26th, --shell-shift the 27th, --iso-clip-fraction the 28th, --iso-field-depth-sigma the 29th, --iso-floor-fraction the 30th, --iso-bulk-spread the 31st, --edge-split the 32nd, --edge-split-from the 33rd, --echo-crest the 34th); view --overlay; evaluate --visible-db; phantom --turn, --drift
+  EXPECT_EQ(checked, 66);  // classify alone has 35 (--small-volume the 26th, --shell-shift the 27th, --iso-clip-fraction the 28th, --iso-field-depth-sigma the 29th, --iso-floor-fraction the 30th, --iso-bulk-spread the 31st, --edge-split the 32nd, --edge-split-from the 33rd, --echo-crest the 34th, --iso-climb the 35th); view --overlay; evaluate --visible-db; phantom --turn, --drift
 #else
-  EXPECT_EQ(checked, 50);  // without render, view, figure5, figure6
+  EXPECT_EQ(checked, 51);  // without render, view, figure5, figure6
 #endif
 }
 

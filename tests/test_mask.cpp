@@ -2083,6 +2083,55 @@ TEST(IsoAuto, ClippedEchoesTakeTheClipFraction) {
   EXPECT_EQ(rep_few.clipped_edges, 0u);
 }
 
+// The same boundary sampled at h mm: fluid (30) over an echo that rises
+// steeply at z = 10 mm and then slowly (1 - exp(-d / 1.5 mm)) toward 200,
+// its crest at 15 mm, over tissue (120) from 16 mm; 8 x 8 x 24 mm.
+Volume slow_echo(double h) {
+  const auto n = [&](double mm) { return std::size_t(std::lround(mm / h)); };
+  Volume v({n(8), n(8), n(24)}, {h, h, h}, ScalarType::Float32);
+  for (std::size_t z = 0; z < v.dims[2]; ++z) {
+    const double mm = (double(z) + 0.5) * h;
+    const double value = mm < 10   ? 30.0
+                         : mm < 15 ? 30.0 + 170.0 * (1.0 - std::exp(-(mm - 10.0) / 1.5))
+                         : mm < 16 ? 120.0 + (mm < 15.5 ? 60.0 : 20.0)
+                                   : 120.0;
+    std::fill_n(v.data.data() + z * v.dims[0] * v.dims[1], v.dims[0] * v.dims[1], float(value));
+  }
+  return v;
+}
+
+TEST(IsoAuto, TheClimbIsInMillimetresSoAFinerGridFindsTheSameIsovalue) {
+  // docs/parameters.md, "The climb in millimetres". The strong edges sit on
+  // the steep foot of the echo; its crest lies 3-4 mm up the slow rise. A
+  // climb of 6 voxels reaches it at 0.6 mm but stops 1.2 mm up at 0.2 mm,
+  // and the finer grid's isovalue fell far below the coarse one's; climbing
+  // climb_mm (3.5) on either grid gives the same isovalue.
+  EXPECT_EQ(climb_steps_for(AutoIsoParams{}, {0.6, 0.6, 0.6}), 6);
+  EXPECT_EQ(climb_steps_for(AutoIsoParams{}, {1.0, 1.0, 1.0}), 6) << "never fewer than climb_steps";
+  EXPECT_EQ(climb_steps_for(AutoIsoParams{}, {0.5, 0.5, 0.5}), 7);
+  EXPECT_EQ(climb_steps_for(AutoIsoParams{}, {0.2, 0.2, 0.2}), 18);
+  EXPECT_EQ(climb_steps_for(AutoIsoParams{}, {0.1, 0.1, 0.2}), 35) << "by the finest spacing";
+  AutoIsoParams voxels;
+  voxels.climb_mm = 0;
+  EXPECT_EQ(climb_steps_for(voxels, {0.1, 0.1, 0.1}), 6);
+  AutoIsoParams half, half_voxels = voxels;
+  scale_length_scales(half_voxels, 0.5);
+  EXPECT_EQ(half_voxels.climb_mm, 0.0);
+  scale_length_scales(half, 0.5);
+  EXPECT_DOUBLE_EQ(half.climb_mm, 1.75) << "a small volume's climb shrinks with its other length scales";
+
+  const Volume coarse = slow_echo(0.6), fine = slow_echo(0.2);
+  const double at_coarse = auto_iso(coarse, nullptr), at_fine = auto_iso(fine, nullptr);
+  const double coarse_voxels = auto_iso(coarse, nullptr, voxels), fine_voxels = auto_iso(fine, nullptr, voxels);
+  std::cout << "[ iso      ] slow echo: isovalue " << at_coarse << " at 0.6 mm, " << at_fine
+            << " at 0.2 mm; climbing 6 voxels " << coarse_voxels << " and " << fine_voxels << '\n';
+  EXPECT_EQ(at_coarse, coarse_voxels) << "6 voxels are 3.6 mm at 0.6 mm: the same climb";
+  // Near the crest side: 30 + 0.75 (~180 - 30), the lowpassed crest.
+  EXPECT_NEAR(at_coarse, 150, 15);
+  EXPECT_NEAR(at_fine, at_coarse, 3);
+  EXPECT_LT(fine_voxels, at_coarse - 8) << "the climb of 6 voxels stops short of the crest at 0.2 mm";
+}
+
 // Fluid at the data's floor (exact 0, z < 16) under a bright side: a thin
 // echo (2 planes) over tissue, or tissue with no echo.
 Volume floor_step(double echo, double tissue, std::uint64_t seed) { return layers_along_z(0, 16, echo, 18, tissue, seed); }

@@ -73,6 +73,7 @@ struct ClassifyOptions {
   double thickness = 1.0;
   double iso_fraction = AutoIsoParams().local_fraction, iso_field_sigma = AutoIsoParams().field_sigma_mm;
   double iso_field_depth_sigma = AutoIsoParams().field_depth_sigma_mm;
+  double iso_climb = AutoIsoParams().climb_mm;
   double iso_clip_fraction = AutoIsoParams().clip_fraction;
   double iso_floor_fraction = AutoIsoParams().floor_fraction;
   double iso_bulk_spread = AutoIsoParams().bulk_spread;
@@ -832,6 +833,7 @@ int run_classify(const ClassifyOptions& given_options) {
     if (ap.want_field) ap.beam_axis = beam_axis_now();
     ap.sigma_mm = o.auto_iso_sigma;
     ap.bulk_sigma_mm *= o.length_scale;  // a small volume's, as the other lowpasses
+    ap.climb_mm = o.iso_climb * (o.given.count("--iso-climb") ? 1.0 : o.length_scale);  // and the climb to the crests
     // The local isovalue field levelled out as it is formed: the classifier
     // then works at one isovalue on data whose brightness no longer drifts
     // (host/auto_iso.hpp).
@@ -1025,6 +1027,12 @@ void add_classify_command(CLI::App& app, Action& action) {
                   "its own shadow: docs/parameters.md)")
       ->capture_default_str()
       ->check(real_range(0.5, 1000, "mm"));
+  sub->add_option("--iso-climb", o->iso_climb,
+                  "--iso auto: how far (mm) each strong edge climbs at most to its echo's crest and down to its "
+                  "trough, and never fewer than 6 voxels; 0: 6 voxels whatever the spacing (docs/parameters.md, "
+                  "\"The climb in millimetres\")")
+      ->capture_default_str()
+      ->check(real_range(0, 100, "mm"));
   sub->add_flag("--no-iso-field", o->no_iso_field,
                 "With the local rule: one isovalue (the median of the edges') instead of a field that follows "
                 "depth and local brightness");
