@@ -7,7 +7,7 @@
 //    draws a boundary as a bright echo layer, and the variational shell sits
 //    best on its crest (docs/parameters.md). From every strong-edge voxel
 //    (|grad v~| in the top 5 %) climb v~ through the 26 neighbours, at most
-//    3.5 mm and 6 steps (climb_steps_for), to the crest of the echo; the
+//    3.5 mm, never fewer than 6 steps (climb_steps_for), to the crest of the echo; the
 //    median crest value is v_iso.
 //  - Local (the default for the variational classifier since the shell
 //    functional): from every strong-edge voxel climb v~ up to the bright

@@ -655,6 +655,7 @@ int run_classify(const ClassifyOptions& given_options) {
     if (!given("--shell-shift")) o.vp.shell_shift_mm *= scale;
     if (!given("--iso-field-sigma")) o.iso_field_sigma *= scale;
     if (!given("--iso-field-depth-sigma")) o.iso_field_depth_sigma *= scale;
+    if (!given("--iso-climb")) o.iso_climb *= scale;
     // beta and kappa are squared lengths (mm^2; host/variational.hpp).
     if (!given("--beta")) o.vp.beta *= scale * scale;
     if (!given("--kappa")) o.vp.kappa *= scale * scale;
@@ -833,7 +834,7 @@ int run_classify(const ClassifyOptions& given_options) {
     if (ap.want_field) ap.beam_axis = beam_axis_now();
     ap.sigma_mm = o.auto_iso_sigma;
     ap.bulk_sigma_mm *= o.length_scale;  // a small volume's, as the other lowpasses
-    ap.climb_mm = o.iso_climb * (o.given.count("--iso-climb") ? 1.0 : o.length_scale);  // and the climb to the crests
+    ap.climb_mm = o.iso_climb;
     // The local isovalue field levelled out as it is formed: the classifier
     // then works at one isovalue on data whose brightness no longer drifts
     // (host/auto_iso.hpp).
