@@ -28,6 +28,17 @@ namespace softshell {
 //     zero voxels on the two faces across the beam, solid in the face's
 //     plane, connected to them along the face (a fan's arc meeting that face
 //     leaves a one-voxel layer of zeros there);
+//  3c. with no region from step 2 (and no dark fluid found by 2b): the zeros
+//     on the two faces across the beam that are solid in the face's plane
+//     (a square of 2 solid + 1 fits) in 4-connected pieces of at least
+//     min_fraction of the face (and the square), when on at least 90 % of
+//     a piece's lines into the volume the zeros end in 2 solid + 1 samples
+//     of data: a scan ending a fraction of a voxel short of the face (or
+//     starting one in) leaves one plane of zeros there, too thin for the
+//     cube (the family's spine 204 at 256^3: 2 560 voxels on its bottom
+//     face, 7 936 on its top, and the step from its last samples to 0 was
+//     drawn as a sheet: 23 600 voxels). Dark fluid reaching the face goes
+//     on in its pattern of zeros under them;
 //  4. then grow by `grow` voxels (6-neighbour dilation) over the
 //     partial-volume rim that the reconstruction leaves at the sweep edge:
 //     on the PLUS spine sweep the first scanned layer is dim (median 72
@@ -87,6 +98,7 @@ struct MaskReport {
   double outside_share = 0;           // step 2c: that part's share of the zero fill
   double inside_share = 0;            // step 2b': the fill's share inside the data's hull (when measured)
   bool fluid_inside = false;          // step 2b' (not 2b) found the dark fluid
+  std::size_t face_layers = 0;        // step 3c: zeros taken in thin layers on the faces across the beam
 };
 
 // The mask derived from the zero fill; deterministic, iterative (no

@@ -210,6 +210,58 @@ TEST(Mask, AFansArcMeetingTheFaceLeavesNoScannedZerosThere) {
   for (std::size_t x = 0; x < 64; ++x) EXPECT_EQ(m[v.index(x, 12, 63)], 0) << "x " << x;
 }
 
+TEST(Mask, AThinLayerOfZerosOnAFaceAcrossTheBeamIsUnscannedButDarkFluidThereIsNot) {
+  // A scan that ends a fraction of a voxel short of the bottom face (tilted:
+  // only where x < 30) and starts one in at the top (x >= 40) leaves one
+  // plane of zeros there and nothing else: no cube fits, no region for step
+  // 2. The family's spine 204 at 256^3 had such layers (7 936 and 2 560
+  // voxels), and the step from its last samples to 0 was drawn as a sheet,
+  // 23 600 of its 65 600 drawn voxels more than 2 mm from the surface.
+  Volume v = test::speckled({48, 24, 40}, 0.5, [](double, double, double) { return 60.0; }, test::seed() + 47);
+  ASSERT_EQ(beam_axis_of(v, nullptr), 2);
+  for (std::size_t y = 0; y < 24; ++y)
+    for (std::size_t x = 0; x < 48; ++x) {
+      if (x < 30) v.at(x, y, 39) = 0.0f;
+      if (x >= 40) v.at(x, y, 0) = 0.0f;
+    }
+  MaskReport r;
+  auto m = scanned_mask(v, MaskParams{}, &r);
+  EXPECT_EQ(r.unscanned_regions, 0u);
+  EXPECT_EQ(r.face_layers, 30u * 24u + 8u * 24u);
+  // The layers, and the 2-voxel rim next to them (step 4), are unscanned.
+  for (std::size_t z : {39u, 38u, 37u}) EXPECT_EQ(m[v.index(10, 12, z)], 0) << "z " << z;
+  for (std::size_t z : {0u, 1u, 2u}) EXPECT_EQ(m[v.index(44, 12, z)], 0) << "z " << z;
+  EXPECT_EQ(m[v.index(10, 12, 36)], 1);
+  EXPECT_EQ(m[v.index(44, 12, 3)], 1);
+  EXPECT_EQ(m[v.index(35, 12, 39)], 1);  // the face's data beside the layer
+  EXPECT_EQ(m[v.index(20, 12, 0)], 1);
+  std::size_t unscanned = count_unscanned(m);
+  EXPECT_EQ(unscanned, 3u * (30u * 24u + 8u * 24u) + 2u * 24u + 1u * 24u + 2u * 24u + 1u * 24u);
+  // A layer on a face along the beam is the sweep's edge beside the data
+  // (host/mask.cpp, step 3b): not taken.
+  Volume side = test::speckled({48, 24, 40}, 0.5, [](double, double, double) { return 60.0; }, test::seed() + 47);
+  for (std::size_t z = 0; z < 40; ++z)
+    for (std::size_t y = 0; y < 24; ++y) side.at(0, y, z) = 0.0f;
+  m = scanned_mask(side, MaskParams{}, &r);
+  EXPECT_EQ(r.face_layers, 0u);
+  EXPECT_EQ(count_unscanned(m), 0u);
+  // Dark fluid at the log-compression floor reaching the bottom face: a
+  // third of its samples are exact zeros, and the bottom plane's zeros are
+  // solid over x < 30 -- but under them the zeros go on in the fluid's
+  // pattern, not into data: scanned.
+  Volume fluid = test::speckled({48, 24, 40}, 0.5, [](double, double, double) { return 60.0; }, test::seed() + 47);
+  std::mt19937_64 rng(test::seed() + 53);
+  std::bernoulli_distribution floor(0.33);
+  for (std::size_t z = 28; z < 40; ++z)
+    for (std::size_t y = 0; y < 24; ++y)
+      for (std::size_t x = 0; x < 48; ++x)
+        if ((z == 39 && x < 30) || floor(rng)) fluid.at(x, y, z) = 0.0f;
+  ASSERT_EQ(beam_axis_of(fluid, nullptr), 2);
+  m = scanned_mask(fluid, MaskParams{}, &r);
+  EXPECT_EQ(r.face_layers, 0u);
+  EXPECT_EQ(count_unscanned(m), 0u);
+}
+
 // The fan of the test above with two acoustic shadows clipped to exact 0:
 // columns 6 voxels wide across the whole volume in y, from z = 24 to 50,
 // tissue again below them down to the arc.

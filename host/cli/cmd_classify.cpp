@@ -171,7 +171,10 @@ DataMask make_mask(const std::string& option, const Volume& in, int beam_axis) {
     if (beam_axis >= 0) params.beam_axis = beam_axis;  // else z, as always (step 2b)
     m.scanned = scanned_mask(in, params, &r);
     m.text = "auto: " + percent(r.unscanned) + " (zero fill " + std::to_string(r.zero_fill) + " + " +
-             std::to_string(params.grow) + "-voxel rim)";
+             std::to_string(params.grow) + "-voxel rim" +
+             (r.face_layers ? "; " + std::to_string(r.face_layers) + " of the fill in thin layers on the faces across the beam"
+                            : std::string()) +
+             ")";
     if (r.outside) {
       std::ostringstream t;
       t << "auto: " << percent(r.unscanned) << " (the part of the zero fill outside the data: " << std::fixed
