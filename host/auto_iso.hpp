@@ -12,7 +12,8 @@
 //  - Local (the default for the variational classifier since the shell
 //    functional): from every strong-edge voxel climb v~ up to the bright
 //    side's crest B and down to the dark side's trough D (26 neighbours, at
-//    most climb_steps each); the edge's isovalue is D + local_fraction
+//    most climb_steps_for's steps each: 3.5 mm, never fewer than 6); the
+//    edge's isovalue is D + local_fraction
 //    (B - D), near the bright side, where a log-compressed, blurred boundary
 //    has its surface (docs/parameters.md, "The automatic isovalue"). Their
 //    median is the global v_iso; spread by a normalised Gaussian (falling

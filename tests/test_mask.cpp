@@ -2137,7 +2137,8 @@ TEST(IsoAuto, ClippedEchoesTakeTheClipFraction) {
 
 // The same boundary sampled at h mm: fluid (30) over an echo that rises
 // steeply at z = 10 mm and then slowly (1 - exp(-d / 1.5 mm)) toward 200,
-// its crest at 15 mm, over tissue (120) from 16 mm; 8 x 8 x 24 mm.
+// its crest at 15 mm, then a fall in two steps (to 180 for half a mm, 140
+// for the next) onto tissue (120) from 16 mm; 8 x 8 x 24 mm.
 Volume slow_echo(double h) {
   const auto n = [&](double mm) { return std::size_t(std::lround(mm / h)); };
   Volume v({n(8), n(8), n(24)}, {h, h, h}, ScalarType::Float32);
