@@ -170,7 +170,7 @@ bool apply_override(const std::string& k, double x, VariationalParams& p, AutoIs
   else if (k == "iso_edge_share") ap.edge_share = x;
   else if (k == "iso_climb_mm") ap.climb_mm = x;
   else if (k == "iso_climb_steps") ap.climb_steps = int(x);
-  else if (k == "iso_field_prior") ap.field_prior = x;
+  else if (k == "iso_field_prior_share") ap.field_prior_share = x;
   else if (k == "iso_clip_fraction") ap.clip_fraction = x;
   else if (k == "iso_clip_share") ap.clip_share = x;
   else if (k == "iso_floor_fraction") ap.floor_fraction = x;
@@ -442,7 +442,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "usage: softshell_study_shells [--train S,S..] [--test S,S..] [--shapes face,spine] "
                            "[--size N] [--physics NAME] [--tolerance-mm MM] [--variational-only] [--defaults-only] "
                            "[--set iso_fraction=..,iso_clip_fraction=..,iso_floor_fraction=..,iso_floor_share=..,iso_field_sigma=..,iso_field_depth_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
-                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior=..,iso_offset=..,iso_cut_crest_votes=..,cut_hold=..,band_sheet=..,data_normals=..,band_sheet_mm=..,band_sheet_patch=..,band_sheet_deep_mm=..,band_sheet_flat_mm=..,band_sheet_skin_mm=..,band_sheet_skin_patch=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,near_skin_step=..,near_step_sds=..,near_echo_bounded=..,reverb_second_peak=..,near_fill_layered=..,near_fill_crossing=..,near_layer_reach=..,"
+                           "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior_share=..,iso_offset=..,iso_cut_crest_votes=..,cut_hold=..,band_sheet=..,data_normals=..,band_sheet_mm=..,band_sheet_patch=..,band_sheet_deep_mm=..,band_sheet_flat_mm=..,band_sheet_skin_mm=..,band_sheet_skin_patch=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,near_skin_step=..,near_step_sds=..,near_echo_bounded=..,reverb_second_peak=..,near_fill_layered=..,near_fill_crossing=..,near_layer_reach=..,"
                            "mask_grow=..,mask_max_enclosed=..,mask_fluid_enclosed=..,mask_fluid_inside=..] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..] "
                            "[--shadow-walls on|off] [--walls beam_cos=..,reach=..,smooth=..,sigma=..,gap=..,bright=..,fan=0|1,fan_skip=..] [--wall-ref weighted|data]\n");
       return 2;

@@ -558,7 +558,7 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
     local_iso = median_of(locals, threads);
     if (params.want_field) {
       // Normalised convolution of the edges' isovalues, with the global
-      // median as a prior of field_prior edges' weight per Gaussian volume.
+      // median as a prior weighing field_prior_share of the mean edge density.
       // The field is smooth (sigma of several voxels): it is formed on a grid
       // coarser by f per axis (cells summing f^3 voxels) where sigma allows,
       // and interpolated back trilinearly.
@@ -591,11 +591,11 @@ double auto_iso(const Volume& v, const std::vector<std::uint8_t>* mask, const Au
       for (int axis = 0; axis < 3; ++axis)
         wc[std::size_t(axis)] = gaussian_weights(std::max(1.0, sigma_vox[axis] / double(f[axis])), 3.0);
       blur_3d(fn.data(), fd.data(), dcoarse, wc[0], wc[1], wc[2], threads, [](std::size_t) {});
-      // fd is now the Gaussian-weighted edge density per cell (weights sum to
-      // 1 per axis); field_prior edges per Gaussian volume of (sqrt(2 pi) sigma)^3 voxels.
-      double gauss_volume = 1;
-      for (int axis = 0; axis < 3; ++axis) gauss_volume *= std::sqrt(2 * M_PI) * sigma_vox[axis];
-      const double prior = params.field_prior / gauss_volume * double(f[0] * f[1] * f[2]);
+      // fd is now the Gaussian-weighted edge count per cell (weights sum to
+      // 1 per axis); the prior is field_prior_share of the volume's mean
+      // count per cell (edges per scanned voxel, f^3 voxels a cell), so its
+      // weight against the edges is the same at any voxel size.
+      const double prior = params.field_prior_share * double(locals.size()) / double(used) * double(f[0] * f[1] * f[2]);
       std::vector<float> coarse(nc);
       for (std::size_t c = 0; c < nc; ++c) coarse[c] = float(double(fn[c]) / (double(fd[c]) + prior));
       // Levelling in place forms the field row by row and keeps none of it.

@@ -63,7 +63,13 @@ struct AutoIsoParams {
   double field_sigma_mm = 3.0;        // Local: spread of the edges' isovalues into a field, across the beam
   double field_depth_sigma_mm = 8.0;  // ... and along it (the beam axis: beam_axis)
   int beam_axis = 2;                  // x 0, y 1, z 2 (the classifier's beam_axis_of or the near field's)
-  double field_prior = 0.5;     // Local: weight of the global median in the field (edges per Gaussian volume)
+  // Local: weight of the global median in the field, as a share of the
+  // volume's mean edge density (edges per scanned voxel). A share, not a
+  // count: the edges grow with the voxel count, so a fixed count per
+  // Gaussian volume weighed 19x less at 0.22 mm than at 0.59 mm, and the
+  // field in edge-free tissue followed the few bright echoes far off
+  // (docs/parameters.md, "The isovalue field's prior").
+  double field_prior_share = 0.002;
   // Local, clipped echoes: an edge whose crest reaches the data's ceiling
   // takes clip_fraction instead of local_fraction. The data clip when at
   // least clip_share of the scanned samples equal the largest one; a crest

@@ -2096,6 +2096,58 @@ TEST(IsoAuto, LocalFieldIsLongAlongTheBeamAndShortAcrossIt) {
   EXPECT_GT(beam_x, 0.65) << "along the beam (x) the bright block beside weighs more";
 }
 
+TEST(IsoAuto, TheFieldsPriorWeighsTheSameAtAnyVoxelSize) {
+  // docs/parameters.md, "The isovalue field's prior". One scene, in mm,
+  // sampled at 0.5 mm and at 0.25 mm: 30 x 12 x 30 mm, edge-free fluid (20)
+  // in its top half (z < 15 mm), and below it columns 3 mm square on a 6 mm
+  // grid, bright (200) on the left (x < 15 mm) and dim (110) on the right.
+  // The global median lies between the two columns' isovalues; in the fluid
+  // above the dim columns the field lies between the median and the dim
+  // columns' level, by how the tail of their edges' Gaussian weighs against
+  // the prior. That weighing must not depend on the voxel size. With the
+  // prior a count of edges per Gaussian volume it did (shares 0.69 and
+  // 0.95): the edges per voxel are the same at both sizes (|grad v~| is
+  // lowpassed in mm), but the Gaussian volume holds 8x the voxels at
+  // 0.25 mm, so the prior weighed 8x less.
+  auto scene = [](double h) {
+    const auto n = std::size_t(std::lround(30.0 / h)), ny = std::size_t(std::lround(12.0 / h));
+    Volume v({n, ny, n}, {float(h), float(h), float(h)}, ScalarType::Float32);
+    std::mt19937_64 rng(test::seed() + 53);
+    std::normal_distribution<double> noise(0.0, 2.0);
+    auto in = [](double p) { return std::fmod(p, 6.0) >= 1.5 && std::fmod(p, 6.0) < 4.5; };
+    for (std::size_t z = 0; z < n; ++z)
+      for (std::size_t y = 0; y < ny; ++y)
+        for (std::size_t x = 0; x < n; ++x) {
+          const double px = (double(x) + 0.5) * h, py = (double(y) + 0.5) * h, pz = (double(z) + 0.5) * h;
+          const double level = pz >= 15 && in(px) && in(py) ? (px < 15 ? 200 : 110) : 20;
+          v.at(x, y, z) = float(level + noise(rng));
+        }
+    return v;
+  };
+  // The field 12 mm above the dim columns (x 23 mm, z 3 mm) as its share of
+  // the way from the global median to the field among them (z 22 mm).
+  auto share = [&](double h) {
+    const Volume v = scene(h);
+    AutoIsoParams ap;
+    ap.want_field = true;
+    ap.edge_share = 0.3;          // the dim columns' edges too, not the bright ones' alone
+    ap.field_prior_share = 0.05;  // a prior that shows within this small scene
+    AutoIsoReport rep;
+    auto_iso(v, nullptr, ap, &rep);
+    auto at = [&](double x_mm, double z_mm) {
+      return double(rep.field[v.index(std::size_t(x_mm / h), v.dims[1] / 2, std::size_t(z_mm / h))]);
+    };
+    const double above = at(23, 3), among = at(23, 22);
+    std::cout << "[ iso      ] " << h << " mm: field " << above << " above the dim columns, " << among
+              << " among them, median " << rep.local_iso << '\n';
+    return (above - rep.local_iso) / (among - rep.local_iso);
+  };
+  const double coarse = share(0.5), fine = share(0.25);
+  EXPECT_GT(coarse, 0.2) << "the dim columns' edges reach 12 mm up";
+  EXPECT_LT(coarse, 0.9) << "the prior weighs there too";
+  EXPECT_NEAR(fine, coarse, 0.05) << "the same weighing at both voxel sizes";
+}
+
 TEST(IsoAuto, ClippedEchoesTakeTheClipFraction) {
   // docs/real-data.md, "Clipped echoes". The echo's true level (400) is
   // clipped at 255: 15 % of the samples sit at the maximum, and its edges'
