@@ -238,6 +238,31 @@ void mask_detail::cube_filter(std::vector<std::uint8_t>& a, const Dims3& d, int 
 
 namespace {
 
+// The 4-connected pieces of the cells of a w x h plane (cell p at
+// (p % w, p / w)) for which in(p) holds, in the order of their first cell:
+// each piece's cells go into `piece` (in the fill's order), then visit() is
+// called.
+template <class In, class Visit>
+void plane_pieces(std::size_t w, std::size_t h, const In& in, std::vector<std::size_t>& piece, const Visit& visit) {
+  std::vector<std::uint8_t> seen(w * h, 0);
+  std::vector<std::size_t> todo;
+  for (std::size_t s = 0; s < w * h; ++s) {
+    if (seen[s] || !in(s)) continue;
+    seen[s] = 1, todo.assign(1, s), piece.clear();
+    while (!todo.empty()) {
+      const std::size_t p = todo.back();
+      todo.pop_back();
+      piece.push_back(p);
+      const std::size_t pa = p % w, pb = p / w;
+      const std::size_t nb[4] = {pa > 0 ? p - 1 : p, pa + 1 < w ? p + 1 : p, pb > 0 ? p - w : p,
+                                 pb + 1 < h ? p + w : p};
+      for (const std::size_t q : nb)
+        if (!seen[q] && in(q)) seen[q] = 1, todo.push_back(q);
+    }
+    visit();
+  }
+}
+
 // Step 3c (MaskParams, host/mask.hpp): the solid zeros on the volume's two
 // faces across the beam, a layer too thin for step 1's cube, in 4-connected
 // pieces of at least min_piece voxels on the face: unscanned (mask 0).
@@ -264,21 +289,9 @@ std::size_t take_face_layers(const Volume& v, const std::vector<std::uint8_t>& z
     mask_detail::cube_filter(plane, pd, solid, false, threads);
     const std::size_t min_piece =
         std::max(square, std::size_t(std::ceil(min_fraction * double(w) * double(h))));
-    std::vector<std::size_t> todo, piece;
-    for (std::size_t s = 0; s < w * h; ++s) {
-      if (plane[s] != 1) continue;
-      plane[s] = 2, todo.assign(1, s), piece.clear();
-      while (!todo.empty()) {
-        const std::size_t p = todo.back();
-        todo.pop_back();
-        piece.push_back(p);
-        const std::size_t pa = p % w, pb = p / w;
-        const std::size_t nb[4] = {pa > 0 ? p - 1 : p, pa + 1 < w ? p + 1 : p, pb > 0 ? p - w : p,
-                                   pb + 1 < h ? p + w : p};
-        for (const std::size_t q : nb)
-          if (plane[q] == 1) plane[q] = 2, todo.push_back(q);
-      }
-      if (piece.size() < min_piece) continue;
+    std::vector<std::size_t> piece;
+    plane_pieces(w, h, [&](std::size_t p) { return plane[p] != 0; }, piece, [&] {
+      if (piece.size() < min_piece) return;
       // A layer, not dark fluid at the log-compression floor reaching the
       // face: on at least 90 % of its lines into the volume, the zeros end
       // and the next 2 solid + 1 samples are all data (fluid's zeros, 25-35 %
@@ -297,17 +310,26 @@ std::size_t take_face_layers(const Volume& v, const std::vector<std::uint8_t>& z
       }
       if (double(layered) >= 0.9 * double(piece.size()))
         for (const std::size_t p : piece) taken.push_back(index(p));
-    }
+    });
     return taken;
+  };
+  // Each face's pieces, looked for until one holds some; the beam's faces
+  // reuse what was found.
+  std::array<std::array<std::vector<std::size_t>, 2>, 3> found;
+  std::array<std::array<bool, 2>, 3> looked{};
+  const auto pieces_on = [&](int axis, std::size_t side) -> const std::vector<std::size_t>& {
+    auto& f = found[std::size_t(axis)][side];
+    if (!looked[std::size_t(axis)][side]) f = pieces(axis, side), looked[std::size_t(axis)][side] = true;
+    return f;
   };
   bool any = false;
   for (int axis = 0; axis < 3 && !any; ++axis)
-    for (std::size_t side = 0; side < (d[axis] > 1 ? 2u : 1u) && !any; ++side) any = !pieces(axis, side).empty();
+    for (std::size_t side = 0; side < (d[axis] > 1 ? 2u : 1u) && !any; ++side) any = !pieces_on(axis, side).empty();
   if (!any) return 0;
   const int axis = beam_axis_of(v, nullptr, threads, std::max<std::size_t>(1, d[2] / 64));
   std::size_t took = 0;
   for (std::size_t side = 0; side < (d[axis] > 1 ? 2u : 1u); ++side)
-    for (const std::size_t i : pieces(axis, side)) took += mask[i] != 0, mask[i] = 0;
+    for (const std::size_t i : pieces_on(axis, side)) took += mask[i] != 0, mask[i] = 0;
   return took;
 }
 
@@ -343,13 +365,16 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
   // unscanned region): without one, the mask is all scanned. (The cube's
   // opening of no zeros, and the flood fill's state over 16 MB with no seed,
   // took 0.1 s at 256^3.)
-  const auto all_scanned = [&] {
+  const auto ones = [&] {
     std::vector<std::uint8_t> mask(n);
     parallel_ranges(n, threads, [&](std::size_t i0, std::size_t i1) {
       std::fill(mask.data() + i0, mask.data() + i1, std::uint8_t{1});
     });
-    if (report) *report = rep;
     return mask;
+  };
+  const auto all_scanned = [&] {
+    if (report) *report = rep;
+    return ones();
   };
   if (rep.zeros == 0) return all_scanned();
   std::vector<std::uint8_t> solid = zero;
@@ -369,10 +394,7 @@ std::vector<std::uint8_t> scanned_mask(const Volume& v, const MaskParams& params
       }
     if (!seed) {
       // No region for step 2: step 3c's thin layers on the faces, then step 4.
-      std::vector<std::uint8_t> mask(n);
-      parallel_ranges(n, threads, [&](std::size_t i0, std::size_t i1) {
-        std::fill(mask.data() + i0, mask.data() + i1, std::uint8_t{1});
-      });
+      std::vector<std::uint8_t> mask = ones();
       if (params.solid > 0) rep.face_layers = take_face_layers(v, zero, params.solid, params.min_fraction, threads, mask);
       rep.zero_fill = rep.face_layers;
       if (rep.face_layers) grow_unscanned(mask, d, params.grow, nullptr, threads);
@@ -1059,28 +1081,10 @@ BandSheetReport hold_band_sheet(const Volume& u, const std::vector<std::uint8_t>
   // The drawn lines' patches: 4-connected across the beam. `decide` takes a
   // patch's share of the band's lines (its lines in `members`) and says
   // whether it is held; `label` is the window's part held.
-  std::vector<std::uint32_t> patch(line.size(), 0);
-  std::vector<std::size_t> stack, members;
+  std::vector<std::size_t> members;
   const auto patches = [&](const std::vector<std::uint8_t>& drawn, std::uint8_t label, const auto& decide) {
-    std::fill(patch.begin(), patch.end(), 0u);
-    std::uint32_t next = 0;
-    for (std::size_t s = 0; s < drawn.size(); ++s) {
-      if (drawn[s] != 2 || patch[s]) continue;
-      ++next;
-      members.clear();
-      stack.assign(1, s);
-      patch[s] = next;
-      while (!stack.empty()) {
-        const std::size_t c = stack.back();
-        stack.pop_back();
-        members.push_back(c);
-        const std::size_t q = c % nu, w = c / nu;
-        const std::size_t nb[4] = {q > 0 ? c - 1 : c, q + 1 < nu ? c + 1 : c, w > 0 ? c - nu : c,
-                                   w + 1 < nw ? c + nu : c};
-        for (std::size_t m : nb)
-          if (drawn[m] == 2 && !patch[m]) patch[m] = next, stack.push_back(m);
-      }
-      if (!decide(double(members.size()) / double(rep.lines))) continue;
+    plane_pieces(nu, nw, [&](std::size_t c) { return drawn[c] == 2; }, members, [&] {
+      if (!decide(double(members.size()) / double(rep.lines))) return;
       for (std::size_t c : members) {
         for (std::size_t k = 0, i = lines.start(c); k < lines.len; ++k, i += lines.stride)
           if (window[i] == label && scanned[i]) scanned[i] = 0, ++rep.voxels;
@@ -1095,7 +1099,7 @@ BandSheetReport hold_band_sheet(const Volume& u, const std::vector<std::uint8_t>
           if (scanned[i]) scanned[i] = 0, ++rep.voxels;
         }
       }
-    }
+    });
   };
   if (rep.lines > 0) patches(line, 1, [&](double share) {
     rep.largest = std::max(rep.largest, share);
