@@ -13,6 +13,7 @@
 #include <cstring>
 #include <limits>
 #include <numeric>
+#include <optional>
 #include <stdexcept>
 #include <utility>
 
@@ -315,12 +316,11 @@ std::size_t take_face_layers(const Volume& v, const std::vector<std::uint8_t>& z
   };
   // Each face's pieces, looked for until one holds some; the beam's faces
   // reuse what was found.
-  std::array<std::array<std::vector<std::size_t>, 2>, 3> found;
-  std::array<std::array<bool, 2>, 3> looked{};
+  std::array<std::optional<std::vector<std::size_t>>, 6> found;
   const auto pieces_on = [&](int axis, std::size_t side) -> const std::vector<std::size_t>& {
-    auto& f = found[std::size_t(axis)][side];
-    if (!looked[std::size_t(axis)][side]) f = pieces(axis, side), looked[std::size_t(axis)][side] = true;
-    return f;
+    auto& f = found[2 * std::size_t(axis) + side];
+    if (!f) f = pieces(axis, side);
+    return *f;
   };
   bool any = false;
   for (int axis = 0; axis < 3 && !any; ++axis)
