@@ -101,6 +101,7 @@ bool set_wall_param(ShadowWallParams& wp, const std::string& k, double x) {
   else if (k == "reach") wp.reach_mm = x;
   else if (k == "smooth") wp.smooth_mm = x;
   else if (k == "bright") wp.bright_mm = x;
+  else if (k == "bright_near") wp.bright_near = x;
   else if (k == "sigma") wp.sigma_mm = x;
   else if (k == "gap") wp.gap_mm = x;
   else if (k == "fan") wp.fan = x != 0;  // 0: beams along the axis in a fan too
@@ -444,7 +445,7 @@ int main(int argc, char** argv) {
                            "[--set iso_fraction=..,iso_clip_fraction=..,iso_floor_fraction=..,iso_floor_share=..,iso_field_sigma=..,iso_field_depth_sigma=..,shell=..,beta=..,kappa=..,sharpen_barrier=..,"
                            "... (bench/param_keys.hpp), iso_edge_share=..,iso_field_prior_share=..,iso_offset=..,iso_cut_crest_votes=..,cut_hold=..,band_sheet=..,data_normals=..,band_sheet_mm=..,band_sheet_patch=..,band_sheet_deep_mm=..,band_sheet_flat_mm=..,band_sheet_skin_mm=..,band_sheet_skin_patch=..,near_band=..,near_layer_dip=..,near_echo_layers=..,near_clipped=..,near_clip_share=..,near_echo_tail=..,near_skin_step=..,near_step_sds=..,near_echo_bounded=..,reverb_second_peak=..,near_fill_layered=..,near_fill_crossing=..,near_layer_reach=..,"
                            "mask_grow=..,mask_max_enclosed=..,mask_fluid_enclosed=..,mask_fluid_inside=..] [--cue sigma=..,from=..,to=..,lo=..,hi=..,floor=..,ratio=..,beam_cos=..,edge_share=..] "
-                           "[--shadow-walls on|off] [--walls beam_cos=..,reach=..,smooth=..,sigma=..,gap=..,bright=..,fan=0|1,fan_skip=..] [--wall-ref weighted|data]\n");
+                           "[--shadow-walls on|off] [--walls beam_cos=..,reach=..,smooth=..,sigma=..,gap=..,bright=..,bright_near=..,fan=0|1,fan_skip=..] [--wall-ref weighted|data]\n");
       return 2;
     }
   }

@@ -404,11 +404,22 @@ std::vector<float> shadow_wall_weight(Runtime& rt, const Volume& v, const std::v
           // voxels per axis).
           double dark[3], bright[3];
           sides_of(c, g, m, dark, bright);
+          // The bright side is probed at reach_mm and, where bright_near is
+          // set, that share of it: in a strip narrower than the reach between
+          // two shadows (the beam passing between two bones) the far probe
+          // lands in the other shadow, the near one does not.
+          double bright_value = sample(vs.data, bright[0], bright[1], bright[2]);
+          double bright_shadow = sample(shadow, bright[0], bright[1], bright[2]);
+          if (params.bright_near > 0 && params.bright_near < 1) {
+            double near_side[3];
+            for (int k = 0; k < 3; ++k) near_side[k] = double(c[k]) + params.bright_near * (bright[k] - double(c[k]));
+            bright_value = std::max(bright_value, sample(vs.data, near_side[0], near_side[1], near_side[2]));
+            bright_shadow = std::min(bright_shadow, sample(shadow, near_side[0], near_side[1], near_side[2]));
+          }
           // Only where the classifier could draw it: the bright side above
           // the isovalue (the dark side, in shadow, is below it).
-          if (!(sample(vs.data, bright[0], bright[1], bright[2]) > iso - params.bright_mm * m)) continue;
-          wall.data[i] = float(sample(shadow, dark[0], dark[1], dark[2]) *
-                               (1.0 - sample(shadow, bright[0], bright[1], bright[2])));
+          if (!(bright_value > iso - params.bright_mm * m)) continue;
+          wall.data[i] = float(sample(shadow, dark[0], dark[1], dark[2]) * (1.0 - bright_shadow));
         }
   });
   // 2b. The underside of a thin echo (params.underside): an edge falling

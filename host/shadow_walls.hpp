@@ -45,6 +45,14 @@ struct ShadowWallParams {
   // isovalue. Half the shell (1 mm) was tried and not kept
   // (docs/parameters.md, "Shadow walls beside tissue under the isovalue").
   double bright_mm = 0.0;
+  // The bright side is probed at reach_mm and also at this share of it
+  // (0 or 1: at reach_mm only). It counts as out of shadow, and as above
+  // the isovalue, where either probe is: a strip of tissue narrower than
+  // the reach between two shadows (the beam passing between two bones, a
+  // spine's processes) had both its sides read as "shadow on the bright
+  // side too", and its walls were drawn (docs/parameters.md, "Walls of a
+  // strip between two shadows").
+  double bright_near = 0.5;
   // Follow a fan's beams (fan_beams below: the scanned region's sides
   // spread out with depth, as a curvilinear or phased array's sector does):
   // the shadow is walked down each beam from the apex, and "across the beam"

@@ -7,6 +7,7 @@
 // (drawn with keep, not with remove).
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <memory>
 #include <random>
 #include <vector>
@@ -141,6 +142,46 @@ TEST(ShadowWalls, AWallWhoseBrightSideLiesJustUnderTheIsovalueIsAWallWithBrightM
     EXPECT_FLOAT_EQ(at_mm(w, v, 3.0, 6.0, z), 1.0f) << "tissue away from the shadow";
   }
   EXPECT_GT(lowest(w, 8.0, 16.0, 12.0), 0.99f);  // the shadow's first 6 mm
+}
+
+TEST(ShadowWalls, AStripBetweenTwoShadowsNarrowerThanTheReachIsWalledAcrossItsWidth) {
+  // Two bright bars (240, 8-10 mm deep) under x in [8, 14) and [16, 22)
+  // mm, each with its shadow (20) below it to the bottom; between them a
+  // strip of tissue 2 mm wide, the beam passing between two bones. Lowpassed
+  // by 1.5 mm the strip stays above the isovalue (70) over about 1.2 mm, less
+  // than the reach (1.5 mm each way): probed at the reach only, the bright
+  // side of a wall voxel past the strip's edge lands in the other shadow, and
+  // the strip's middle keeps its edges. With the near probe (bright_near
+  // 0.5, the default) the strip is weighted down across its width. Tissue
+  // away from the shadows keeps every edge either way.
+  const Volume v = scene({64, 24, 64},
+                         [](double x, double, double z) {
+                           const bool bar = (x >= 8.0 && x < 14.0) || (x >= 16.0 && x < 22.0);
+                           if (!bar || z < 8.0) return 150.0;
+                           return z < 10.0 ? 240.0 : 20.0;
+                         },
+                         test::seed() + 31);
+  ShadowWallParams far_only;
+  far_only.bright_near = 0.0;
+  const std::vector<float> w = shadow_wall_weight(test::runtime(), v, nullptr, 70.0);
+  const std::vector<float> w0 = shadow_wall_weight(test::runtime(), v, nullptr, 70.0, far_only);
+  const auto mean_over = [&](const std::vector<float>& m, double x0, double x1) {
+    double s = 0;
+    int k = 0;
+    for (double z = 16.0; z <= 28.0 + 1e-9; z += kH)
+      for (double x = x0; x <= x1 + 1e-9; x += kH) s += at_mm(m, v, x, 6.0, z), ++k;
+    return s / k;
+  };
+  const double strip = mean_over(w, 14.0, 16.0), strip0 = mean_over(w0, 14.0, 16.0);
+  EXPECT_LT(strip, 0.35) << "the strip with the near probe";
+  EXPECT_GT(strip0, strip + 0.25) << "the strip probed at the reach only";
+  EXPECT_GT(mean_over(w, 28.0, 30.0), 0.999) << "tissue away from the shadows";
+  EXPECT_GT(mean_over(w0, 28.0, 30.0), 0.999) << "tissue away from the shadows";
+  // An outer wall (a shadow beside wide tissue) is a wall with either probe.
+  EXPECT_LT(mean_over(w, 7.0, 8.0), 0.5);
+  EXPECT_LT(mean_over(w0, 7.0, 8.0), 0.5);
+  std::printf("strip mean weight %.3f (near probe) / %.3f (reach only); outer wall %.3f / %.3f\n", strip, strip0,
+              mean_over(w, 7.0, 8.0), mean_over(w0, 7.0, 8.0));
 }
 
 TEST(ShadowWalls, AnObjectInFluidKeepsEveryEdge) {
