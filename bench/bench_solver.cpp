@@ -7,7 +7,7 @@
 // (the difference of two solves one iteration apart). Every kernel result is
 // checked against the host reference (bench.hpp) before it is timed.
 //
-//   softshell_bench_solver [--size N] [--reps R] [--device D] [--slab P] [--sweeps S] [--compact 0|1] [--ab ROUNDS] [--resolve-tol T] [--ab-resolve ROUNDS] [--barrier B] [--sharpen N] [--trace]
+//   softshell_bench_solver [--size N] [--reps R] [--device D] [--slab P] [--sweeps S] [--compact 0|1] [--ab ROUNDS] [--resolve-tol T] [--ab-resolve ROUNDS] [--ab-sweeps ROUNDS] [--resolve-sweeps N] [--barrier B] [--sharpen N] [--trace]
 //
 // Byte model: docs/benchmarks.md ("Byte model"). Times are the minimum of R.
 #include <algorithm>
@@ -34,7 +34,7 @@ using namespace softshell;
 namespace {
 
 int usage() {
-  std::cerr << "usage: softshell_bench_solver [--size N] [--reps R] [--device I|NAME] [--slab P] [--sweeps S] [--compact 0|1] [--ab ROUNDS] [--resolve-tol T] [--ab-resolve ROUNDS] [--barrier B] [--sharpen N] [--trace]\n";
+  std::cerr << "usage: softshell_bench_solver [--size N] [--reps R] [--device I|NAME] [--slab P] [--sweeps S] [--compact 0|1] [--ab ROUNDS] [--resolve-tol T] [--ab-resolve ROUNDS] [--ab-sweeps ROUNDS] [--resolve-sweeps N] [--barrier B] [--sharpen N] [--trace]\n";
   return 2;
 }
 
@@ -130,8 +130,9 @@ int main(int argc, char** argv) {
   int size = 128, reps = 10;
   std::string device;
   bool trace = false;
-  int slab = 0, sweeps = 0, compact = 1, ab = 0, ab_resolve = 0;
+  int slab = 0, sweeps = 0, compact = 1, ab = 0, ab_resolve = 0, ab_sweeps = 0;
   double resolve_tol = SolverParams{}.resolve_tol;  // --resolve-tol: the warm re-solves' last step
+  int resolve_sweeps = SolverParams{}.resolve_sweeps;  // --resolve-sweeps: a re-solve's sweeps before its iterations
   double barrier = VariationalParams{}.sharpen_barrier;  // --barrier: the sharpening barrier of every classification
   int sharpen = VariationalParams{}.sharpen_iterations;  // --sharpen: its steps
   for (int i = 1; i < argc; ++i) {
@@ -148,6 +149,8 @@ int main(int argc, char** argv) {
     else if (a == "--ab") ab = std::atoi(argv[++i]);
     else if (a == "--resolve-tol") resolve_tol = std::atof(argv[++i]);
     else if (a == "--ab-resolve") ab_resolve = std::atoi(argv[++i]);
+    else if (a == "--ab-sweeps") ab_sweeps = std::atoi(argv[++i]);
+    else if (a == "--resolve-sweeps") resolve_sweeps = std::atoi(argv[++i]);
     else if (a == "--barrier") barrier = std::atof(argv[++i]);
     else if (a == "--sharpen") sharpen = std::atoi(argv[++i]);
     else {
@@ -348,6 +351,7 @@ int main(int argc, char** argv) {
     if (sweeps > 0) sp.pre_sweeps = sp.post_sweeps = sweeps;
     sp.compact_smoother = compact != 0;
     sp.resolve_tol = resolve_tol;
+    sp.resolve_sweeps = resolve_sweeps;
     MultigridSolver mg(sys, sp);
     SolveReport rep;
     mg.solve(&rep);
@@ -473,6 +477,53 @@ int main(int argc, char** argv) {
         const Timing w = summarise(tw[k]), c = summarise(tc[k]);
         std::printf("A/B %-8s re-classification min %.1f median %.1f ms, cold min %.1f median %.1f ms (%d rounds)\n",
                     k ? "compact" : "float32", w.min * 1e3, w.median * 1e3, c.min * 1e3, c.median * 1e3, ab);
+      }
+    }
+    if (ab_sweeps > 0) {
+      // --ab-sweeps ROUNDS: re-solves whose stages sweep first
+      // (SolverParams::resolve_sweeps, the default) against re-solves
+      // without (0), interleaved round by round with a cold classification;
+      // each re-solve's distance from the reference at v_iso x 1.05
+      // (sharpening from converged solves) beside the cold one's.
+      SolverParams sps[2] = {sp, sp};
+      sps[0].resolve_sweeps = 0;
+      SolverParams sp_ref = sp;
+      sp_ref.sharpen_tol = 0, sp_ref.resolve_tol = 0;
+      SolveReport r;
+      const Volume ref = classify_variational(rt, v, p1, sp_ref, &r);
+      const Volume cold = classify_variational(rt, v, p1, sp, &r);
+      std::unique_ptr<VariationalClassifier> cls[2] = {resolving(sps[0]), resolving(sps[1])};
+      std::vector<double> tw[2], tc, mean[2], share[2];
+      int cycles[2] = {0, 0};
+      for (int round = 0; round < ab_sweeps; ++round) {
+        ClassifyTiming t;
+        classify_variational(rt, v, p1, sp, &r, nullptr, nullptr, &t);
+        tc.push_back(t.setup + t.solve);
+        for (int k = 0; k < 2; ++k) {
+          VariationalClassifier& c = *cls[k];
+          const auto t0 = std::chrono::steady_clock::now();
+          c.update(p1);
+          const Volume u = c.solve(&r, nullptr, true);
+          tw[k].push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+          cycles[k] = r.cycles;
+          const Deviation d = deviation(u, ref);
+          mean[k].push_back(d.mean), share[k].push_back(d.share);
+          c.polish(&r);
+          c.update(p0);
+          c.solve(&r, nullptr, true);
+          c.polish(&r);
+        }
+      }
+      auto worst = [](const std::vector<double>& x) { return *std::max_element(x.begin(), x.end()); };
+      const Deviation dc = deviation(cold, ref);
+      const Timing ct = summarise(tc);
+      std::printf("cold classification: min %.1f median %.1f ms; distance from the reference mean %.2e, %.2f %% beyond 5e-3\n",
+                  ct.min * 1e3, ct.median * 1e3, dc.mean, 100 * dc.share);
+      for (int k = 0; k < 2; ++k) {
+        const Timing w = summarise(tw[k]);
+        std::printf("A/B re-solve, %d sweeps first: min %.1f median %.1f ms (median %.2f of cold), %d iterations; distance mean %.2e (worst), %.2f %% beyond 5e-3 (worst) (%d rounds)\n",
+                    sps[k].resolve_sweeps, w.min * 1e3, w.median * 1e3, w.median / ct.median, cycles[k], worst(mean[k]),
+                    100 * worst(share[k]), ab_sweeps);
       }
     }
     if (ab_resolve > 0) {

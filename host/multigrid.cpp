@@ -89,6 +89,7 @@ class Multigrid {
   double b_norm() const { return b_norm_; }
   void measure_b() { b_norm_ = fine().sys->norm(fine().sys->b()); }
   bool has_solution = false;  // fine().u holds the last solve's solution
+  bool resolve_sweeps_allowed = false;  // MultigridSolver::allow_resolve_sweeps
 
   // After the fine level's update_point(): mu and rho down every level.
   void update_point() {
@@ -449,6 +450,7 @@ int MultigridSolver::levels() const { return impl_->levels(); }
 const SolverParams& MultigridSolver::params() const { return impl_->params(); }
 void MultigridSolver::update_point() { impl_->update_point(); }
 void MultigridSolver::allow_compact_smoother(bool on) { impl_->allow_compact(on); }
+void MultigridSolver::allow_resolve_sweeps(bool on) { impl_->resolve_sweeps_allowed = on; }
 bool MultigridSolver::compact_smoother_in_use() const { return impl_->compact_in_use(); }
 void MultigridSolver::load_solution(const cl::Buffer& u) {
   Impl& mg = *impl_;
@@ -491,6 +493,16 @@ std::vector<float> MultigridSolver::solve(SolveReport* report, const std::vector
     rt.queue().finish();  // `init` may go out of scope after the call
   } else if (warm && mg.has_solution) {
     rep.residuals.push_back(mg.relative_residual());  // F.u: the previous solution, fixed voxels at 0
+    // A re-solve's stage (SolverParams::resolve_sweeps): sweeps first, and
+    // the conjugate gradients only if they leave the residual above tol.
+    // The sweeps relax on F.rhs, which the conjugate gradients do not read.
+    if (mg.resolve_sweeps_allowed && sp.resolve_sweeps > 0 && sp.krylov && tol >= kLooseTol &&
+        rep.residuals.back() > tol) {
+      rt.queue().enqueueCopyBuffer(fine.b(), F.rhs, 0, 0, n * sizeof(float));
+      mg.count(fine, bytes_per_voxel::copy);
+      mg.smooth_symmetric(0, sp.resolve_sweeps);
+      rep.residuals.push_back(mg.relative_residual());
+    }
   } else if (sp.full_multigrid) {
     rep.residuals.push_back(1.0);  // u = 0
     const progress::Stage fmg("full multigrid, " + std::to_string(mg.levels()) + " levels");
@@ -646,6 +658,7 @@ Volume VariationalClassifier::solve(SolveReport* report, const Volume* init, boo
   polishable_ = false;
   // Warm re-solves relax on the compact stencil (keep_resolve_start).
   mg_->allow_compact_smoother(from_last);
+  mg_->allow_resolve_sweeps(from_last);
   kept_linear_ = kept_steps_ = false;
   if (from_last) mg_->load_solution(kept_[0]);
   std::vector<float> u = steps > 0 ? mg_->solve(report, linear_in, from_last, loose)

@@ -350,6 +350,15 @@ struct SolverParams {
   // VariationalClassifier::polish() then finishes it to tol, as the viewer
   // does once no slider moves. 0 takes tol.
   double resolve_tol = 1e-3;
+  // A warm re-solve's stages (as for resolve_tol) first relax this many
+  // symmetric Gauss-Seidel sweeps on the fine level from their start and
+  // stop there when the stage's tolerance (sharpen_tol, resolve_tol) is met,
+  // else go on with the conjugate gradients from there: after a slider's
+  // step the change lies near the shell, where the smoother removes it at a
+  // fraction of a preconditioned iteration's cost (docs/numerics.md,
+  // "Sweeps before the iterations"). Stages to a tolerance under 1e-3 (the
+  // polish, a cold classification) never do. 0: the conjugate gradients at once.
+  int resolve_sweeps = 8;
   // The conjugate gradients' preconditioner relaxes on a compact copy of the
   // fine level's stencil (bfloat16 couplings; DeviceSystem::build_compact)
   // where the slab Gauss-Seidel runs (CPUs) and the copy fits: fewer bytes
@@ -359,7 +368,7 @@ struct SolverParams {
 };
 
 struct SolveReport {
-  std::vector<double> residuals;  // relative residual: initial, after FMG, after each cycle / iteration
+  std::vector<double> residuals;  // relative residual: initial, after FMG (or a re-solve's sweeps), after each cycle / iteration
   int cycles = 0, levels = 0;
   int refinements = 0;  // float64 refinement steps (tol below 1e-4), each a float32 solve of its own
   bool converged = false;
@@ -396,6 +405,10 @@ class MultigridSolver {
   // VariationalClassifier allows it for its warm re-solves only).
   void allow_compact_smoother(bool on);
   bool compact_smoother_in_use() const;  // the last solve relaxed on the compact stencil
+  // Whether the next warm solves to a tolerance of 1e-3 or looser first
+  // relax SolverParams::resolve_sweeps sweeps (VariationalClassifier allows
+  // it for its warm re-solves only, with the compact smoother).
+  void allow_resolve_sweeps(bool on);
   // The float64 solution of the last solve when it was refined (tol below
   // 1e-4; its float32 rounding is what solve() returned), else empty.
   const std::vector<double>& solution64() const;
