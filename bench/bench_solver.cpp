@@ -479,6 +479,32 @@ int main(int argc, char** argv) {
                     k ? "compact" : "float32", w.min * 1e3, w.median * 1e3, c.min * 1e3, c.median * 1e3, ab);
       }
     }
+    // The A/B re-solves (--ab-sweeps, --ab-resolve): a re-solve at p1 from
+    // `c`'s kept stages, timed from its update, with its iterations and its
+    // distance from `ref` logged; and the way back to p0 (polished) for the
+    // next round.
+    struct ResolveLog {
+      std::vector<double> time, mean, share;
+      int cycles = 0;
+    };
+    auto timed_resolve = [&](VariationalClassifier& c, const Volume& ref, ResolveLog& log) {
+      SolveReport r;
+      const auto t0 = std::chrono::steady_clock::now();
+      c.update(p1);
+      Volume u = c.solve(&r, nullptr, true);
+      log.time.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+      log.cycles = r.cycles;
+      const Deviation d = deviation(u, ref);
+      log.mean.push_back(d.mean), log.share.push_back(d.share);
+      return u;
+    };
+    auto back_to_p0 = [&](VariationalClassifier& c) {
+      SolveReport r;
+      c.update(p0);
+      c.solve(&r, nullptr, true);
+      c.polish(&r);
+    };
+    auto worst = [](const std::vector<double>& x) { return *std::max_element(x.begin(), x.end()); };
     if (ab_sweeps > 0) {
       // --ab-sweeps ROUNDS: re-solves whose stages sweep first
       // (SolverParams::resolve_sweeps, the default) against re-solves
@@ -493,37 +519,27 @@ int main(int argc, char** argv) {
       const Volume ref = classify_variational(rt, v, p1, sp_ref, &r);
       const Volume cold = classify_variational(rt, v, p1, sp, &r);
       std::unique_ptr<VariationalClassifier> cls[2] = {resolving(sps[0]), resolving(sps[1])};
-      std::vector<double> tw[2], tc, mean[2], share[2];
-      int cycles[2] = {0, 0};
+      ResolveLog log[2];
+      std::vector<double> tc;
       for (int round = 0; round < ab_sweeps; ++round) {
         ClassifyTiming t;
         classify_variational(rt, v, p1, sp, &r, nullptr, nullptr, &t);
         tc.push_back(t.setup + t.solve);
         for (int k = 0; k < 2; ++k) {
-          VariationalClassifier& c = *cls[k];
-          const auto t0 = std::chrono::steady_clock::now();
-          c.update(p1);
-          const Volume u = c.solve(&r, nullptr, true);
-          tw[k].push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-          cycles[k] = r.cycles;
-          const Deviation d = deviation(u, ref);
-          mean[k].push_back(d.mean), share[k].push_back(d.share);
-          c.polish(&r);
-          c.update(p0);
-          c.solve(&r, nullptr, true);
-          c.polish(&r);
+          timed_resolve(*cls[k], ref, log[k]);
+          cls[k]->polish(&r);
+          back_to_p0(*cls[k]);
         }
       }
-      auto worst = [](const std::vector<double>& x) { return *std::max_element(x.begin(), x.end()); };
       const Deviation dc = deviation(cold, ref);
       const Timing ct = summarise(tc);
       std::printf("cold classification: min %.1f median %.1f ms; distance from the reference mean %.2e, %.2f %% beyond 5e-3\n",
                   ct.min * 1e3, ct.median * 1e3, dc.mean, 100 * dc.share);
       for (int k = 0; k < 2; ++k) {
-        const Timing w = summarise(tw[k]);
+        const Timing w = summarise(log[k].time);
         std::printf("A/B re-solve, %d sweeps first: min %.1f median %.1f ms (median %.2f of cold), %d iterations; distance mean %.2e (worst), %.2f %% beyond 5e-3 (worst) (%d rounds)\n",
-                    sps[k].resolve_sweeps, w.min * 1e3, w.median * 1e3, w.median / ct.median, cycles[k], worst(mean[k]),
-                    100 * worst(share[k]), ab_sweeps);
+                    sps[k].resolve_sweeps, w.min * 1e3, w.median * 1e3, w.median / ct.median, log[k].cycles,
+                    worst(log[k].mean), 100 * worst(log[k].share), ab_sweeps);
       }
     }
     if (ab_resolve > 0) {
@@ -540,18 +556,12 @@ int main(int argc, char** argv) {
       const Volume ref = classify_variational(rt, v, p1, sp_ref, &r);
       const Volume cold = classify_variational(rt, v, p1, sp, &r);
       std::unique_ptr<VariationalClassifier> cls[2] = {resolving(spr[0]), resolving(spr[1])};
-      std::vector<double> tw[2], tp, mean[2], share[2], pmean, pshare;
-      int cycles[2] = {0, 0};
+      ResolveLog log[2];
+      std::vector<double> tp, pmean, pshare;
       for (int round = 0; round < ab_resolve; ++round)
         for (int k = 0; k < 2; ++k) {
           VariationalClassifier& c = *cls[k];
-          const auto t0 = std::chrono::steady_clock::now();
-          c.update(p1);
-          const Volume u = c.solve(&r, nullptr, true);
-          tw[k].push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-          cycles[k] = r.cycles;
-          const Deviation d = deviation(u, ref);
-          mean[k].push_back(d.mean), share[k].push_back(d.share);
+          const Volume u = timed_resolve(c, ref, log[k]);
           if (k == 1) {
             const auto t1 = std::chrono::steady_clock::now();
             const Volume up = c.polish(&r);
@@ -559,21 +569,18 @@ int main(int argc, char** argv) {
             const Deviation dp = deviation(up.data.empty() ? u : up, ref);
             pmean.push_back(dp.mean), pshare.push_back(dp.share);
           }
-          c.update(p0);
-          c.solve(&r, nullptr, true);
-          c.polish(&r);
+          back_to_p0(c);
         }
-      auto worst = [](const std::vector<double>& x) { return *std::max_element(x.begin(), x.end()); };
       const Deviation dc = deviation(cold, ref);
       std::printf("cold classification: distance from the reference mean %.2e, %.2f %% beyond 5e-3\n", dc.mean,
                   100 * dc.share);
       char loose[32];
       std::snprintf(loose, sizeof loose, "%.0e", spr[1].resolve_tol);
       for (int k = 0; k < 2; ++k) {
-        const Timing w = summarise(tw[k]);
+        const Timing w = summarise(log[k].time);
         std::printf("A/B re-solve to %-7s min %.1f median %.1f ms, %d cycles; distance mean %.2e (worst), %.2f %% beyond 5e-3 (worst) (%d rounds)\n",
-                    k ? loose : "tol", w.min * 1e3, w.median * 1e3, cycles[k], worst(mean[k]), 100 * worst(share[k]),
-                    ab_resolve);
+                    k ? loose : "tol", w.min * 1e3, w.median * 1e3, log[k].cycles, worst(log[k].mean),
+                    100 * worst(log[k].share), ab_resolve);
       }
       const Timing pt = summarise(tp);
       std::printf("    then polished: min %.1f median %.1f ms more; distance mean %.2e, %.2f %% beyond 5e-3 (worst)\n",
